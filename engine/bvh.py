@@ -1,0 +1,742 @@
+"""BVH (Biovision Hierarchy) reading and writing.
+
+Reading happens in two steps, as Blender does: :func:`parse_bvh_text` turns text into a plain
+:class:`BVHRecord` (names, offsets and channel values exactly as written, with line numbers),
+then :func:`record_to_motion` interprets it: rotation orders, what position channels mean,
+units and up axis, and converts everything to the internal convention of :mod:`engine.units`.
+
+What real files do and this reader accepts: a rotation order per joint (mixed in one file), any
+subset of position and rotation channels on any joint, End Sites with offsets, tabs, CRLF and
+bare CR line endings, multi-word joint names, ``{`` on the name's line, scientific notation,
+blank lines, no newline at the end. Anything else raises :class:`~engine.errors.BVHError` naming
+the file, the line and what was expected.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ._numparse import parse_number_rows
+from .errors import BVHError, ExportError
+from .fileio import atomic_write
+from .kinematics import fk_arrays
+from .motion import Motion
+from .rotations import euler_to_quat, quat_to_euler
+from .skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
+from .units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
+
+__all__ = ["BVHRecord", "parse_bvh_text", "read_bvh", "parse_bvh", "record_to_motion",
+           "format_bvh", "write_bvh", "detect_position_modes"]
+
+_KNOWN_CHANNELS = ROTATION_CHANNELS + POSITION_CHANNELS
+_CHANNEL_CANON = {c.lower(): c for c in _KNOWN_CHANNELS}
+_FRAMES_RE = re.compile(r"^\s*frames\s*:\s*(\S+)\s*$", re.IGNORECASE)
+_FRAME_TIME_RE = re.compile(r"^\s*frame\s+time\s*:\s*(\S+)\s*$", re.IGNORECASE)
+_CMU_NAMES = {"lhipjoint", "rhipjoint", "lowerback", "lfingers", "rfingers", "lthumb"}
+#: Largest frame count accepted from a ``Frames:`` line before the rows are counted.
+_MAX_FRAMES = 50_000_000
+
+
+# --------------------------------------------------------------------------- plain records
+@dataclass
+class BVHRecord:
+    """A BVH file as written: nothing interpreted, lengths in file units, angles in degrees.
+
+    Attributes:
+        names: joint names (ROOT and JOINT entries) in file order.
+        parents: parent index per joint, ``-1`` for the root.
+        offsets: ``(J, 3)`` OFFSET values.
+        channels: per joint, canonical channel names in file order.
+        end_sites: ``(parent index, offset (3,))`` per End Site, in file order.
+        frame_time: seconds per frame as written.
+        values: ``(F, C)`` channel values, one row per frame.
+        joint_lines: line number of each joint's ROOT/JOINT keyword.
+        first_row_line: line number of the first motion row.
+        path: the file the text came from, if any.
+    """
+
+    names: list[str]
+    parents: list[int]
+    offsets: np.ndarray
+    channels: list[tuple[str, ...]]
+    end_sites: list[tuple[int, np.ndarray]]
+    frame_time: float
+    values: np.ndarray
+    joint_lines: list[int] = field(default_factory=list)
+    first_row_line: int = 0
+    path: str | None = None
+
+    @property
+    def num_frames(self) -> int:
+        return self.values.shape[0]
+
+
+class _Tokens:
+    """Whitespace tokens of the hierarchy with their line numbers."""
+
+    def __init__(self, lines: list[str], path):
+        self.path = path
+        self.toks: list[tuple[str, int, int]] = []   # (token, line number, index in line)
+        self.line_tokens: dict[int, list[str]] = {}
+        self.pos = 0
+        self.motion_line = None
+        for number, line in enumerate(lines, start=1):
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0].upper() == "MOTION":
+                self.motion_line = number
+                break
+            self.line_tokens[number] = parts
+            self.toks.extend((t, number, i) for i, t in enumerate(parts))
+        self.last_line = self.toks[-1][1] if self.toks else 1
+
+    def error(self, problem, line=None):
+        return BVHError(problem, self.path, line if line is not None else self.here())
+
+    def here(self) -> int:
+        if self.pos < len(self.toks):
+            return self.toks[self.pos][1]
+        return self.motion_line or self.last_line
+
+    def peek(self):
+        return self.toks[self.pos] if self.pos < len(self.toks) else None
+
+    def next(self, expected: str):
+        if self.pos >= len(self.toks):
+            where = ("before MOTION" if self.motion_line else "at the end of the file")
+            raise self.error(f"the hierarchy stops {where}; expected {expected}")
+        tok = self.toks[self.pos]
+        self.pos += 1
+        return tok
+
+    def rest_of_line(self, line: int, index: int) -> list[str]:
+        """Tokens after position ``index`` on ``line``, consuming them."""
+        rest = self.line_tokens[line][index + 1:]
+        self.pos += len(rest)
+        return rest
+
+    def number(self, what: str) -> float:
+        tok, line, _ = self.next(what)
+        try:
+            value = float(tok)
+        except ValueError:
+            raise BVHError(f"expected {what}, found {tok!r}", self.path, line) from None
+        if not math.isfinite(value):
+            raise BVHError(f"expected {what} (a finite number), found {tok!r}", self.path, line)
+        return value
+
+
+def _decode(data: bytes, path) -> str:
+    if not data.strip():
+        raise BVHError("the file is empty; expected a BVH file starting with HIERARCHY", path,
+                       None)
+    if b"\x00" in data:
+        raise BVHError("this is a binary file, not a BVH text file (it contains NUL bytes)",
+                       path, None)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecord:
+    """Parse BVH text into a :class:`BVHRecord`, checking its structure and every value."""
+    path = os.fspath(path) if path is not None else None
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    toks = _Tokens(lines, path)
+    first = toks.peek()
+    if first is None:
+        raise BVHError("no HIERARCHY section; expected a BVH file starting with HIERARCHY",
+                       path, toks.motion_line or 1)
+    if first[0].upper() != "HIERARCHY":
+        raise BVHError(f"expected the keyword HIERARCHY, found {first[0][:40]!r}; is this a BVH "
+                       "file?", path, first[1])
+    toks.pos = 1
+
+    names: list[str] = []
+    name_lines: dict[str, int] = {}
+    parents: list[int] = []
+    offsets: list[list[float] | None] = []
+    channels: list[tuple[str, ...] | None] = []
+    joint_lines: list[int] = []
+    end_sites: list[tuple[int, np.ndarray]] = []
+    # stack entries: (kind, index, line) with kind "joint" or "end"
+    stack: list[tuple[str, int, int]] = []
+    end_offset: list[float] | None = None
+    closed_root = False
+
+    def open_brace():
+        tok, line, _ = toks.next("'{'")
+        if tok != "{":
+            raise BVHError(f"expected '{{', found {tok!r}", path, line)
+
+    while True:
+        item = toks.peek()
+        if item is None:
+            if stack:
+                kind, j, line = stack[-1]
+                what = f"joint {names[j]!r}" if kind == "joint" else "an End Site"
+                raise toks.error(f"the hierarchy stops before {what} (opened at line {line}) is "
+                                 "closed; expected '}' (the file may be truncated)")
+            if toks.motion_line is None:
+                raise toks.error("no MOTION section; expected the keyword MOTION after the "
+                                 "hierarchy (the file may be truncated)")
+            break
+        tok, line, index = toks.next("a keyword")
+        key = tok.upper()
+        if key in ("ROOT", "JOINT"):
+            if key == "ROOT" and stack:
+                raise BVHError("ROOT inside another joint; expected JOINT or '}'", path, line)
+            if key == "ROOT" and closed_root:
+                raise BVHError("a second ROOT: this reader takes one skeleton per file", path,
+                               line)
+            if key == "JOINT" and (not stack or stack[-1][0] != "joint"):
+                where = "inside an End Site" if stack else "outside any ROOT"
+                raise BVHError(f"JOINT {where}; expected it inside a ROOT or JOINT", path, line)
+            rest = toks.rest_of_line(line, index)
+            brace_on_line = False
+            if rest and rest[-1].endswith("{"):
+                brace_on_line = True
+                rest[-1] = rest[-1][:-1]
+                if not rest[-1]:
+                    rest.pop()
+            name = " ".join(rest)
+            if not name:
+                raise BVHError(f"expected a joint name after {key}", path, line)
+            if name in name_lines:
+                raise BVHError(f"duplicate joint name {name!r} (first at line "
+                               f"{name_lines[name]}); joint names must be unique", path, line)
+            name_lines[name] = line
+            names.append(name)
+            parents.append(stack[-1][1] if stack else -1)
+            offsets.append(None)
+            channels.append(None)
+            joint_lines.append(line)
+            if not brace_on_line:
+                open_brace()
+            stack.append(("joint", len(names) - 1, line))
+        elif key == "END":
+            site, sline, _ = toks.next("'Site' after 'End'")
+            if site.upper().rstrip("{") != "SITE":
+                raise BVHError(f"expected 'End Site', found 'End {site}'", path, sline)
+            if not stack or stack[-1][0] != "joint":
+                raise BVHError("End Site outside a joint; expected it inside a JOINT", path, line)
+            if not site.endswith("{"):
+                open_brace()
+            stack.append(("end", stack[-1][1], line))
+            end_offset = None
+        elif key == "OFFSET":
+            if not stack:
+                raise BVHError("OFFSET outside any joint", path, line)
+            values = [toks.number(f"the {axis} value of OFFSET") for axis in "XYZ"]
+            kind, j, _ = stack[-1]
+            if kind == "end":
+                if end_offset is not None:
+                    raise BVHError("a second OFFSET in one End Site", path, line)
+                end_offset = values
+            else:
+                if offsets[j] is not None:
+                    raise BVHError(f"a second OFFSET for joint {names[j]!r}", path, line)
+                offsets[j] = values
+        elif key == "CHANNELS":
+            if not stack or stack[-1][0] != "joint":
+                raise BVHError("CHANNELS outside a joint (End Sites have no channels)", path,
+                               line)
+            j = stack[-1][1]
+            if channels[j] is not None:
+                raise BVHError(f"a second CHANNELS line for joint {names[j]!r}", path, line)
+            count_tok, cline, _ = toks.next("the channel count after CHANNELS")
+            if not count_tok.isdigit() or int(count_tok) > 6:
+                raise BVHError(f"expected a channel count from 0 to 6 after CHANNELS, found "
+                               f"{count_tok!r}", path, cline)
+            found = []
+            for _ in range(int(count_tok)):
+                ch, chline, _ = toks.next(f"{count_tok} channel names after CHANNELS")
+                canon = _CHANNEL_CANON.get(ch.lower())
+                if canon is None:
+                    raise BVHError(f"unknown channel {ch!r} (channel {len(found) + 1} of "
+                                   f"{count_tok}); expected one of {', '.join(_KNOWN_CHANNELS)}",
+                                   path, chline)
+                if canon in found:
+                    raise BVHError(f"channel {canon} appears twice for joint {names[j]!r}",
+                                   path, chline)
+                found.append(canon)
+            channels[j] = tuple(found)
+        elif tok == "}":
+            if not stack:
+                raise BVHError("unbalanced braces: '}' with no open joint", path, line)
+            kind, j, opened = stack.pop()
+            if kind == "end":
+                if end_offset is None:
+                    raise BVHError(f"the End Site opened at line {opened} has no OFFSET", path,
+                                   line)
+                end_sites.append((j, np.array(end_offset)))
+            else:
+                if offsets[j] is None:
+                    raise BVHError(f"joint {names[j]!r} (line {opened}) has no OFFSET", path,
+                                   line)
+                if channels[j] is None:
+                    channels[j] = ()
+            if not stack:
+                closed_root = True
+        elif key == "HIERARCHY":
+            raise BVHError("a second HIERARCHY keyword", path, line)
+        else:
+            expected = ("ROOT" if not stack and not closed_root else
+                        "MOTION" if not stack else "OFFSET, CHANNELS, JOINT, End Site or '}'")
+            raise BVHError(f"unexpected {tok[:40]!r}; expected {expected}", path, line)
+
+    if not names:
+        raise BVHError("the hierarchy has no ROOT joint", path, toks.motion_line)
+
+    # ------------------------------------------------------------------ MOTION section
+    line_no = toks.motion_line
+    motion_rest = lines[line_no:]                       # lines after MOTION
+
+    def header(regex, label, start):
+        k = start
+        while k < len(motion_rest) and not motion_rest[k].strip():
+            k += 1
+        if k >= len(motion_rest):
+            raise BVHError(f"the file ends after MOTION; expected a '{label}' line", path,
+                           line_no + k)
+        m = regex.match(motion_rest[k])
+        if not m:
+            raise BVHError(f"expected '{label} <number>', found {motion_rest[k].strip()[:60]!r}",
+                           path, line_no + k + 1)
+        return m.group(1), k
+
+    frames_tok, k = header(_FRAMES_RE, "Frames:", 0)
+    frames_line = line_no + k + 1
+    if not frames_tok.isdigit():
+        raise BVHError(f"expected a whole number of frames after 'Frames:', found "
+                       f"{frames_tok!r}", path, frames_line)
+    n_frames = int(frames_tok)
+    if n_frames == 0:
+        raise BVHError("'Frames: 0': the file holds no motion; expected at least one frame",
+                       path, frames_line)
+    if n_frames > _MAX_FRAMES:
+        raise BVHError(f"'Frames: {n_frames}' is more than this reader accepts "
+                       f"({_MAX_FRAMES})", path, frames_line)
+    ft_tok, k = header(_FRAME_TIME_RE, "Frame Time:", k + 1)
+    ft_line = line_no + k + 1
+    try:
+        frame_time = float(ft_tok)
+    except ValueError:
+        frame_time = float("nan")
+    if not (math.isfinite(frame_time) and frame_time > 0):
+        raise BVHError(f"expected a positive number of seconds after 'Frame Time:', found "
+                       f"{ft_tok!r}", path, ft_line)
+
+    n_cols = sum(len(c) for c in channels)            # type: ignore[arg-type]
+    first_row = ft_line                                # 0-based index of the first row line
+    block = "\n".join(lines[first_row:])
+    parsed = None
+    if n_cols:
+        try:
+            parsed = parse_number_rows(block.encode("utf-8"), n_cols)
+        except UnicodeEncodeError:
+            parsed = None
+    if parsed is not None and parsed[1] == n_frames:
+        values = parsed[0]
+    else:
+        values = _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names,
+                                       channels, path)
+    if not np.all(np.isfinite(values)):
+        values = _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names,
+                                       channels, path)
+    return BVHRecord(names=names, parents=parents, offsets=np.array(offsets, dtype=float),
+                     channels=list(channels), end_sites=end_sites,  # type: ignore[arg-type]
+                     frame_time=frame_time, values=values, joint_lines=joint_lines,
+                     first_row_line=first_row + 1, path=path)
+
+
+def _channel_label(col: int, names, channels) -> str:
+    for name, chans in zip(names, channels):
+        if col < len(chans):
+            return f"{name} {chans[col]}"
+        col -= len(chans)
+    return "?"
+
+
+def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names, channels,
+                          path) -> np.ndarray:
+    """The slow path: parse row by row so that the first problem is reported exactly."""
+    values = np.empty((n_frames, n_cols))
+    row = 0
+    for k in range(first_row, len(lines)):
+        parts = lines[k].split()
+        if not parts:
+            continue
+        line = k + 1
+        if row >= n_frames:
+            extra = sum(1 for rest in lines[k:] if rest.strip())
+            raise BVHError(f"'Frames: {n_frames}' (line {frames_line}) but {n_frames + extra} "
+                           "rows of values follow; the frame count disagrees with the rows",
+                           path, line)
+        if len(parts) != n_cols:
+            raise BVHError(f"frame {row + 1} has {len(parts)} values; expected {n_cols} (one per "
+                           "channel declared in the hierarchy)", path, line)
+        for c, tok in enumerate(parts):
+            try:
+                v = float(tok)
+            except ValueError:
+                raise BVHError(f"value {c + 1} of frame {row + 1} ({_channel_label(c, names, channels)})"
+                               f" is {tok[:40]!r}; expected a number", path, line) from None
+            if not math.isfinite(v):
+                raise BVHError(f"value {c + 1} of frame {row + 1} ({_channel_label(c, names, channels)})"
+                               f" is {tok[:40]!r}; expected a finite number", path, line)
+            values[row, c] = v
+        row += 1
+    if row < n_frames:
+        raise BVHError(f"'Frames: {n_frames}' (line {frames_line}) but the file ends after "
+                       f"{row} rows; the frame count disagrees with the rows (truncated file?)",
+                       path, len(lines))
+    return values
+
+
+# --------------------------------------------------------------------------- interpretation
+def _column_layout(channels):
+    """Per joint: (rotation columns, {axis index: position column})."""
+    col = 0
+    rot_cols, pos_cols = [], []
+    for chans in channels:
+        r, p = [], {}
+        for c in chans:
+            if c in ROTATION_CHANNELS:
+                r.append(col)
+            else:
+                p["XYZ".index(c[0])] = col
+            col += 1
+        rot_cols.append(r)
+        pos_cols.append(p)
+    return rot_cols, pos_cols
+
+
+def detect_position_modes(record: BVHRecord) -> dict[str, str]:
+    """Decide, per joint with position channels, whether they replace or add to its OFFSET.
+
+    The first frame's position values are compared with the OFFSET on the axes where the
+    offset is large (at least a tenth of its length): values near the offset mean *absolute*
+    (the value is the local position and replaces the OFFSET: Bandai, Rokoko, most roots),
+    values near zero mean *relative* (added to the OFFSET: CC3 hip-rooted exports).
+    Exporters that write a joint's OFFSET take it from the first frame, which is why frame 0
+    decides rather than an average over a clip that travels. A zero OFFSET makes both readings
+    equal: *absolute*.
+    """
+    _, pos_cols = _column_layout(record.channels)
+    modes = {}
+    for j, cols in enumerate(pos_cols):
+        if not cols:
+            continue
+        off = record.offsets[j]
+        axes = [a for a in cols if abs(off[a]) >= 0.1 * np.linalg.norm(off) and abs(off[a]) > 0]
+        if not axes:
+            modes[record.names[j]] = "absolute"
+            continue
+        first = np.array([record.values[0, cols[a]] for a in axes])
+        near_offset = np.linalg.norm(first - off[axes])
+        near_zero = np.linalg.norm(first)
+        modes[record.names[j]] = "relative" if near_zero < near_offset else "absolute"
+    return modes
+
+
+def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
+    """Local rotations (F, J, 4) and translations (F, K, 3) in file units and file axes."""
+    values = record.values
+    F = values.shape[0]
+    J = len(record.names)
+    rot_cols, pos_cols = _column_layout(record.channels)
+    rotations = np.empty((F, J, 4))
+    orders: dict[str, list[int]] = {}
+    for j, chans in enumerate(record.channels):
+        orders.setdefault("".join(c[0] for c in chans if c in ROTATION_CHANNELS), []).append(j)
+    for order, joints in orders.items():
+        if not order:
+            rotations[:, joints] = (0.0, 0.0, 0.0, 1.0)
+            continue
+        cols = np.array([rot_cols[j] for j in joints])               # (Jg, n)
+        angles = values[:, cols]                                      # (F, Jg, n)
+        q = euler_to_quat(angles.reshape(-1, len(order)), order)
+        rotations[:, joints] = q.reshape(F, len(joints), 4)
+    translated = [0] + [j for j in range(1, J) if pos_cols[j]]
+    translations = np.empty((F, len(translated), 3))
+    for k, j in enumerate(translated):
+        off = record.offsets[j]
+        cols = pos_cols[j]
+        relative = modes.get(record.names[j]) == "relative"
+        for axis in range(3):
+            if axis in cols:
+                v = values[:, cols[axis]]
+                translations[:, k, axis] = v + off[axis] if relative else v
+            else:
+                translations[:, k, axis] = off[axis]
+    return rotations, translations
+
+
+def _detect_frame(record: BVHRecord, rotations, translations, skeleton_file: Skeleton):
+    """Detect up axis and units from a sample of frames (file units, file axes)."""
+    F = rotations.shape[0]
+    sample = np.unique(np.linspace(0, F - 1, min(F, 48)).round().astype(int))
+    pose = fk_arrays(skeleton_file, rotations[sample], translations[sample])
+    pts = pose.all_positions()                                        # (S, J+E, 3)
+    lower = [n.lower() for n in record.names]
+    head = [j for j, n in enumerate(lower) if "head" in n and "end" not in n
+            and "top" not in n]
+    feet = [j for j, n in enumerate(lower) if any(w in n for w in ("foot", "ankle", "toe"))]
+    if head and feet:
+        v = np.median(pose.positions[:, head[0]] - pose.positions[:, feet].mean(axis=1), axis=0)
+        up = nearest_axis(v)
+        how = f"'{record.names[head[0]]}' is above the feet along {up}"
+    else:
+        up = "+Y"
+        how = "no head and foot joints to tell the up axis by: +Y assumed"
+    k = "XYZ".index(up[1])
+    heights = pts[..., k]
+    stature = float(np.median(heights.max(axis=1) - heights.min(axis=1)))
+    cmu = bool(_CMU_NAMES & set(lower))
+    units, why = detect_units(stature, cmu_names=cmu)
+    return up, units, stature, f"{how}; {why}"
+
+
+def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: float | None = None,
+                     up_axis: str | None = None,
+                     position_mode: str | Mapping[str, str] | None = None,
+                     name: str = "") -> Motion:
+    """Interpret a parsed BVH file and convert it to the internal convention.
+
+    Args:
+        units: the file's length unit (a key of :data:`engine.units.UNITS`); detected if None.
+        scale: metres per file unit, overriding ``units``.
+        up_axis: the file's up axis (``"+Y"``, ``"+Z"``, ...); detected if None.
+        position_mode: ``"absolute"`` or ``"relative"`` for every joint with position
+            channels, or a mapping from joint name to mode; detected where not given.
+    """
+    path = record.path
+    modes = detect_position_modes(record)
+    if isinstance(position_mode, str):
+        _check_mode(position_mode, path)
+        modes = {n: position_mode for n in modes}
+    elif position_mode:
+        for joint, mode in position_mode.items():
+            if joint not in modes:
+                raise BVHError(f"position mode given for {joint!r}, which has no position "
+                               "channels in this file", path, None)
+            _check_mode(mode, path)
+            modes[joint] = mode
+    if units is not None and units not in UNITS:
+        raise BVHError(f"unknown units {units!r}; expected one of {', '.join(UNITS)}", path,
+                       None)
+    if up_axis is not None and up_axis not in AXES:
+        raise BVHError(f"unknown up axis {up_axis!r}; expected one of {', '.join(AXES)}", path,
+                       None)
+    names = record.names
+    channels = [tuple(c) for c in record.channels]
+    pos_modes = [modes.get(n) for n in names]
+    file_skeleton = Skeleton(names=names, parents=record.parents, offsets=record.offsets,
+                             channels=channels, position_modes=pos_modes,
+                             end_sites=[EndSite(p, o, f"{names[p]}_end")
+                                        for p, o in record.end_sites])
+    rotations, translations = _local_arrays(record, modes)
+
+    detected = units is None and scale is None or up_axis is None
+    reason = ""
+    if detected:
+        d_up, d_units, _, reason = _detect_frame(record, rotations, translations, file_skeleton)
+        up_axis = up_axis or d_up
+        if units is None and scale is None:
+            units = d_units
+    if scale is None:
+        scale = UNITS[units]
+    elif units is None:
+        units = "custom"
+    if not (math.isfinite(scale) and scale > 0):
+        raise BVHError(f"the scale must be a positive number of metres per unit, not {scale!r}",
+                       path, None)
+    source = SourceFrame(units=units, scale=float(scale), up_axis=up_axis, detected=detected,
+                         reason=reason)
+    C = source.rotation
+    offsets = record.offsets * scale
+    offsets[0] = C @ record.offsets[0] * scale
+    skeleton = Skeleton(names=names, parents=record.parents, offsets=offsets, channels=channels,
+                        position_modes=pos_modes,
+                        end_sites=[EndSite(p, o * scale, f"{names[p]}_end")
+                                   for p, o in record.end_sites],
+                        source=source)
+    translations = translations * scale
+    if up_axis != "+Y":
+        translations[:, 0] = translations[:, 0] @ C.T
+        rotations[:, 0] = (Rotation.from_matrix(C) * Rotation.from_quat(rotations[:, 0])).as_quat()
+    return Motion(skeleton=skeleton, rotations=rotations, translations=translations,
+                  frame_time=record.frame_time, name=name)
+
+
+def _check_mode(mode, path):
+    if mode not in ("absolute", "relative"):
+        raise BVHError(f"position mode must be 'absolute' or 'relative', not {mode!r}", path,
+                       None)
+
+
+def parse_bvh(text: str, path: str | os.PathLike | None = None, **options) -> Motion:
+    """Parse BVH text into a :class:`Motion` (options as :func:`record_to_motion`)."""
+    record = parse_bvh_text(text, path)
+    options.setdefault("name", Path(path).stem if path is not None else "")
+    return record_to_motion(record, **options)
+
+
+def read_bvh(path: str | os.PathLike, **options) -> Motion:
+    """Read a BVH file into a :class:`Motion` in the internal convention.
+
+    Options (all detected when not given): ``units``, ``scale``, ``up_axis``,
+    ``position_mode``; see :func:`record_to_motion`.
+    """
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise BVHError("no such file", path, None) from None
+    except IsADirectoryError:
+        raise BVHError("this is a folder, not a BVH file", path, None) from None
+    except OSError as exc:
+        raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
+    return parse_bvh(_decode(data, path), path, **options)
+
+
+# --------------------------------------------------------------------------- writing
+def _fmt(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}"
+    return "0" + text[2:] if text.startswith("-0") and float(text) == 0 else text
+
+
+def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
+               position_modes: str | Mapping[str, str] | None = None,
+               decimals: int = 6) -> str:
+    """The BVH text of ``motion``.
+
+    Args:
+        source: units and up axis to write in; the skeleton's own (the file it came from) by
+            default.
+        position_modes: ``"absolute"`` or ``"relative"`` for every joint with position
+            channels, or per joint name; the skeleton's own by default.
+        decimals: digits after the decimal point.
+    """
+    sk = motion.skeleton
+    src = source or sk.source
+    C = src.rotation
+    s = src.scale
+    modes = list(sk.position_modes)
+    if isinstance(position_modes, str):
+        _check_mode(position_modes, None)
+        modes = [position_modes if m else None for m in modes]
+    elif position_modes:
+        for joint, mode in position_modes.items():
+            j = sk.joint(joint)
+            if modes[j] is None:
+                raise ExportError(f"joint {joint!r} has no position channels")
+            _check_mode(mode, None)
+            modes[j] = mode
+
+    offsets = sk.offsets / s
+    offsets[0] = (C.T @ sk.offsets[0]) / s
+    F = motion.num_frames
+    rotations = motion.rotations
+    translations = motion.translations / s
+    if src.up_axis != "+Y":
+        translations = translations.copy()
+        translations[:, 0] = translations[:, 0] @ C
+        rotations = rotations.copy()
+        rotations[:, 0] = (Rotation.from_matrix(C.T) *
+                           Rotation.from_quat(rotations[:, 0])).as_quat()
+
+    # channel values
+    rot_cols, pos_cols = _column_layout(sk.channels)
+    values = np.zeros((F, sk.num_channels))
+    by_order: dict[str, list[int]] = {}
+    for j, order in enumerate(sk.rotation_orders):
+        by_order.setdefault(order, []).append(j)
+    for order, joints in by_order.items():
+        q = rotations[:, joints]                                   # (F, Jg, 4)
+        if not order:
+            angle = 2 * np.arccos(np.clip(np.abs(q[..., 3]), 0, 1))
+            if np.any(angle > 1e-6):
+                j = joints[int(np.argmax(angle.max(axis=0)))]
+                raise ExportError(f"joint {sk.names[j]!r} rotates, but it has no rotation "
+                                  "channels to write the rotation in")
+            continue
+        flat = q.transpose(1, 0, 2).reshape(-1, 4)                 # joint-major for unwrap
+        angles = quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order))
+        angles = np.unwrap(angles, period=360.0, axis=1) if F > 1 else angles
+        if len(order) < 3:
+            back = euler_to_quat(angles.reshape(-1, len(order)), order).reshape(len(joints), F, 4)
+            err = np.abs(np.sum(back * flat.reshape(len(joints), F, 4), axis=-1))
+            if np.any(err < np.cos(0.5e-5)):
+                j = joints[int(np.argmin(err.min(axis=1)))]
+                raise ExportError(f"joint {sk.names[j]!r} rotates about an axis it has no "
+                                  f"channel for (it has only {sk.describe_channels(j)})")
+        for g, j in enumerate(joints):
+            values[:, rot_cols[j]] = angles[g]
+    for k, j in enumerate(sk.translated):
+        cols = pos_cols[j]
+        t = translations[:, k]
+        if not cols:
+            if np.any(np.abs(t - offsets[j]) > 1e-6 * max(1.0, np.abs(offsets[j]).max())):
+                raise ExportError(f"joint {sk.names[j]!r} moves, but it has no position "
+                                  "channels to write the movement in")
+            continue
+        for axis, col in cols.items():
+            values[:, col] = t[:, axis] - offsets[j][axis] if modes[j] == "relative" \
+                else t[:, axis]
+
+    out = ["HIERARCHY"]
+    sites_of: dict[int, list[EndSite]] = {}
+    for site in sk.end_sites:
+        sites_of.setdefault(site.parent, []).append(site)
+
+    def off(v):
+        return " ".join(_fmt(x, decimals) for x in v)
+
+    def emit(j: int, depth: int):
+        pad = "\t" * depth
+        out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
+        out.append(f"{pad}{{")
+        out.append(f"{pad}\tOFFSET {off(offsets[j])}")
+        out.append(f"{pad}\tCHANNELS {len(sk.channels[j])}"
+                   + "".join(" " + c for c in sk.channels[j]))
+        for child in sk.children[j]:
+            emit(child, depth + 1)
+        for site in sites_of.get(j, ()):
+            out.append(f"{pad}\tEnd Site")
+            out.append(f"{pad}\t{{")
+            out.append(f"{pad}\t\tOFFSET {off(site.offset / s)}")
+            out.append(f"{pad}\t}}")
+        out.append(f"{pad}}}")
+
+    import sys
+    limit = sys.getrecursionlimit()
+    if sk.depth.max() + 50 > limit:
+        sys.setrecursionlimit(int(sk.depth.max()) + 100)
+    emit(0, 0)
+    out.append("MOTION")
+    out.append(f"Frames: {F}")
+    out.append(f"Frame Time: {motion.frame_time!r}")
+    if values.shape[1]:
+        values = np.where(np.abs(values) < 0.5 * 10.0 ** -decimals, 0.0, values)
+        row_fmt = " ".join([f"%.{decimals}f"] * values.shape[1])
+        out.extend(row_fmt % tuple(row) for row in values.tolist())
+    else:
+        out.extend("" for _ in range(F))
+    return "\n".join(out) + "\n"
+
+
+def write_bvh(motion: Motion, path: str | os.PathLike, **options) -> None:
+    """Write ``motion`` as a BVH file, atomically (options as :func:`format_bvh`)."""
+    atomic_write(path, format_bvh(motion, **options))

@@ -1,0 +1,65 @@
+"""Plain-data summaries of skeletons and motions (for ``motion-composer info`` and the GUI)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .kinematics import fk_arrays
+from .motion import Motion
+
+__all__ = ["stature", "describe_motion", "joint_tree_lines"]
+
+
+def stature(motion: Motion, *, samples: int = 48) -> float:
+    """Approximate standing height [m]: the median over sampled frames of the vertical extent
+    of all joints and End Sites (internal +Y up)."""
+    F = motion.num_frames
+    idx = np.unique(np.linspace(0, F - 1, min(F, samples)).round().astype(int))
+    pose = fk_arrays(motion.skeleton, motion.rotations[idx], motion.translations[idx])
+    y = pose.all_positions()[..., 1]
+    return float(np.median(y.max(axis=1) - y.min(axis=1)))
+
+
+def joint_tree_lines(motion: Motion) -> list[str]:
+    """One line per joint, indented by depth, with its channel layout."""
+    sk = motion.skeleton
+    out = []
+    for j, name in enumerate(sk.names):
+        chans = sk.channels[j]
+        rot = sk.rotation_orders[j]
+        pos = "".join(c[0] for c in chans if c.endswith("position"))
+        parts = []
+        if pos:
+            parts.append(f"pos {pos} ({sk.position_modes[j]})")
+        if rot:
+            parts.append(f"rot {rot}")
+        layout = ", ".join(parts) if parts else "no channels"
+        out.append(f"{'  ' * int(sk.depth[j])}{name}  [{layout}]")
+    return out
+
+
+def describe_motion(motion: Motion) -> dict:
+    """A JSON-ready summary: frames, frame rate, duration, units, up axis, stature, joints."""
+    sk = motion.skeleton
+    src = sk.source
+    orders = sorted({o for o in sk.rotation_orders if o})
+    return {
+        "name": motion.name,
+        "frames": motion.num_frames,
+        "fps": motion.fps,
+        "frame_time": motion.frame_time,
+        "duration": motion.duration,
+        "units": src.units,
+        "metres_per_unit": src.scale,
+        "up_axis": src.up_axis,
+        "detected": src.detected,
+        "detection": src.reason,
+        "stature_m": stature(motion),
+        "joints": list(sk.names),
+        "parents": [int(p) for p in sk.parents],
+        "end_sites": [site.name for site in sk.end_sites],
+        "channels": {name: list(ch) for name, ch in zip(sk.names, sk.channels)},
+        "channel_count": sk.num_channels,
+        "rotation_orders": orders,
+        "position_channels": {sk.names[j]: sk.position_modes[j]
+                              for j in range(sk.num_joints) if sk.position_modes[j]},
+    }

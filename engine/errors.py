@@ -1,0 +1,54 @@
+"""The engine's typed errors.
+
+Every error a user can cause (a malformed file, an impossible mapping, a corrupt project) is
+an instance of :class:`MotionComposerError`, so callers catch one class and show its message.
+Messages say where (file and line where there is one) and what was expected, in words a person
+can act on; the command-line interface prints them on one line.
+"""
+from __future__ import annotations
+
+import os
+
+__all__ = [
+    "MotionComposerError",
+    "FileFormatError",
+    "BVHError",
+    "ExportError",
+    "SkeletonError",
+]
+
+
+class MotionComposerError(Exception):
+    """Base class of every error the engine raises on bad input."""
+
+
+class FileFormatError(MotionComposerError):
+    """A file that cannot be read: it names the file, the line (if known) and what was expected.
+
+    Attributes:
+        path: the file's path as given (``None`` for text that came from no file).
+        line: 1-based line number, or ``None`` when the problem is not on one line.
+        problem: the message without the location prefix.
+    """
+
+    def __init__(self, problem: str, path: str | os.PathLike | None = None,
+                 line: int | None = None):
+        self.path = os.fspath(path) if path is not None else None
+        self.line = line
+        self.problem = problem
+        where = self.path or "<text>"
+        if line is not None:
+            where = f"{where}:{line}"
+        super().__init__(f"{where}: {problem}")
+
+
+class BVHError(FileFormatError):
+    """A BVH file that is malformed or holds values that cannot be used."""
+
+
+class ExportError(MotionComposerError):
+    """A motion that cannot be written in the requested form."""
+
+
+class SkeletonError(MotionComposerError):
+    """A skeleton that is inconsistent (a parent after its child, a duplicate name, ...)."""

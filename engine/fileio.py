@@ -1,0 +1,32 @@
+"""Atomic file writing: a save either completes or leaves the previous file untouched."""
+from __future__ import annotations
+
+import os
+import tempfile
+
+__all__ = ["atomic_write"]
+
+
+def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = "utf-8") -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder, then rename.
+
+    The temporary file is flushed and fsynced before :func:`os.replace`, so a crash at any
+    moment leaves either the old file or the complete new one, never a half-written file.
+    """
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    payload = data.encode(encoding) if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
+                               dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(payload)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise

@@ -1,0 +1,76 @@
+"""Vectorised quaternion products, the hot path of kinematics.
+
+scipy's :class:`~scipy.spatial.transform.Rotation` is the reference and is used wherever speed
+does not matter, but on this machine composing 100,000 rotations with it costs about 50 ms
+and ``from_euler`` about 200 ms, against 2 to 4 ms for the numpy below; forward kinematics and
+BVH reading run these once per joint per call. The test suite checks every function here
+against scipy value by value.
+
+All quaternions are x, y, z, w (scipy's order), shape ``(..., 4)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle"]
+
+
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``), broadcasting."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    return out
+
+
+def qconj(q: np.ndarray) -> np.ndarray:
+    """The conjugate (the inverse of a unit quaternion)."""
+    out = np.array(q, dtype=float, copy=True)
+    out[..., :3] *= -1.0
+    return out
+
+
+def qrot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)``, broadcasting.
+
+    Uses v' = v + w t + u x t with t = 2 u x v (u the vector part, w the scalar part).
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    ux, uy, uz, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    out = np.empty(np.broadcast_shapes(q.shape[:-1], v.shape[:-1]) + (3,))
+    out[..., 0] = vx + w * tx + (uy * tz - uz * ty)
+    out[..., 1] = vy + w * ty + (uz * tx - ux * tz)
+    out[..., 2] = vz + w * tz + (ux * ty - uy * tx)
+    return out
+
+
+def axis_angle(axis: int, angles: np.ndarray) -> np.ndarray:
+    """Quaternions for rotations of ``angles`` radians about coordinate ``axis`` (0, 1, 2)."""
+    half = 0.5 * np.asarray(angles, dtype=float)
+    q = np.zeros(half.shape + (4,))
+    q[..., axis] = np.sin(half)
+    q[..., 3] = np.cos(half)
+    return q
+
+
+def from_euler(angles_deg: np.ndarray, order: str) -> np.ndarray:
+    """Quaternions for intrinsic Euler angles ``(..., len(order))`` in degrees.
+
+    ``order`` like ``"ZYX"`` means R = Rz Ry Rx (BVH's and scipy's upper-case reading).
+    """
+    angles = np.radians(np.asarray(angles_deg, dtype=float))
+    q = axis_angle("XYZ".index(order[0].upper()), angles[..., 0])
+    for k in range(1, len(order)):
+        q = qmul(q, axis_angle("XYZ".index(order[k].upper()), angles[..., k]))
+    return q
