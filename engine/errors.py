@@ -15,6 +15,7 @@ __all__ = [
     "BVHError",
     "ExportError",
     "SkeletonError",
+    "MappingError",
 ]
 
 
@@ -52,3 +53,16 @@ class ExportError(MotionComposerError):
 
 class SkeletonError(MotionComposerError):
     """A skeleton that is inconsistent (a parent after its child, a duplicate name, ...)."""
+
+
+class MappingError(MotionComposerError):
+    """A joint correspondence that cannot be used (unknown joint, inverted ancestry, ...).
+
+    Attributes:
+        path: the mapping file, when the mapping came from one.
+    """
+
+    def __init__(self, problem: str, path=None):
+        self.path = os.fspath(path) if path is not None else None
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}" if self.path else problem)
