@@ -69,6 +69,48 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _reference(text: str):
+    """``rest``, ``auto`` or ``frame:N`` for a reference pose."""
+    if text in ("rest", "auto"):
+        return text
+    if text.startswith("frame:") and text[6:].isdigit():
+        return int(text[6:])
+    raise argparse.ArgumentTypeError(f"expected rest, auto or frame:N (N a frame number), "
+                                     f"not {text!r}")
+
+
+def cmd_retarget(args) -> int:
+    import time
+
+    from engine.bvh import write_bvh
+    from engine.correspondence import Correspondence
+    from engine.retarget import BindOptions, RootOptions, retarget
+
+    started = time.perf_counter()
+    performer = read_bvh(args.performer)
+    target = read_bvh(args.target)
+    if args.map:
+        correspondence = Correspondence.load(args.map)
+        correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
+    else:
+        from engine.automap import automap
+        correspondence = automap(target.skeleton, performer.skeleton)
+    options = BindOptions(performer_reference=args.reference,
+                          target_reference=args.target_reference,
+                          rest_alignment=not args.keep_target_pose,
+                          distribute=args.distribute)
+    root = RootOptions(mode=args.root, scale=tuple(args.root_scale) if args.root_scale else None)
+    result = retarget(performer, target, correspondence, bind_options=options, root=root)
+    write_bvh(result, args.output)
+    if args.save_map:
+        correspondence.save(args.save_map)
+    elapsed = time.perf_counter() - started
+    print(f"wrote {args.output}: {result.num_frames} frames at {result.fps:.6g} fps onto "
+          f"{result.skeleton.num_joints} joints ({len(correspondence)} mapped) in "
+          f"{elapsed:.2f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="motion-composer",
@@ -81,6 +123,34 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print JSON for machines")
     _add_reader_options(info)
     info.set_defaults(func=cmd_info)
+
+    rt = sub.add_parser("retarget", help="convert a capture onto another character",
+                        description="Convert a performer's motion onto a target character "
+                                    "through an intermediate skeleton (no IK correction).")
+    rt.add_argument("performer", help="the capture (.bvh)")
+    rt.add_argument("--target", required=True,
+                    help="the character (.bvh whose rest pose or first frame gives it)")
+    rt.add_argument("-o", "--output", required=True, help="the .bvh to write")
+    rt.add_argument("--map", help="a mapping file (JSON with a \"pairs\" object); "
+                                  "automatic mapping when not given")
+    rt.add_argument("--save-map", help="write the mapping actually used to this JSON file")
+    rt.add_argument("--reference", type=_reference, default="auto",
+                    help="the performer's reference pose: rest (zero rotations), frame:N, or "
+                         "auto (rest if it stands upright, else frame 0; the default)")
+    rt.add_argument("--target-reference", type=_reference, default="auto",
+                    help="the target's initial posture: rest, frame:N or auto (default)")
+    rt.add_argument("--keep-target-pose", action="store_true",
+                    help="keep the target's own initial posture instead of turning its bones "
+                         "onto the performer's (rest-posture alignment)")
+    rt.add_argument("--root", choices=("scaled", "absolute", "in-place"), default="scaled",
+                    help="root translation: scaled by the ratio of hip heights (default), as "
+                         "captured, or with the horizontal displacement removed")
+    rt.add_argument("--root-scale", type=float, nargs=2, metavar=("H", "V"),
+                    help="horizontal and vertical root scale, overriding the hip-height ratio")
+    rt.add_argument("--distribute", choices=("even", "first"), default="even",
+                    help="how a target chain with unmapped inner joints turns: spread over "
+                         "the chain (default) or all at its first joint")
+    rt.set_defaults(func=cmd_retarget)
     return parser
 
 

@@ -58,8 +58,10 @@ class Correspondence:
         """Raise :class:`MappingError` unless this map can drive ``target`` from ``performer``.
 
         Checks: every name exists in its skeleton; no performer joint is used twice; the
-        target's root is mapped; ancestry is kept (if target joint B descends from A, B's
-        performer joint descends from A's).
+        body's root is mapped (the target's root, or a joint above every other mapped joint,
+        such as the hips below an unmapped ground-level root, which then keeps its own
+        placement); ancestry is kept (if target joint B descends from A, B's performer joint
+        descends from A's).
         """
         for t, p in self.pairs.items():
             if t not in target.index:
@@ -74,10 +76,18 @@ class Correspondence:
                                    f"performer joint {p!r}; each performer joint may drive one "
                                    "target joint", path)
             used[p] = t
-        root = target.names[0]
-        if root not in self.pairs:
-            raise MappingError(f"the target's root joint {root!r} is not mapped; map it to the "
-                               "performer's root or hips", path)
+        # one mapped joint must sit above all others (the body's root: the target's root, or
+        # its hips below an unmapped ground-level root such as Bandai's joint_Root)
+        tops = [t for t in self.pairs
+                if _nearest_mapped_ancestor(target, target.index[t], self.pairs) is None]
+        if not tops:
+            raise MappingError(f"no joint is mapped; map at least the target's root "
+                               f"{target.names[0]!r} (or its hips)", path)
+        if len(tops) > 1:
+            raise MappingError(
+                f"the target's root {target.names[0]!r} is unmapped and the mapped joints "
+                f"{', '.join(repr(t) for t in sorted(tops, key=target.index.get)[:4])} have no "
+                "mapped ancestor in common; map the target's root or hips", path)
         for t, p in self.pairs.items():
             a = _nearest_mapped_ancestor(target, target.index[t], self.pairs)
             if a is None:

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle"]
+__all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
+           "twist_about", "qpow", "about_axis"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -74,3 +75,73 @@ def from_euler(angles_deg: np.ndarray, order: str) -> np.ndarray:
     for k in range(1, len(order)):
         q = qmul(q, axis_angle("XYZ".index(order[k].upper()), angles[..., k]))
     return q
+
+
+def qnormalize(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions (``q / |q|``)."""
+    q = np.asarray(q, dtype=float)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking direction ``a`` onto direction ``b`` (``(..., 3)`` each,
+    any length). Opposite directions turn 180 degrees about an axis normal to ``a``."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    a, b = np.broadcast_arrays(a, b)
+    q = np.empty(a.shape[:-1] + (4,))
+    q[..., :3] = np.cross(a, b)
+    q[..., 3] = 1.0 + np.sum(a * b, axis=-1)
+    opposite = q[..., 3] < 1e-9
+    if np.any(opposite):
+        aa = a[opposite]
+        # any axis normal to a: cross with the coordinate axis least aligned with it
+        pick = np.eye(3)[np.argmin(np.abs(aa), axis=-1)]
+        axis = np.cross(aa, pick)
+        q[opposite, :3] = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+        q[opposite, 3] = 0.0
+    return qnormalize(q)
+
+
+def twist_about(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The twist part of ``q`` about unit ``axis`` (swing-twist decomposition q = swing twist,
+    twist about ``axis``). Where q is a half turn normal to the axis, the twist is identity."""
+    q = np.asarray(q, dtype=float)
+    axis = np.asarray(axis, dtype=float)
+    along = np.sum(q[..., :3] * axis, axis=-1, keepdims=True)
+    t = np.concatenate([along * axis, q[..., 3:4]], axis=-1)
+    t = np.broadcast_to(t, np.broadcast_shapes(t.shape, q.shape)).copy()
+    norm = np.linalg.norm(t, axis=-1, keepdims=True)
+    small = norm[..., 0] < 1e-12
+    t[small] = (0.0, 0.0, 0.0, 1.0)
+    norm[small] = 1.0
+    return t / norm
+
+
+def qpow(q: np.ndarray, fraction: float) -> np.ndarray:
+    """``q`` raised to ``fraction``: the same axis, ``fraction`` of the (shortest) angle."""
+    q = np.asarray(q, dtype=float)
+    q = np.where(q[..., 3:4] < 0, -q, q)
+    vec = q[..., :3]
+    s = np.linalg.norm(vec, axis=-1)
+    angle = 2.0 * np.arctan2(s, q[..., 3])
+    safe = np.where(s > 1e-12, s, 1.0)
+    axis = vec / safe[..., None]
+    half = 0.5 * fraction * angle
+    out = np.empty(q.shape)
+    out[..., :3] = axis * np.sin(half)[..., None]
+    out[..., 3] = np.cos(half)
+    out[s <= 1e-12] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+def about_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotations of ``angle`` radians about unit ``axis`` (``(..., 3)``), broadcasting."""
+    axis = np.asarray(axis, dtype=float)
+    half = 0.5 * np.asarray(angle, dtype=float)
+    out = np.empty(np.broadcast_shapes(axis.shape[:-1], half.shape) + (4,))
+    out[..., :3] = axis * np.sin(half)[..., None]
+    out[..., 3] = np.cos(half)
+    return out

@@ -1,0 +1,528 @@
+"""Direct motion conversion through an Intermediate Skeleton (the paper's section 2).
+
+Three steps, each vectorised over frames:
+
+* :func:`bind` (*Anatomic Binding*) builds the :class:`Binding`, our Intermediate Skeleton: the
+  target's joints and local axes, posed so that each target bone points along the performer's
+  *virtual bone* in the performer's reference pose (rest-posture alignment, section 2.1.4, on
+  by default; off keeps the target's own initial posture).
+* :func:`convert` (*Motion Converter*) orients every intermediate bone, root to leaves, along
+  its virtual bone in each frame of the capture.
+* :func:`compose` (*Motion Composer*) copies the intermediate skeleton's local values onto the
+  target and adds the root's translation.
+
+:func:`retarget` runs the three.
+
+How each mapped joint turns (its world rotation is ``delta * A`` with ``A`` its bound rest
+rotation): ``delta`` is the rotation taking the joint's virtual bones in the performer's
+reference pose to where they are in the frame. The *primary* virtual bone (the one leading to
+the child with the largest subtree, e.g. the spine for the hips) is matched exactly by the
+smallest swing. The roll about it, which the paper leaves out, is carried where the data
+allows: by the other virtual bones of a branching joint (the hip line for the hips, the
+shoulder line for the chest), else by the twist of the performer joint's own rotation (which
+carries a forearm's or a foot's roll), so a clip retargeted onto its own skeleton comes back
+unchanged. A joint with no usable virtual bone (a leaf, or a zero-length bone) takes the
+performer joint's whole rotation change.
+
+Unmapped target joints keep their bound local rotation (they follow their parent). Where a
+target chain has more joints than the performer maps (CC3's spine under CMU's), the
+``distribute="even"`` default spreads the chain's turn evenly over its joints and then corrects
+the chain so that its end still lies exactly along the virtual bone; ``"first"`` puts it all on
+the chain's first joint.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .correspondence import Correspondence
+from .errors import MappingError, MotionComposerError
+from .kinematics import fk_arrays
+from .motion import Motion
+from .quaternions import about_axis, qconj, qmul, qpow, qrot, quat_between, twist_about
+from .skeleton import Skeleton
+
+__all__ = ["BindOptions", "RootOptions", "Binding", "bind", "convert", "compose", "retarget",
+           "reference_pose", "is_upright"]
+
+#: a virtual bone shorter than this fraction of the character's height has no direction
+_MIN_BONE = 1e-3
+
+
+@dataclass(frozen=True)
+class BindOptions:
+    """Choices of the Anatomic Binding.
+
+    Attributes:
+        performer_reference: the performer's reference pose: ``"rest"`` (zero rotations, the
+            OFFSET pose), a frame number, or ``"auto"`` (the rest pose when it stands upright,
+            else frame 0; Bandai, CC3 and Rokoko rest poses lie down).
+        target_reference: the same for the target (its file's rest pose or one of its frames).
+        rest_alignment: turn the target's bones onto the performer's virtual bones (the
+            paper's *rest posture*); ``False`` keeps the target's own initial posture.
+        distribute: how a target chain with unmapped inner joints turns: ``"even"`` spreads
+            the turn over the chain's joints, ``"first"`` turns only the chain's first joint.
+    """
+
+    performer_reference: str | int = "auto"
+    target_reference: str | int = "auto"
+    rest_alignment: bool = True
+    distribute: str = "even"
+
+    def __post_init__(self):
+        for ref in (self.performer_reference, self.target_reference):
+            if not (ref in ("auto", "rest") or (isinstance(ref, (int, np.integer))
+                                                 and not isinstance(ref, bool) and ref >= 0)):
+                raise MotionComposerError(f"a reference pose is 'auto', 'rest' or a frame "
+                                          f"number (0 or more), not {ref!r}")
+        if self.distribute not in ("even", "first"):
+            raise MotionComposerError(f"distribute must be 'even' or 'first', not "
+                                      f"{self.distribute!r}")
+
+
+@dataclass(frozen=True)
+class RootOptions:
+    """How the root's translation is carried over.
+
+    Attributes:
+        mode: ``"scaled"`` (the performer's displacement times the ratio of hip heights, the
+            default), ``"absolute"`` (the performer's world trajectory as it is, in metres) or
+            ``"in-place"`` (horizontal displacement removed, vertical scaled).
+        scale: ``(horizontal, vertical)`` factors overriding the hip-height ratio in the
+            ``scaled`` and ``in-place`` modes.
+    """
+
+    mode: str = "scaled"
+    scale: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if self.mode not in ("scaled", "absolute", "in-place"):
+            raise MotionComposerError(f"root mode must be 'scaled', 'absolute' or 'in-place', "
+                                      f"not {self.mode!r}")
+        if self.scale is not None:
+            h, v = self.scale
+            if not (np.isfinite(h) and np.isfinite(v)):
+                raise MotionComposerError(f"root scale must be two finite numbers, not "
+                                          f"{self.scale!r}")
+            object.__setattr__(self, "scale", (float(h), float(v)))
+
+
+def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> bool:
+    """Whether a single pose stands up along +Y: its vertical extent is at least 0.7 of its
+    widest horizontal extent (a T-pose's arm span is about its height; a skeleton lying along
+    an axis fails)."""
+    pose = fk_arrays(skeleton, rotations[None], translations[None])
+    pts = pose.all_positions()[0]
+    ext = pts.max(axis=0) - pts.min(axis=0)
+    return bool(ext[1] >= 0.7 * max(ext[0], ext[2]))
+
+
+def reference_pose(motion: Motion, choice: str | int) -> tuple[np.ndarray, np.ndarray, str]:
+    """Local rotations ``(J, 4)`` and translations ``(K, 3)`` of a reference pose, and a label.
+
+    ``choice`` is ``"rest"`` (zero rotations, offsets, the root at its first-frame position),
+    a frame number, or ``"auto"`` (rest if it stands upright, else frame 0).
+    """
+    sk = motion.skeleton
+    rest_rot = np.zeros((sk.num_joints, 4))
+    rest_rot[:, 3] = 1.0
+    rest_tra = sk.offsets[sk.translated].copy()
+    rest_tra[0] = motion.translations[0, 0]
+    if choice == "auto":
+        choice = "rest" if is_upright(sk, rest_rot, rest_tra) else 0
+    if choice == "rest":
+        return rest_rot, rest_tra, "rest pose (zero rotations)"
+    frame = int(choice)
+    if not 0 <= frame < motion.num_frames:
+        raise MotionComposerError(f"reference frame {frame} is outside the clip "
+                                  f"{motion.name or ''} (frames 0 to {motion.num_frames - 1})")
+    return motion.rotations[frame].copy(), motion.translations[frame].copy(), f"frame {frame}"
+
+
+@dataclass(frozen=True, eq=False)
+class Binding:
+    """The Intermediate Skeleton: everything :func:`convert` needs, computed once.
+
+    Attributes (J target joints, Jp performer joints):
+        target: the target skeleton.
+        performer: the performer skeleton.
+        correspondence: the map used.
+        mapped: ``(J,)`` performer joint index driving each target joint, or -1.
+        rest_world: ``(J, 4)`` world rotations of the bound rest posture (the target's axes,
+            the performer's bone directions when rest alignment is on).
+        rest_local: ``(J, 4)`` local rotations of the bound rest posture.
+        rest_positions: ``(J, 3)`` [m] world joint positions of the bound rest posture.
+        performer_rest_world: ``(Jp, 4)`` performer world rotations in its reference pose.
+        performer_rest_positions: ``(Jp, 3)`` [m] performer positions in its reference pose.
+        bones: per mapped target joint, its virtual bones (see :class:`_Bones`).
+        chains: per mapped target joint, the unmapped joints between it and its primary
+            child (turned together with ``distribute="even"``).
+        body_root: the top-most mapped target joint (its translation follows the performer).
+        driven: target joints whose world position follows their performer joint's (scaled):
+            the body root, and mapped joints with animated translation whose performer joint's
+            translation is animated too (Bandai's hips under its ground-level root).
+        root_translation: the target's reference translations ``(K, 3)``.
+        hip_height_ratio: target hip height over performer hip height, both in their
+            reference (bound) poses, the default root scale.
+        options: the :class:`BindOptions` used.
+        notes: how references were chosen, for display.
+    """
+
+    target: Skeleton
+    performer: Skeleton
+    correspondence: Correspondence
+    mapped: np.ndarray
+    rest_world: np.ndarray
+    rest_local: np.ndarray
+    rest_positions: np.ndarray
+    performer_rest_world: np.ndarray
+    performer_rest_positions: np.ndarray
+    bones: dict
+    chains: dict
+    body_root: int
+    driven: list
+    root_translation: np.ndarray
+    hip_height_ratio: float
+    options: BindOptions
+    notes: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class _Bones:
+    """The virtual bones of one mapped target joint ``j`` (performer joint ``p``).
+
+    ``children``: target indices of its usable mapped children, primary first; ``performer``:
+    their performer joints; ``target_local``: ``(C, 3)`` each child's position in ``j``'s frame
+    in the bound rest posture; ``reference``: ``(C, 3)`` the performer's virtual bones
+    (world, reference pose). ``roll_by_bones``: the roll comes from the secondary bones (a
+    branching joint) rather than from the performer joint's twist.
+    """
+
+    children: list
+    performer: list
+    target_local: np.ndarray
+    reference: np.ndarray
+    roll_by_bones: bool
+
+
+def _height_above_floor(positions: np.ndarray, joint: int) -> float:
+    return float(positions[joint, 1] - positions[:, 1].min())
+
+
+def _align(from_dirs: np.ndarray, to_dirs: np.ndarray, roll_by_bones: bool) -> np.ndarray:
+    """Rotation(s) taking ``from_dirs[..., 0, :]`` exactly onto ``to_dirs[..., 0, :]`` and rolling
+    about it to best match the other directions (least squares in the normal plane).
+
+    Shapes ``(..., C, 3)``; returns ``(..., 4)``.
+    """
+    swing = quat_between(from_dirs[..., 0, :], to_dirs[..., 0, :])
+    if not roll_by_bones or from_dirs.shape[-2] < 2:
+        return swing
+    n = to_dirs[..., 0, :]
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    a = qrot(swing[..., None, :], from_dirs[..., 1:, :])
+    b = to_dirs[..., 1:, :]
+    a = a - np.sum(a * n[..., None, :], axis=-1, keepdims=True) * n[..., None, :]
+    b = b - np.sum(b * n[..., None, :], axis=-1, keepdims=True) * n[..., None, :]
+    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-12)
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
+    sin = np.sum(np.sum(np.cross(a, b) * n[..., None, :], axis=-1), axis=-1)
+    cos = np.sum(np.sum(a * b, axis=-1), axis=-1)
+    roll = about_axis(n, np.arctan2(sin, cos))
+    return qmul(roll, swing)
+
+
+def _check_mapping(target: Skeleton, performer: Skeleton, corr: Correspondence) -> np.ndarray:
+    corr.validate(target, performer)
+    mapped = np.full(target.num_joints, -1, dtype=np.intp)
+    for t, p in corr.pairs.items():
+        mapped[target.index[t]] = performer.index[p]
+    return mapped
+
+
+def _nearest_mapped_ancestor(skeleton: Skeleton, mapped: np.ndarray) -> np.ndarray:
+    anchor = np.full(skeleton.num_joints, -1, dtype=np.intp)
+    for j in range(1, skeleton.num_joints):
+        p = skeleton.parents[j]
+        anchor[j] = p if mapped[p] >= 0 else anchor[p]
+    return anchor
+
+
+def _crosses(skeleton: Skeleton, top: int, joint: int, joints: set) -> bool:
+    """Whether the path from ``top`` (exclusive) down to ``joint`` (inclusive) meets ``joints``."""
+    k = joint
+    while k >= 0 and k != top:
+        if k in joints:
+            return True
+        k = int(skeleton.parents[k])
+    return False
+
+
+def bind(performer: Motion, target: Motion, correspondence: Correspondence,
+         options: BindOptions | None = None) -> Binding:
+    """Anatomic Binding: build the Intermediate Skeleton for ``performer`` onto ``target``.
+
+    ``target`` is a motion whose skeleton is the character (its rest pose or one of its frames
+    gives the target's initial posture, see :class:`BindOptions`).
+    """
+    options = options or BindOptions()
+    tsk, psk = target.skeleton, performer.skeleton
+    mapped = _check_mapping(tsk, psk, correspondence)
+    J = tsk.num_joints
+    anchor = _nearest_mapped_ancestor(tsk, mapped)
+    body_roots = [j for j in range(J) if mapped[j] >= 0 and anchor[j] < 0]
+    body_root = body_roots[0]
+
+    # reference poses
+    p_rot, p_tra, p_label = reference_pose(performer, options.performer_reference)
+    t_rot, t_tra, t_label = reference_pose(target, options.target_reference)
+    p_pose = fk_arrays(psk, p_rot[None], p_tra[None], end_sites=True)
+    p_world = p_pose.rotations[0]
+    p_pos = p_pose.positions[0]
+    p_all = p_pose.all_positions()[0]
+    t_pose = fk_arrays(tsk, t_rot[None], t_tra[None])
+    t_world_ref = t_pose.rotations[0]
+    t_pos_ref = t_pose.positions[0]
+    scale_len = max(float(np.ptp(p_all[:, 1])), 1e-6)
+
+    # children of each mapped joint and the target offsets towards them (in the joint's frame)
+    kids: dict[int, list[int]] = {j: [] for j in range(J) if mapped[j] >= 0}
+    for j in range(J):
+        if mapped[j] >= 0 and anchor[j] >= 0:
+            kids[anchor[j]].append(j)
+    subtree = np.ones(J, dtype=np.intp)
+    for j in range(J - 1, 0, -1):
+        subtree[tsk.parents[j]] += subtree[j]
+
+    local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
+    local_t[tsk.translated] = t_tra
+    t_height = max(float(np.ptp(t_pos_ref[:, 1])), 1e-6)
+
+    # performer joints whose translation is animated: a virtual bone across one of them
+    # stretches and turns with the translation (Bandai's hips under its ground root), so it
+    # gives no direction to follow
+    p_slots = {int(j): k for k, j in enumerate(psk.translated)}
+    p_moving = {j for j, k in p_slots.items() if j > 0 and
+                np.ptp(performer.translations[:, k], axis=0).max() > 1e-6}
+
+    bones: dict[int, _Bones] = {}
+    for j, children in kids.items():
+        usable = []
+        for c in children:
+            if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving):
+                continue
+            v = p_pos[mapped[c]] - p_pos[mapped[j]]
+            t = qrot(qconj(t_world_ref[j]), t_pos_ref[c] - t_pos_ref[j])
+            if np.linalg.norm(v) > _MIN_BONE * scale_len and \
+                    np.linalg.norm(t) > _MIN_BONE * t_height:
+                usable.append((c, v, t))
+        usable.sort(key=lambda item: -subtree[item[0]])
+        if not usable:
+            bones[j] = _Bones([], [], np.zeros((0, 3)), np.zeros((0, 3)), False)
+            continue
+        ref = np.array([u[1] for u in usable])
+        loc = np.array([u[2] for u in usable])
+        roll_by_bones = False
+        if len(usable) > 1:
+            n = ref[0] / np.linalg.norm(ref[0])
+            normal = ref[1:] - np.outer(ref[1:] @ n, n)
+            roll_by_bones = bool(np.any(np.linalg.norm(normal, axis=1) >
+                                        0.1 * np.linalg.norm(ref[1:], axis=1)))
+        bones[j] = _Bones([u[0] for u in usable], [int(mapped[u[0]]) for u in usable], loc, ref,
+                          roll_by_bones)
+
+    # chains of unmapped joints between a mapped joint and its primary child
+    chains: dict[int, list[int]] = {}
+    for j, b in bones.items():
+        if b.children:
+            path = []
+            k = tsk.parents[b.children[0]]
+            while k != j:
+                path.append(int(k))
+                k = tsk.parents[k]
+            chains[j] = path[::-1]
+
+    # the bound rest posture, root to leaves
+    rest_world = np.empty((J, 4))
+    for j in range(J):
+        parent = tsk.parents[j]
+        w = t_rot[j] if parent < 0 else qmul(rest_world[parent], t_rot[j])
+        if options.rest_alignment and j in bones and bones[j].children:
+            b = bones[j]
+            from_dirs = qrot(w, b.target_local)
+            w = qmul(_align(from_dirs, b.reference, b.roll_by_bones), w)
+        rest_world[j] = w
+    rest_local = rest_world.copy()
+    rest_local[1:] = qmul(qconj(rest_world[tsk.parents[1:]]), rest_world[1:])
+    bound = fk_arrays(tsk, rest_local[None], t_tra[None])
+    rest_positions = bound.positions[0]
+    # the target offsets towards the children, in the bound posture
+    for j, b in bones.items():
+        if b.children:
+            loc = qrot(qconj(rest_world[j]), rest_positions[b.children] - rest_positions[j])
+            bones[j] = _Bones(b.children, b.performer, loc, b.reference, b.roll_by_bones)
+
+    t_hip = _height_above_floor(np.concatenate([rest_positions, bound.end_positions[0]]),
+                                body_root)
+    p_hip = _height_above_floor(p_all, int(mapped[body_root]))
+    ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
+    driven = [body_root]
+    for j in tsk.translated[1:]:
+        p = int(mapped[j])
+        if j != body_root and p in p_moving:
+            driven.append(int(j))
+    return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
+                   rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
+                   performer_rest_world=p_world, performer_rest_positions=p_pos, bones=bones,
+                   chains=chains, body_root=body_root, driven=driven, root_translation=t_tra,
+                   hip_height_ratio=float(ratio), options=options,
+                   notes={"performer reference": p_label, "target reference": t_label,
+                          "hip height ratio": f"{ratio:.4f}"})
+
+
+@dataclass(frozen=True, eq=False)
+class IntermediatePose:
+    """The Intermediate Skeleton over frames.
+
+    Attributes:
+        world: ``(F, J, 4)`` world rotations of the target's joints.
+        positions: target joint index -> ``(F, 3)`` [m] world positions of the joints whose
+            translation is driven (``Binding.driven``: the body root first).
+    """
+
+    world: np.ndarray
+    positions: dict
+
+
+def convert(binding: Binding, performer: Motion, root: RootOptions | None = None,
+            progress=None) -> IntermediatePose:
+    """Motion Converter: orient the intermediate bones along the virtual bones, every frame."""
+    root = root or RootOptions()
+    tsk = binding.target
+    if performer.skeleton.names != binding.performer.names:
+        raise MappingError("this binding was made for another performer skeleton")
+    pose = fk_arrays(performer.skeleton, performer.rotations, performer.translations,
+                     end_sites=False)
+    pq, pp = pose.rotations, pose.positions
+    F, J = performer.num_frames, tsk.num_joints
+    world = np.empty((F, J, 4))
+    local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
+    local_t[tsk.translated] = binding.root_translation
+    mapped = binding.mapped
+    done = np.zeros(J, dtype=bool)
+    for j in range(J):
+        if done[j]:
+            continue
+        parent = tsk.parents[j]
+        if mapped[j] < 0:
+            world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
+                           else qmul(world[:, parent], binding.rest_local[j]))
+            done[j] = True
+            continue
+        p = mapped[j]
+        full = qmul(pq[:, p], qconj(binding.performer_rest_world[p]))
+        b = binding.bones[j]
+        if not b.children:
+            delta = full
+        else:
+            now = pp[:, b.performer] - pp[:, [p]]                      # (F, C, 3)
+            delta = _align(np.broadcast_to(b.reference, now.shape), now, b.roll_by_bones)
+            if not b.roll_by_bones:
+                axis = b.reference[0] / np.linalg.norm(b.reference[0])
+                twist = twist_about(qmul(qconj(delta), full), axis)
+                delta = qmul(delta, twist)
+        w = qmul(delta, binding.rest_world[j])
+        chain = binding.chains.get(j, [])
+        if chain and binding.options.distribute == "even" and parent >= 0:
+            w = _distribute(binding, j, chain, w, world, pp[:, b.performer[0]] - pp[:, p],
+                            local_t)
+            done[chain] = True
+        elif chain and binding.options.distribute == "even":
+            w = _distribute(binding, j, chain, w, world, pp[:, b.performer[0]] - pp[:, p],
+                            local_t)
+            done[chain] = True
+        world[:, j] = w
+        done[j] = True
+        if progress is not None:
+            progress((j + 1) / J)
+    positions = {}
+    for j in binding.driven:
+        ph = mapped[j]
+        disp = pp[:, ph] - binding.performer_rest_positions[ph]
+        if root.mode == "absolute":
+            positions[j] = pp[:, ph].copy()
+        else:
+            h, v = root.scale if root.scale is not None else (binding.hip_height_ratio,) * 2
+            scaled = disp * np.array([h, v, h])
+            if root.mode == "in-place":
+                scaled[:, [0, 2]] = 0.0
+            positions[j] = binding.rest_positions[j] + scaled
+    return IntermediatePose(world=world, positions=positions)
+
+
+def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
+                world: np.ndarray, target_dir: np.ndarray, local_t: np.ndarray) -> np.ndarray:
+    """Spread joint ``j``'s turn over ``j`` and the unmapped ``chain`` below it, then turn the
+    whole chain so that the primary child still lies along ``target_dir``. Fills ``world`` for
+    the chain's joints and returns ``j``'s world rotation."""
+    tsk = binding.target
+    parent = tsk.parents[j]
+    follow = (np.broadcast_to(binding.rest_local[j], rigid.shape) if parent < 0
+              else qmul(world[:, parent], binding.rest_local[j]))
+    n = len(chain) + 1
+    step = qpow(qmul(rigid, qconj(follow)), 1.0 / n)
+    rots = [qmul(step, follow)]
+    for k in chain:
+        rots.append(qmul(step, qmul(rots[-1], binding.rest_local[k])))
+    # where the primary child ends up, relative to j
+    child = binding.bones[j].children[0]
+    pos = np.zeros(rigid.shape[:-1] + (3,))
+    for r, k in zip(rots, chain + [child]):
+        pos = pos + qrot(r, local_t[k])
+    fix = quat_between(pos, target_dir)
+    rots = [qmul(fix, r) for r in rots]
+    for r, k in zip(rots[1:], chain):
+        world[:, k] = r
+    return rots[0]
+
+
+def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
+            name: str = "") -> Motion:
+    """Motion Composer: the target motion with the intermediate skeleton's local values."""
+    tsk = binding.target
+    world = pose.world
+    F = world.shape[0]
+    local = np.empty_like(world)
+    local[:, 0] = world[:, 0]
+    local[:, 1:] = qmul(qconj(world[:, tsk.parents[1:]]), world[:, 1:])
+    translations = np.broadcast_to(binding.root_translation,
+                                   (F,) + binding.root_translation.shape).copy()
+    slot = {int(j): k for k, j in enumerate(tsk.translated)}
+    for j in binding.driven:
+        target_pos = pose.positions[j]
+        # the nearest joint at or above j whose translation is animated carries it
+        carrier = j
+        while carrier not in slot:
+            carrier = int(tsk.parents[carrier])
+        parent = tsk.parents[carrier]
+        if carrier == j and parent < 0:
+            translations[:, slot[j]] = target_pos
+            continue
+        current = fk_arrays(tsk, local, translations, end_sites=False)
+        shift = target_pos - current.positions[:, j]
+        if parent >= 0:
+            shift = qrot(qconj(current.rotations[:, parent]), shift)
+        translations[:, slot[carrier]] += shift
+    return Motion(skeleton=tsk, rotations=local, translations=translations,
+                  frame_time=frame_time, name=name)
+
+
+def retarget(performer: Motion, target: Motion, correspondence: Correspondence, *,
+             bind_options: BindOptions | None = None, root: RootOptions | None = None,
+             progress=None) -> Motion:
+    """Convert ``performer``'s motion onto ``target``'s character (bind, convert, compose)."""
+    binding = bind(performer, target, correspondence, bind_options)
+    pose = convert(binding, performer, root, progress=progress)
+    name = f"{performer.name}_on_{target.name}" if performer.name and target.name else ""
+    return compose(binding, pose, performer.frame_time, name=name)
