@@ -1,0 +1,345 @@
+"""Direct conversion through the intermediate skeleton, on real clips."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from engine import forward_kinematics, read_bvh
+from engine.bvh import format_bvh, parse_bvh
+from engine.correspondence import Correspondence
+from engine.errors import MappingError, MotionComposerError
+from engine.quaternions import qconj, qmul, qrot
+from engine.retarget import BindOptions, RootOptions, bind, retarget
+from engine.rotations import angle_between
+from conftest import all_bvh_params, clip_path, resolve, shared_path
+
+CMU_TO_BANDAI = {  # target (Bandai) -> performer (CMU MotionBuilder names)
+    "Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",
+    "Shoulder_L": "LeftShoulder", "UpperArm_L": "LeftArm", "LowerArm_L": "LeftForeArm",
+    "Hand_L": "LeftHand", "Shoulder_R": "RightShoulder", "UpperArm_R": "RightArm",
+    "LowerArm_R": "RightForeArm", "Hand_R": "RightHand",
+    "UpperLeg_L": "LeftUpLeg", "LowerLeg_L": "LeftLeg", "Foot_L": "LeftFoot",
+    "Toes_L": "LeftToeBase", "UpperLeg_R": "RightUpLeg", "LowerLeg_R": "RightLeg",
+    "Foot_R": "RightFoot", "Toes_R": "RightToeBase",
+}
+
+
+def _deg(qa, qb):
+    return np.degrees(angle_between(qa, qb))
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def bone_deviation(performer, target_motion, corr):
+    """Per (anchor, joint) pair of the target: max angle [deg] over frames between the target's
+    bone (nearest mapped ancestor -> joint) and the performer's matching virtual bone."""
+    tsk, psk = target_motion.skeleton, performer.skeleton
+    a = forward_kinematics(performer).positions
+    c = forward_kinematics(target_motion).positions
+    mapped = {tsk.index[t]: psk.index[p] for t, p in corr.pairs.items()}
+    out = {}
+    for j, pj in mapped.items():
+        anchors = [x for x in tsk.ancestors(j) if x in mapped]
+        if not anchors:
+            continue
+        a0 = anchors[0]
+        vt = c[:, j] - c[:, a0]
+        vp = a[:, pj] - a[:, mapped[a0]]
+        if np.linalg.norm(vp, axis=1).min() < 1e-6 or np.linalg.norm(vt, axis=1).min() < 1e-6:
+            continue              # a zero-length bone has no direction to compare
+        cos = np.sum(_unit(vt) * _unit(vp), axis=1)
+        out[(tsk.names[a0], tsk.names[j])] = float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
+    return out
+
+
+# --------------------------------------------------------------------------- identity
+@pytest.mark.parametrize("spec", all_bvh_params())
+def test_retargeting_a_clip_onto_its_own_skeleton_gives_it_back(spec):
+    motion = read_bvh(resolve(spec))
+    corr = Correspondence({n: n for n in motion.skeleton.names})
+    out = retarget(motion, motion, corr)
+    a, b = forward_kinematics(motion), forward_kinematics(out)
+    assert _deg(a.rotations, b.rotations).max() < 0.01
+    assert np.abs(a.positions - b.positions).max() < 1e-9
+    assert out.frame_time == motion.frame_time
+
+
+# --------------------------------------------------------------------------- across skeletons
+@pytest.fixture(scope="module")
+def cmu_on_bandai():
+    performer = read_bvh(shared_path("cmu_mb_01_01_jumps.bvh"))
+    target = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))
+    corr = Correspondence(CMU_TO_BANDAI)
+    return performer, target, corr, retarget(performer, target, corr)
+
+
+def test_chain_bones_follow_the_virtual_bones_on_every_frame(cmu_on_bandai):
+    performer, target, corr, out = cmu_on_bandai
+    dev = bone_deviation(performer, out, corr)
+    branch = {("Hips", "UpperLeg_L"), ("Hips", "UpperLeg_R")}
+    chains = {k: v for k, v in dev.items() if k not in branch}
+    assert len(chains) >= 15
+    worst = max(chains, key=chains.get)
+    assert chains[worst] < 0.5, f"{worst}: {chains[worst]:.3f} deg"
+
+
+def test_branching_joint_matches_its_primary_bone_and_rolls_to_the_others(cmu_on_bandai):
+    performer, target, corr, out = cmu_on_bandai
+    a = forward_kinematics(performer).positions
+    c = forward_kinematics(out).positions
+    t, p = target.skeleton.index, performer.skeleton.index
+    # primary bone of the hips: towards the spine, exact
+    vt = c[:, t["Spine"]] - c[:, t["Hips"]]
+    vp = a[:, p["Spine"]] - a[:, p["Hips"]]
+    assert np.degrees(np.arccos(np.clip(np.sum(_unit(vt) * _unit(vp), 1), -1, 1))).max() < 0.5
+    # roll: the hip line (left thigh to right thigh) seen along the spine agrees
+    n = _unit(vp)
+    ht = c[:, t["UpperLeg_L"]] - c[:, t["UpperLeg_R"]]
+    hp = a[:, p["LeftUpLeg"]] - a[:, p["RightUpLeg"]]
+    ht = _unit(ht - np.sum(ht * n, 1, keepdims=True) * n)
+    hp = _unit(hp - np.sum(hp * n, 1, keepdims=True) * n)
+    roll = np.degrees(np.arccos(np.clip(np.sum(ht * hp, 1), -1, 1)))
+    # One rotation cannot follow three bones that move against each other (CMU's LowerBack
+    # bends the spine away from the pelvis): the spine is exact and the hip line agrees up to
+    # that bend (4.6 degrees at worst on this clip, 0.4 typically).
+    assert np.median(roll) < 1.0
+    assert roll.max() < 8.0
+    # ...which a roll from the spine swing alone would not give
+    minimal = bind(performer, target, corr)
+    assert minimal.bones[t["Hips"]].roll_by_bones
+
+
+def test_output_keeps_the_target_units_axes_and_channels(cmu_on_bandai, tmp_path):
+    performer, target, corr, out = cmu_on_bandai
+    assert out.skeleton is target.skeleton
+    path = tmp_path / "out.bvh"
+    path.write_text(format_bvh(out))
+    back = read_bvh(path, units="cm", up_axis="+Y")
+    assert back.skeleton.channels == target.skeleton.channels
+    np.testing.assert_allclose(back.skeleton.offsets, target.skeleton.offsets, atol=1e-8)
+    np.testing.assert_allclose(forward_kinematics(back).positions,
+                               forward_kinematics(out).positions, atol=2e-8)
+
+
+def test_root_translation_is_scaled_by_hip_heights(cmu_on_bandai):
+    performer, target, corr, out = cmu_on_bandai
+    binding = bind(performer, target, corr)
+    ratio = binding.hip_height_ratio
+    # Bandai hips stand higher than CMU's: about 0.93 m against 0.96 m scaled to metres
+    assert 0.7 < ratio < 1.3
+    pp = forward_kinematics(performer).positions[:, performer.skeleton.index["Hips"]]
+    tp = forward_kinematics(out).positions[:, target.skeleton.index["Hips"]]
+    np.testing.assert_allclose(tp - tp[0], (pp - pp[0]) * ratio, atol=1e-9)
+
+
+@pytest.mark.parametrize("mode", ["absolute", "in-place", "scale"])
+def test_root_modes(cmu_on_bandai, mode):
+    performer, target, corr, _ = cmu_on_bandai
+    root = (RootOptions(mode="scaled", scale=(2.0, 0.5)) if mode == "scale"
+            else RootOptions(mode=mode))
+    out = retarget(performer, target, corr, root=root)
+    pp = forward_kinematics(performer).positions[:, performer.skeleton.index["Hips"]]
+    tp = forward_kinematics(out).positions[:, target.skeleton.index["Hips"]]
+    if mode == "absolute":
+        np.testing.assert_allclose(tp, pp, atol=1e-9)
+    elif mode == "in-place":
+        np.testing.assert_allclose(tp[:, [0, 2]], np.broadcast_to(tp[0, [0, 2]], (len(tp), 2)),
+                                   atol=1e-9)
+        assert np.ptp(tp[:, 1]) > 0.1            # the jumps still go up and down
+    else:
+        np.testing.assert_allclose(tp - tp[0], (pp - pp[0]) * [2.0, 0.5, 2.0], atol=1e-9)
+
+
+def test_rest_alignment_turns_the_target_bones_and_keeping_the_pose_does_not(cmu_on_bandai):
+    performer, target, corr, _ = cmu_on_bandai
+    aligned = bind(performer, target, corr)
+    kept = bind(performer, target, corr, BindOptions(rest_alignment=False))
+    # kept: the bound rest posture is the target's own reference (frame 0: Bandai's rest pose
+    # lies along +X, so 'auto' takes frame 0)
+    ref = forward_kinematics(target.frames(slice(0, 1))).rotations[0]
+    assert _deg(kept.rest_world, ref).max() < 1e-6
+    # aligned: the left forearm bone points along the performer's reference forearm
+    t, p = target.skeleton.index, performer.skeleton.index
+    bone = aligned.rest_positions[t["Hand_L"]] - aligned.rest_positions[t["LowerArm_L"]]
+    virt = (aligned.performer_rest_positions[p["LeftHand"]] -
+            aligned.performer_rest_positions[p["LeftForeArm"]])
+    assert np.degrees(np.arccos(np.dot(_unit(bone), _unit(virt)))) < 1e-6
+    # the Bandai arms hang down in frame 0 but the CMU rest pose is a T-pose: a real turn
+    assert _deg(aligned.rest_world[t["UpperArm_L"]], ref[t["UpperArm_L"]]) > 30
+
+
+def test_reference_pose_choices(cmu_on_bandai):
+    performer, target, corr, _ = cmu_on_bandai
+    rest = bind(performer, target, corr, BindOptions(performer_reference="rest"))
+    frame = bind(performer, target, corr, BindOptions(performer_reference=100))
+    assert rest.notes["performer reference"] == "rest pose (zero rotations)"
+    assert frame.notes["performer reference"] == "frame 100"
+    assert not np.allclose(rest.performer_rest_world, frame.performer_rest_world)
+    with pytest.raises(MotionComposerError, match="outside the clip"):
+        bind(performer, target, corr, BindOptions(performer_reference=10**6))
+    with pytest.raises(MotionComposerError):
+        BindOptions(performer_reference="sideways")
+
+
+# --------------------------------------------------------------------------- twist
+def test_a_forearm_twist_in_the_capture_shows_on_the_target_wrist(cmu_on_bandai):
+    """CMU stores the forearm's pronation in the hand joint's roll about the forearm; the
+    Bandai hand must roll with it rather than keep the smallest swing."""
+    performer, target, corr, out = cmu_on_bandai
+    pw = forward_kinematics(performer)
+    tw = forward_kinematics(out)
+    p, t = performer.skeleton.index, target.skeleton.index
+
+    def roll(pose, forearm, hand, child):
+        # the hand's roll about the forearm axis relative to the forearm, per frame
+        axis = _unit(pose.positions[:, hand] - pose.positions[:, forearm])
+        rel = qmul(pose.rotations[:, hand], qconj(pose.rotations[:, forearm]))
+        along = np.sum(rel[:, :3] * axis, axis=1)
+        return 2 * np.degrees(np.arctan2(along, rel[:, 3]))
+
+    pr = roll(pw, p["LeftForeArm"], p["LeftHand"], p["LeftFingerBase"])
+    tr = roll(tw, t["LowerArm_L"], t["Hand_L"], None)
+    pr = np.unwrap(np.radians(pr))
+    tr = np.unwrap(np.radians(tr))
+    # the capture twists (tens of degrees over the clip) and the target follows it
+    assert np.degrees(np.ptp(pr)) > 20
+    corr_coef = np.corrcoef(pr, tr)[0, 1]
+    assert corr_coef > 0.95
+    assert np.degrees(np.abs((tr - tr.mean()) - (pr - pr.mean()))).max() < 5.0
+
+
+# --------------------------------------------------------------------------- topology
+def test_a_longer_target_chain_shares_the_turn():
+    performer = read_bvh(shared_path("cmu_mb_01_01_jumps.bvh")).frames(slice(0, 600))
+    target = read_bvh(shared_path("cc3_cmu_02_06_pickup.bvh"))
+    pairs = {"CC_Base_Hip": "Hips", "CC_Base_Waist": "LowerBack", "CC_Base_Spine02": "Spine1",
+             "CC_Base_NeckTwist01": "Neck", "CC_Base_Head": "Head",
+             "CC_Base_L_Thigh": "LeftUpLeg", "CC_Base_L_Calf": "LeftLeg",
+             "CC_Base_L_Foot": "LeftFoot", "CC_Base_R_Thigh": "RightUpLeg",
+             "CC_Base_R_Calf": "RightLeg", "CC_Base_R_Foot": "RightFoot"}
+    corr = Correspondence(pairs)
+    even = retarget(performer, target, corr)
+    first = retarget(performer, target, corr, bind_options=BindOptions(distribute="first"))
+    t = target.skeleton.index
+    # CMU's LowerBack sits on the hips (a zero-length bone), so the waist follows LowerBack's
+    # own turn; Spine01 is unmapped: with "first" it keeps its rest local rotation, with
+    # "even" it takes a share of the waist -> Spine02 turn
+    binding = bind(performer, target, corr)
+    assert binding.chains[t["CC_Base_Waist"]] == [t["CC_Base_Spine01"]] or \
+        binding.chains.get(t["CC_Base_Waist"]) in (None, [])
+    rest_local = binding.rest_local[t["CC_Base_Spine01"]]
+    turn_first = _deg(first.rotations[:, t["CC_Base_Spine01"]], rest_local)
+    turn_even = _deg(even.rotations[:, t["CC_Base_Spine01"]], rest_local)
+    assert turn_first.max() < 1e-6
+    assert turn_even.max() > 1.0
+    for motion in (even, first):
+        dev = bone_deviation(performer, motion, corr)
+        assert dev[("CC_Base_Waist", "CC_Base_Spine02")] < 0.5
+        assert dev[("CC_Base_L_Thigh", "CC_Base_L_Calf")] < 0.5
+
+
+def test_fewer_target_joints_ignore_performer_joints():
+    """Bandai has one spine joint and one chest joint against CMU's three: the unmapped CMU
+    joints are ignored and conversion still runs (CMU -> Bandai uses Spine and Spine1)."""
+    performer = read_bvh(clip_path("cmu_131_01_walk.bvh"))
+    target = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))
+    max_names = {"Hips": "Hips", "Spine": "Chest", "Chest": "Chest2", "Neck": "Neck",
+                 "Head": "Head", "UpperArm_L": "LeftShoulder", "LowerArm_L": "LeftElbow",
+                 "Hand_L": "LeftWrist", "UpperLeg_L": "LeftHip", "LowerLeg_L": "LeftKnee",
+                 "Foot_L": "LeftAnkle"}
+    out = retarget(performer, target, Correspondence(max_names))
+    assert out.num_frames == performer.num_frames
+    dev = bone_deviation(performer, out, Correspondence(max_names))
+    assert dev[("UpperArm_L", "LowerArm_L")] < 0.5
+    assert dev[("UpperLeg_L", "LowerLeg_L")] < 0.5
+
+
+# --------------------------------------------------------------------------- units and axes
+def test_z_up_inches_onto_a_y_up_target_in_cmu_units(tmp_path):
+    performer = read_bvh(clip_path("fair1_child8_jumping.bvh"))          # +Z up, inches
+    target = read_bvh(clip_path("cmu_rest_tpose.bvh"))                    # +Y up, CMU units
+    pairs = {"Hips": "Hips", "Spine": "Spine", "Spine1": "Spine3", "Neck": "Neck",
+             "Head": "Head", "LeftArm": "LeftArm", "LeftForeArm": "LeftForeArm",
+             "LeftHand": "LeftHand", "RightArm": "RightArm", "RightForeArm": "RightForeArm",
+             "RightHand": "RightHand", "LeftUpLeg": "LeftUpLeg", "LeftLeg": "LeftLeg",
+             "LeftFoot": "LeftFoot", "RightUpLeg": "RightUpLeg", "RightLeg": "RightLeg",
+             "RightFoot": "RightFoot"}
+    corr = Correspondence(pairs)
+    out = retarget(performer, target, corr)
+    # the child jumps up: the target's head rises along +Y in internal axes too
+    head = forward_kinematics(out).positions[:, target.skeleton.index["Head"]]
+    phead = forward_kinematics(performer).positions[:, performer.skeleton.index["Head"]]
+    assert np.corrcoef(head[:, 1], phead[:, 1])[0, 1] > 0.95
+    text = format_bvh(out)
+    back = parse_bvh(text, tmp_path / "o.bvh")
+    assert back.skeleton.source.units == "cmu" and back.skeleton.source.up_axis == "+Y"
+    np.testing.assert_allclose(forward_kinematics(back).positions,
+                               forward_kinematics(out).positions, atol=1e-6)
+    dev = bone_deviation(performer, out, corr)
+    assert dev[("LeftArm", "LeftForeArm")] < 0.5
+    assert dev[("RightUpLeg", "RightLeg")] < 0.5
+
+
+# --------------------------------------------------------------------------- the mapping
+@pytest.fixture(scope="module")
+def walk():
+    return read_bvh(clip_path("cmu_131_01_walk.bvh"))
+
+
+@pytest.fixture(scope="module")
+def tpose():
+    return read_bvh(clip_path("cmu_rest_tpose.bvh"))
+
+
+def test_mapping_names_must_exist(walk, tpose):
+    with pytest.raises(MappingError, match="'LeftArmm' is not a joint of the target.*LeftArm"):
+        Correspondence({"Hips": "Hips", "LeftArmm": "LeftShoulder"}).validate(
+            tpose.skeleton, walk.skeleton)
+    with pytest.raises(MappingError, match="'Elbow' is not a joint of the performer"):
+        Correspondence({"Hips": "Hips", "LeftArm": "Elbow"}).validate(
+            tpose.skeleton, walk.skeleton)
+
+
+def test_mapping_is_one_to_one(walk, tpose):
+    with pytest.raises(MappingError, match="both mapped to performer joint 'LeftElbow'"):
+        Correspondence({"Hips": "Hips", "LeftArm": "LeftElbow",
+                        "LeftForeArm": "LeftElbow"}).validate(tpose.skeleton, walk.skeleton)
+
+
+def test_mapping_keeps_ancestry(walk, tpose):
+    with pytest.raises(MappingError, match="inverts ancestry"):
+        Correspondence({"Hips": "Hips", "LeftArm": "LeftElbow",
+                        "LeftForeArm": "LeftShoulder"}).validate(tpose.skeleton, walk.skeleton)
+
+
+def test_mapping_needs_a_mapped_root(walk, tpose):
+    with pytest.raises(MappingError, match="root 'Hips' is unmapped"):
+        Correspondence({"LeftArm": "LeftShoulder", "RightArm": "RightShoulder"}).validate(
+            tpose.skeleton, walk.skeleton)
+    with pytest.raises(MappingError, match="no joint is mapped"):
+        Correspondence({}).validate(tpose.skeleton, walk.skeleton)
+
+
+def test_mapping_files_round_trip_and_bad_files_name_the_problem(tmp_path):
+    corr = Correspondence(CMU_TO_BANDAI)
+    path = tmp_path / "map.json"
+    corr.save(path)
+    data = json.loads(path.read_text())
+    assert data["pairs"] == CMU_TO_BANDAI
+    assert Correspondence.load(path) == corr
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"pairs": {"Hips": "Hips",\n "Spine": }}')
+    with pytest.raises(MappingError, match=r"bad.json: not valid JSON at line 2"):
+        Correspondence.load(bad)
+    bad.write_text('{"map": {}}')
+    with pytest.raises(MappingError, match='"pairs"'):
+        Correspondence.load(bad)
+    bad.write_text('{"pairs": {"Hips": 3}}')
+    with pytest.raises(MappingError, match="strings to strings"):
+        Correspondence.load(bad)
+    with pytest.raises(MappingError, match="no such mapping file"):
+        Correspondence.load(tmp_path / "absent.json")
