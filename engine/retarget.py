@@ -410,42 +410,47 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
     local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
     local_t[tsk.translated] = binding.root_translation
     mapped = binding.mapped
-    done = np.zeros(J, dtype=bool)
+    bones = binding.bones
+
+    # every mapped joint at once: its world rotation is delta * rest_world, delta from the
+    # performer alone (so no mapped joint waits for its parent)
+    mj = np.flatnonzero(mapped >= 0)
+    pm = mapped[mj]
+    delta = qmul(pq[:, pm], qconj(binding.performer_rest_world[pm]))     # whole-joint change
+    by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
+    if by_twist:
+        js = mj[by_twist]
+        ref = np.array([bones[j].reference[0] for j in js])                # (T, 3)
+        now = pp[:, [bones[j].performer[0] for j in js]] - pp[:, mapped[js]]
+        swing = quat_between(ref, now)
+        axis = ref / np.linalg.norm(ref, axis=-1, keepdims=True)
+        twist = twist_about(qmul(qconj(swing), delta[:, by_twist]), axis)
+        delta[:, by_twist] = qmul(swing, twist)
+    for k, j in enumerate(mj):
+        b = bones[j]
+        if b.children and b.roll_by_bones:
+            now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (F, C, 3)
+            delta[:, k] = _align(np.broadcast_to(b.reference, now.shape), now, True)
+    world[:, mj] = qmul(delta, binding.rest_world[mj])
+
+    # unmapped joints follow their parent; chains share their first joint's turn
+    even = binding.options.distribute == "even"
+    done = mapped >= 0
     for j in range(J):
-        if done[j]:
-            continue
         parent = tsk.parents[j]
-        if mapped[j] < 0:
-            world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
-                           else qmul(world[:, parent], binding.rest_local[j]))
-            done[j] = True
+        if done[j]:
+            chain = binding.chains.get(j)
+            if chain and even and mapped[j] >= 0:
+                b = bones[j]
+                world[:, j] = _distribute(binding, j, chain, world[:, j], world,
+                                          pp[:, b.performer[0]] - pp[:, mapped[j]], local_t)
+                done[chain] = True
             continue
-        p = mapped[j]
-        full = qmul(pq[:, p], qconj(binding.performer_rest_world[p]))
-        b = binding.bones[j]
-        if not b.children:
-            delta = full
-        else:
-            now = pp[:, b.performer] - pp[:, [p]]                      # (F, C, 3)
-            delta = _align(np.broadcast_to(b.reference, now.shape), now, b.roll_by_bones)
-            if not b.roll_by_bones:
-                axis = b.reference[0] / np.linalg.norm(b.reference[0])
-                twist = twist_about(qmul(qconj(delta), full), axis)
-                delta = qmul(delta, twist)
-        w = qmul(delta, binding.rest_world[j])
-        chain = binding.chains.get(j, [])
-        if chain and binding.options.distribute == "even" and parent >= 0:
-            w = _distribute(binding, j, chain, w, world, pp[:, b.performer[0]] - pp[:, p],
-                            local_t)
-            done[chain] = True
-        elif chain and binding.options.distribute == "even":
-            w = _distribute(binding, j, chain, w, world, pp[:, b.performer[0]] - pp[:, p],
-                            local_t)
-            done[chain] = True
-        world[:, j] = w
+        world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
+                       else qmul(world[:, parent], binding.rest_local[j]))
         done[j] = True
-        if progress is not None:
-            progress((j + 1) / J)
+    if progress is not None:
+        progress(1.0)
     positions = {}
     for j in binding.driven:
         ph = mapped[j]
@@ -487,6 +492,22 @@ def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
     return rots[0]
 
 
+def _chain_fk(skeleton: Skeleton, local: np.ndarray, translations: np.ndarray, slot: dict,
+              joint: int):
+    """World rotations and positions of ``joint`` and its ancestors only: dicts of ``(F, ...)``."""
+    chain = [joint] + skeleton.ancestors(joint)
+    rot, pos = {}, {}
+    for k in reversed(chain):
+        t = translations[:, slot[k]] if k in slot else skeleton.offsets[k]
+        p = skeleton.parents[k]
+        if p < 0:
+            rot[k], pos[k] = local[:, k], np.broadcast_to(t, (local.shape[0], 3))
+        else:
+            rot[k] = qmul(rot[p], local[:, k])
+            pos[k] = pos[p] + qrot(rot[p], t)
+    return rot, pos
+
+
 def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
             name: str = "") -> Motion:
     """Motion Composer: the target motion with the intermediate skeleton's local values."""
@@ -509,10 +530,10 @@ def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
         if carrier == j and parent < 0:
             translations[:, slot[j]] = target_pos
             continue
-        current = fk_arrays(tsk, local, translations, end_sites=False)
-        shift = target_pos - current.positions[:, j]
+        rot, pos = _chain_fk(tsk, local, translations, slot, j)
+        shift = target_pos - pos[j]
         if parent >= 0:
-            shift = qrot(qconj(current.rotations[:, parent]), shift)
+            shift = qrot(qconj(rot[parent]), shift)
         translations[:, slot[carrier]] += shift
     return Motion(skeleton=tsk, rotations=local, translations=translations,
                   frame_time=frame_time, name=name)
