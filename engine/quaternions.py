@@ -69,12 +69,39 @@ def from_euler(angles_deg: np.ndarray, order: str) -> np.ndarray:
     """Quaternions for intrinsic Euler angles ``(..., len(order))`` in degrees.
 
     ``order`` like ``"ZYX"`` means R = Rz Ry Rx (BVH's and scipy's upper-case reading).
+
+    This equals ``qmul(qmul(axis_angle(a0, t0), axis_angle(a1, t1)), axis_angle(a2, t2))`` value
+    for value (up to the sign of zeros), but multiplies by each elementary rotation with the
+    two terms per component that are not zero (:func:`_mul_axis`), on separate contiguous
+    component arrays: about a quarter of the general product's time.
     """
-    angles = np.radians(np.asarray(angles_deg, dtype=float))
-    q = axis_angle("XYZ".index(order[0].upper()), angles[..., 0])
+    half = 0.5 * np.radians(np.asarray(angles_deg, dtype=float))
+    # (n, ...) contiguous, so each angle's sin and cos take numpy's contiguous loops
+    half = np.moveaxis(half, -1, 0).copy()
+    sin, cos = np.sin(half), np.cos(half)
+    axes = ["XYZ".index(a.upper()) for a in order]
+    zero = np.zeros(half.shape[1:])
+    q = [zero, zero, zero, cos[0]]                     # components x, y, z, w
+    q[axes[0]] = sin[0]
     for k in range(1, len(order)):
-        q = qmul(q, axis_angle("XYZ".index(order[k].upper()), angles[..., k]))
-    return q
+        q = _mul_axis(q, axes[k], sin[k], cos[k])
+    return np.stack(q, axis=-1)
+
+
+def _mul_axis(a: list, axis: int, s: np.ndarray, c: np.ndarray) -> list:
+    """Components of ``a * (s e_axis + c)``: ``a`` times a rotation about a coordinate axis.
+
+    ``a`` and the result are lists of the four component arrays x, y, z, w. With ``k`` the axis
+    and ``i, j`` the next two in cyclic order, the Hamilton product keeps two terms per
+    component; each equals :func:`qmul`'s result exactly, since the terms dropped are zeros.
+    """
+    k, i, j = axis, (axis + 1) % 3, (axis + 2) % 3
+    out = [None] * 4
+    out[k] = a[3] * s + a[k] * c
+    out[i] = a[i] * c + a[j] * s
+    out[j] = a[j] * c - a[i] * s
+    out[3] = a[3] * c - a[k] * s
+    return out
 
 
 def qnormalize(q: np.ndarray) -> np.ndarray:

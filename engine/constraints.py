@@ -1,0 +1,232 @@
+"""Cartesian constraints (the paper's section 3.2): a joint, a goal, a kind and a time range.
+
+Kinds and goals (positions in metres, internal axes: +Y up):
+
+* ``position``: ``goal = {"point": [x, y, z]}``.
+* ``trajectory``: ``goal = {"points": [[x, y, z], ...]}`` one point per frame from ``start``
+  to ``end``, or ``goal = {"keys": [[frame, x, y, z], ...]}`` a path through keys (linear
+  between them, held beyond the ends).
+* ``plane``: ``goal = {"point": [...], "normal": [...], "side": "above" | "on" | "below"}``.
+  ``above`` and ``below`` are one-sided: no pull while satisfied. The floor is a plane.
+* ``orientation``: ``goal = {"quaternion": [x, y, z, w]}`` the joint's world orientation.
+
+The time range ``smooth_in <= start <= end <= smooth_out`` (frames): active on
+``[start, end]``, eased in over ``[smooth_in, start]`` and out over ``[end, smooth_out]``. A
+priority level (1 is the highest; a lower level acts only in the null space of the higher
+ones) and a weight (scales the task's rows within its level).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .errors import MotionComposerError
+
+__all__ = ["Constraint", "ConstraintError", "KINDS", "PLANE_SIDES", "constraints_to_json",
+           "constraints_from_json", "floor_constraint"]
+
+KINDS = ("position", "trajectory", "plane", "orientation")
+PLANE_SIDES = ("above", "on", "below")
+
+
+class ConstraintError(MotionComposerError):
+    """A constraint that cannot be used; the message names the constraint and the field."""
+
+
+def _vec(value, n, what, label):
+    try:
+        arr = np.array(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConstraintError(f"{label}: {what} must be {n} numbers, not {value!r}") from None
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise ConstraintError(f"{label}: {what} must be {n} finite numbers, not {value!r}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Constraint:
+    """One Cartesian constraint on a target joint over a time range (see the module doc)."""
+
+    joint: str
+    kind: str
+    goal: dict
+    smooth_in: int
+    start: int
+    end: int
+    smooth_out: int
+    priority: int = 1
+    weight: float = 1.0
+    name: str = ""
+    enabled: bool = True
+    auto: bool = False
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        label = f"constraint {self.name or self.joint!r}"
+        if not isinstance(self.joint, str) or not self.joint:
+            raise ConstraintError(f"{label}: 'joint' must name a target joint")
+        if self.kind not in KINDS:
+            raise ConstraintError(f"{label}: kind must be one of {', '.join(KINDS)}, not "
+                                  f"{self.kind!r}")
+        times = []
+        for key in ("smooth_in", "start", "end", "smooth_out"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) and not (
+                    isinstance(value, float) and value.is_integer()):
+                raise ConstraintError(f"{label}: {key} must be a whole frame number, not "
+                                      f"{value!r}")
+            object.__setattr__(self, key, int(value))
+            times.append(int(value))
+        if not times[0] <= times[1] <= times[2] <= times[3]:
+            raise ConstraintError(
+                f"{label}: the time range must satisfy smooth_in <= start <= end <= "
+                f"smooth_out, got {times[0]}, {times[1]}, {times[2]}, {times[3]}")
+        if times[0] < 0:
+            raise ConstraintError(f"{label}: smooth_in must be frame 0 or later, not {times[0]}")
+        if isinstance(self.priority, bool) or not isinstance(self.priority, (int, np.integer)) \
+                or self.priority < 1:
+            raise ConstraintError(f"{label}: priority must be a whole number from 1 (highest), "
+                                  f"not {self.priority!r}")
+        if not (isinstance(self.weight, (int, float)) and math.isfinite(self.weight)
+                and self.weight > 0):
+            raise ConstraintError(f"{label}: weight must be a positive number, not "
+                                  f"{self.weight!r}")
+        if not isinstance(self.goal, dict):
+            raise ConstraintError(f"{label}: goal must be an object, not {self.goal!r}")
+        goal = dict(self.goal)
+        if self.kind == "position":
+            goal = {"point": _vec(goal.get("point"), 3, "goal.point", label)}
+        elif self.kind == "trajectory":
+            if "points" in goal:
+                pts = np.array(goal["points"], dtype=float)
+                n = self.end - self.start + 1
+                if pts.ndim != 2 or pts.shape != (n, 3) or not np.all(np.isfinite(pts)):
+                    raise ConstraintError(f"{label}: goal.points must hold one [x, y, z] per "
+                                          f"frame from start to end ({n} points), got shape "
+                                          f"{pts.shape}")
+                goal = {"points": pts}
+            elif "keys" in goal:
+                keys = np.array(goal["keys"], dtype=float)
+                if keys.ndim != 2 or keys.shape[1] != 4 or len(keys) < 1 or \
+                        not np.all(np.isfinite(keys)) or np.any(np.diff(keys[:, 0]) <= 0):
+                    raise ConstraintError(f"{label}: goal.keys must be [[frame, x, y, z], ...] "
+                                          "with increasing frames")
+                goal = {"keys": keys}
+            else:
+                raise ConstraintError(f"{label}: a trajectory goal needs 'points' (one per "
+                                      "frame) or 'keys' ([frame, x, y, z] ...)")
+        elif self.kind == "plane":
+            normal = _vec(goal.get("normal", [0, 1, 0]), 3, "goal.normal", label)
+            if np.linalg.norm(normal) < 1e-9:
+                raise ConstraintError(f"{label}: goal.normal must not be zero")
+            side = goal.get("side", "above")
+            if side not in PLANE_SIDES:
+                raise ConstraintError(f"{label}: goal.side must be one of "
+                                      f"{', '.join(PLANE_SIDES)}, not {side!r}")
+            goal = {"point": _vec(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
+                    "normal": normal / np.linalg.norm(normal), "side": side}
+        else:
+            q = _vec(goal.get("quaternion"), 4, "goal.quaternion", label)
+            if np.linalg.norm(q) < 1e-9:
+                raise ConstraintError(f"{label}: goal.quaternion must not be zero")
+            goal = {"quaternion": q / np.linalg.norm(q)}
+        for v in goal.values():
+            if isinstance(v, np.ndarray):
+                v.setflags(write=False)
+        object.__setattr__(self, "goal", goal)
+        object.__setattr__(self, "weight", float(self.weight))
+
+    # ------------------------------------------------------------------ time
+    @property
+    def range(self) -> tuple[int, int, int, int]:
+        return self.smooth_in, self.start, self.end, self.smooth_out
+
+    def with_range(self, smooth_in, start, end, smooth_out) -> "Constraint":
+        return replace(self, smooth_in=smooth_in, start=start, end=end, smooth_out=smooth_out)
+
+    def goal_point(self, frames: np.ndarray) -> np.ndarray:
+        """``(n, 3)`` goal positions at ``frames`` for position and trajectory kinds."""
+        frames = np.asarray(frames)
+        if self.kind == "position":
+            return np.broadcast_to(self.goal["point"], (len(frames), 3)).copy()
+        if self.kind == "trajectory":
+            if "points" in self.goal:
+                idx = np.clip(frames - self.start, 0, len(self.goal["points"]) - 1)
+                return self.goal["points"][idx]
+            keys = self.goal["keys"]
+            return np.stack([np.interp(frames, keys[:, 0], keys[:, k]) for k in (1, 2, 3)], 1)
+        raise ConstraintError(f"a {self.kind} constraint has no goal point")
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        goal = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.goal.items()}
+        data = {"joint": self.joint, "kind": self.kind, "goal": goal,
+                "range": [self.smooth_in, self.start, self.end, self.smooth_out],
+                "priority": self.priority, "weight": self.weight}
+        if self.name:
+            data["name"] = self.name
+        if not self.enabled:
+            data["enabled"] = False
+        if self.auto:
+            data["auto"] = True
+        if self.meta:
+            data["meta"] = self.meta
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict, index: int | None = None) -> "Constraint":
+        label = f"constraint {index + 1}" if index is not None else "constraint"
+        if not isinstance(data, dict):
+            raise ConstraintError(f"{label}: expected an object, not {type(data).__name__}")
+        for key in ("joint", "kind", "goal", "range"):
+            if key not in data:
+                raise ConstraintError(f"{label}: the field {key!r} is missing")
+        rng = data["range"]
+        if not isinstance(rng, (list, tuple)) or len(rng) != 4:
+            raise ConstraintError(f"{label}: 'range' must be [smooth_in, start, end, "
+                                  f"smooth_out], not {rng!r}")
+        unknown = set(data) - {"joint", "kind", "goal", "range", "priority", "weight", "name",
+                               "enabled", "auto", "meta"}
+        if unknown:
+            raise ConstraintError(f"{label}: unknown field(s) {', '.join(sorted(unknown))}")
+        return cls(joint=data["joint"], kind=data["kind"], goal=data["goal"],
+                   smooth_in=rng[0], start=rng[1], end=rng[2], smooth_out=rng[3],
+                   priority=data.get("priority", 1), weight=data.get("weight", 1.0),
+                   name=data.get("name", ""), enabled=data.get("enabled", True),
+                   auto=data.get("auto", False), meta=data.get("meta", {}))
+
+
+def constraints_to_json(constraints) -> str:
+    return json.dumps({"constraints": [c.to_dict() for c in constraints]}, indent=2) + "\n"
+
+
+def constraints_from_json(text: str, path=None) -> list[Constraint]:
+    where = f"{path}: " if path else ""
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConstraintError(f"{where}not valid JSON at line {exc.lineno}, column "
+                              f"{exc.colno}: {exc.msg}") from None
+    items = data.get("constraints") if isinstance(data, dict) else data
+    if not isinstance(items, list):
+        raise ConstraintError(f'{where}expected a JSON object with a "constraints" list')
+    out = []
+    for i, item in enumerate(items):
+        try:
+            out.append(Constraint.from_dict(item, i))
+        except ConstraintError as exc:
+            raise ConstraintError(f"{where}{exc}") from None
+    return out
+
+
+def floor_constraint(joint: str, num_frames: int, height: float = 0.0, *,
+                     priority: int = 1) -> Constraint:
+    """Keep ``joint`` on or above the floor plane at ``height`` [m] over the whole clip."""
+    return Constraint(joint=joint, kind="plane",
+                      goal={"point": [0.0, height, 0.0], "normal": [0.0, 1.0, 0.0],
+                            "side": "above"},
+                      smooth_in=0, start=0, end=num_frames - 1, smooth_out=num_frames - 1,
+                      priority=priority, name=f"floor {joint}", auto=True)

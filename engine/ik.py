@@ -1,0 +1,360 @@
+"""Whole-body inverse kinematics with an attraction posture (the paper's equation (1)).
+
+    d_theta = J+ d_x + (I - J+ J) d_z
+
+solved by damped least squares, with priority levels after Baerlocher and Boulic (level k acts
+only in the null space of levels 1..k-1) and the attraction to the converted posture as the
+last, lowest task. The unknowns are the root's translation and the rotation of every joint that
+moves a constrained joint (the chains from the constrained joints up to the root); joints that
+move nothing constrained are exactly at their attraction posture, which is what the null-space
+term would converge to.
+
+Each joint's increment is a rotation vector ``r`` in its parent's frame, applied as
+``local' = exp(r) * local`` (the displacement map's own convention), so the Jacobian block of
+joint ``a`` for a point task on joint ``e`` is ``-[p_e - p_a]x R_parent(a)``.
+
+Everything is vectorised over a *batch* of frames that share the same tasks (their goals
+differ per frame). :func:`solve_frames` iterates a batch to a tolerance or a cap; frames that
+converge leave the batch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .quaternions import qconj, qmul, qnormalize, qrot
+from .skeleton import Skeleton
+
+__all__ = ["Task", "IKOptions", "solve_frames", "rotvec_to_quat", "quat_to_rotvec",
+           "task_error_and_jacobian"]
+
+
+def rotvec_to_quat(v: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` of rotation vectors ``(..., 3)`` [rad]."""
+    v = np.asarray(v, dtype=float)
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(x/2)/x with its limit 1/2 - x^2/48 near zero
+    small = angle < 1e-8
+    scale = np.where(small, 0.5 - angle * angle / 48.0,
+                     np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([v * scale, np.cos(half)], axis=-1)
+
+
+def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors ``(..., 3)`` of quaternions ``(..., 4)`` (the shortest rotation)."""
+    q = np.asarray(q, dtype=float)
+    q = np.where(q[..., 3:4] < 0, -q, q)
+    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(s, q[..., 3:4])
+    small = s < 1e-12
+    scale = np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-12),
+                     angle / np.where(small, 1.0, s))
+    return q[..., :3] * scale
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` cross-product matrices of ``(..., 3)`` vectors."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1] = -v[..., 2]
+    out[..., 0, 2] = v[..., 1]
+    out[..., 1, 0] = v[..., 2]
+    out[..., 1, 2] = -v[..., 0]
+    out[..., 2, 0] = -v[..., 1]
+    out[..., 2, 1] = v[..., 0]
+    return out
+
+
+def _matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Task:
+    """One Cartesian task for a batch of frames.
+
+    Attributes:
+        kind: ``"position"``, ``"plane"`` or ``"orientation"``.
+        joint: the constrained joint's index.
+        goal: ``(B, 3)`` points (position), ``(B, 4)`` quaternions (orientation), or for a
+            plane ``(B, 3)`` points on the plane (the plane may move over the batch).
+        normal: ``(3,)`` the plane's unit normal (plane only).
+        side: ``"above"``, ``"on"`` or ``"below"`` (plane only).
+        priority: 1 is the highest.
+        weight: scales the task's rows within its level.
+        label: for residual reports.
+    """
+
+    kind: str
+    joint: int
+    goal: np.ndarray
+    normal: np.ndarray | None = None
+    side: str = "on"
+    priority: int = 1
+    weight: float = 1.0
+    label: str = ""
+
+    @property
+    def rows(self) -> int:
+        return 1 if self.kind == "plane" else 3
+
+
+@dataclass(frozen=True)
+class IKOptions:
+    """Solver settings.
+
+    Attributes:
+        tolerance: [m] a position or plane task is met below this error (orientation tasks
+            use ``tolerance / scale`` radians with ``scale`` [m] the character's size).
+        max_iterations: the cap per frame.
+        damping: damped least squares lambda, as a fraction of ``scale`` [m].
+        max_step: the largest task correction taken per iteration, as a fraction of ``scale``.
+        attraction: gain [0, 1] of the pull towards the attraction posture per iteration.
+        settle: a frame whose tasks are met is done once its largest step is below this
+            (radians or metres): the null-space pull has converged too.
+        joint_limits: joint index -> largest angle [rad] a joint may turn away from its
+            attraction posture (optional).
+        scale: [m] the character's size (its height); set by the caller.
+    """
+
+    tolerance: float = 1e-4
+    max_iterations: int = 60
+    damping: float = 2e-3
+    max_step: float = 0.05
+    attraction: float = 0.5
+    settle: float = 1e-5
+    joint_limits: dict = field(default_factory=dict)
+    scale: float = 1.7
+
+
+class _Structure:
+    """What a task set needs from the skeleton: the unknown joints and each task's chain."""
+
+    def __init__(self, skeleton: Skeleton, tasks: list[Task]):
+        self.tasks = tasks
+        moving: set[int] = set()
+        chains = []
+        for t in tasks:
+            anc = skeleton.ancestors(t.joint)
+            chain = sorted(anc + [t.joint]) if t.kind == "orientation" else sorted(anc)
+            chains.append(np.array(chain, dtype=np.intp))
+            moving.update(chain)
+        self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
+        self.col = {int(j): 3 + 3 * k for k, j in enumerate(self.joints)}
+        self.n = 3 + 3 * len(self.joints)
+        self.chains = chains
+        # FK needs every unknown joint, every task joint and their ancestors
+        needed = set(self.joints.tolist())
+        for t in tasks:
+            needed.add(t.joint)
+            needed.update(skeleton.ancestors(t.joint))
+        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
+        self.levels = sorted({t.priority for t in tasks})
+        self.row0 = np.cumsum([0] + [t.rows for t in tasks])
+        self.k = int(self.row0[-1])
+
+
+def _fk_partial(skeleton: Skeleton, joints: np.ndarray, rot: np.ndarray, tra: np.ndarray,
+                slot: dict):
+    """World rotations and positions ``{joint: (B, 4) / (B, 3)}`` for ``joints`` (closed under
+    ancestors, sorted)."""
+    wq, wp = {}, {}
+    for j in joints:
+        j = int(j)
+        p = int(skeleton.parents[j])
+        t = tra[:, slot[j]] if j in slot else skeleton.offsets[j]
+        if p < 0:
+            wq[j] = rot[:, j]
+            wp[j] = np.broadcast_to(t, (rot.shape[0], 3))
+        else:
+            wq[j] = qmul(wq[p], rot[:, j])
+            wp[j] = wp[p] + qrot(wq[p], t)
+    return wq, wp
+
+
+def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
+                            tra: np.ndarray, slot: dict, select=None):
+    """Errors ``(B, K)`` and Jacobians ``(B, K, N)`` of the tasks at the current posture.
+
+    Columns: root translation (3), then 3 per unknown joint (rotation vector in its parent's
+    frame). Rows of a satisfied one-sided plane are zero. Weights are not applied here.
+    ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
+    """
+    B = rot.shape[0]
+    wq, wp = _fk_partial(skeleton, structure.fk_joints, rot, tra, slot)
+    err = np.zeros((B, structure.k))
+    jac = np.zeros((B, structure.k, structure.n))
+    parent_m = {}
+    for task, chain, r0 in zip(structure.tasks, structure.chains, structure.row0):
+        e = task.joint
+        goal = task.goal if select is None else task.goal[select]
+        mats = []
+        for a in chain:
+            a = int(a)
+            if a not in parent_m:
+                p = int(skeleton.parents[a])
+                parent_m[a] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if p < 0
+                               else _matrices(wq[p]))
+            mats.append(parent_m[a])
+        cols = np.concatenate([np.arange(structure.col[int(a)], structure.col[int(a)] + 3)
+                               for a in chain]) if len(chain) else np.zeros(0, dtype=np.intp)
+        if task.kind == "orientation":
+            err[:, r0:r0 + 3] = quat_to_rotvec(qmul(goal, qconj(wq[e])))
+            if len(chain):
+                jac[:, r0:r0 + 3, cols] = np.concatenate(mats, axis=2)
+            continue
+        pe = wp[e]
+        if len(chain):
+            blocks = [-_skew(pe - wp[int(a)]) @ m for a, m in zip(chain, mats)]
+            jpos = np.concatenate(blocks, axis=2)                      # (B, 3, 3C)
+        if task.kind == "position":
+            err[:, r0:r0 + 3] = goal - pe
+            jac[:, r0:r0 + 3, 0:3] = np.eye(3)
+            if len(chain):
+                jac[:, r0:r0 + 3, cols] = jpos
+        else:                                                           # plane
+            n = task.normal
+            s = (pe - goal) @ n                                     # signed distance
+            if task.side == "above":
+                active = s < 0
+            elif task.side == "below":
+                active = s > 0
+            else:
+                active = np.ones(B, dtype=bool)
+            err[:, r0] = np.where(active, -s, 0.0)
+            row = np.zeros((B, structure.n))
+            row[:, 0:3] = n
+            if len(chain):
+                row[:, cols] = np.einsum("i,bij->bj", n, jpos)
+            jac[:, r0] = np.where(active[:, None], row, 0.0)
+    return err, jac
+
+
+def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float) -> np.ndarray:
+    """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``."""
+    k = a.shape[1]
+    gram = a @ a.transpose(0, 2, 1) + lam2 * np.eye(k)
+    y = np.linalg.solve(gram, rhs[..., None])
+    return (a.transpose(0, 2, 1) @ y)[..., 0]
+
+
+def _damped_pinv(a: np.ndarray, lam2: float) -> np.ndarray:
+    k = a.shape[1]
+    gram = a @ a.transpose(0, 2, 1) + lam2 * np.eye(k)
+    return a.transpose(0, 2, 1) @ np.linalg.inv(gram)
+
+
+def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
+                 attraction_rot: np.ndarray, attraction_root: np.ndarray,
+                 options: IKOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Solve a batch of frames that share ``tasks``.
+
+    Args:
+        rot: ``(B, J, 4)`` starting local rotations (the attraction posture, or the solution
+            of the previous frame for a warm start).
+        tra: ``(B, K, 3)`` local translations of ``skeleton.translated`` (the root's first; only
+            the root's is an unknown).
+        attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
+
+    Returns:
+        ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
+        frame ``(B, T)`` (metres; radians for orientation), iterations used per frame ``(B,)``.
+    """
+    rot = np.array(rot, dtype=float)
+    tra = np.array(tra, dtype=float)
+    B = rot.shape[0]
+    structure = _Structure(skeleton, tasks)
+    slot = {int(j): k for k, j in enumerate(skeleton.translated)}
+    scale = options.scale
+    lam2 = (options.damping * scale) ** 2
+    ns_lam2 = (1e-6 * scale) ** 2
+    max_step = options.max_step * scale
+    tol = options.tolerance
+    weights = np.concatenate([[t.weight] * t.rows for t in tasks])
+    task_of_row = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
+    level_rows = [np.flatnonzero([tasks[i].priority == lvl for i in task_of_row])
+                  for lvl in structure.levels]
+    is_orient = np.concatenate([[t.kind == "orientation"] * t.rows for t in tasks])
+    row_tol = np.where(is_orient, tol / scale, tol)
+    joints = structure.joints
+    # joints that move nothing constrained sit at their attraction posture
+    others = np.setdiff1d(np.arange(skeleton.num_joints), joints)
+    rot[:, others] = attraction_rot[:, others]
+
+    iterations = np.zeros(B, dtype=np.intp)
+    residual = np.zeros((B, len(tasks)))
+    active = np.arange(B)
+    for it in range(options.max_iterations + 1):
+        r, t = rot[active], tra[active]
+        err, jac = task_error_and_jacobian(skeleton, structure, r, t, slot, active)
+        task_err = np.sqrt(np.add.reduceat(err * err, structure.row0[:-1], axis=1))
+        residual[active] = task_err
+        met = np.all(np.abs(err) <= row_tol, axis=1)
+        if it == options.max_iterations:
+            break
+        iterations[active] += 1
+        # clamp the correction asked of each task
+        norms = task_err[:, task_of_row]
+        err = err * np.minimum(1.0, max_step / np.maximum(norms, 1e-12))
+        err = err * weights
+        jac = jac * weights[:, None]
+        nb = len(active)
+        dq = np.zeros((nb, structure.n))
+        stacked = None
+        for rows in level_rows:
+            jl, el = jac[:, rows], err[:, rows]
+            if stacked is None:
+                jt = jl
+            else:
+                jt = jl - (jl @ _damped_pinv(stacked, ns_lam2)) @ stacked
+            dq += _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
+            stacked = jl if stacked is None else np.concatenate([stacked, jl], axis=1)
+        # attraction, in the null space of every task
+        dz = np.zeros((nb, structure.n))
+        dz[:, 0:3] = attraction_root[active] - t[:, 0]
+        cur = r[:, joints]
+        dz[:, 3:] = quat_to_rotvec(qmul(attraction_rot[active][:, joints],
+                                        qconj(cur))).reshape(nb, -1)
+        dz *= options.attraction
+        dq += dz - (_damped_pinv(stacked, ns_lam2) @ (stacked @ dz[..., None]))[..., 0]
+        # a frame is done when its tasks are met and the posture has stopped moving
+        settled = met & (np.abs(dq).max(axis=1) < options.settle)
+        if np.all(settled):
+            iterations[active] -= 1
+            break
+        keep = ~settled
+        iterations[active[settled]] -= 1
+        active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
+        nb = len(active)
+        # apply
+        t = t.copy()
+        t[:, 0] += dq[:, 0:3]
+        step = dq[:, 3:].reshape(nb, len(joints), 3)
+        angle = np.linalg.norm(step, axis=-1, keepdims=True)
+        step = step * np.minimum(1.0, 0.5 / np.maximum(angle, 1e-12))      # <= 0.5 rad a step
+        new = qnormalize(qmul(rotvec_to_quat(step), cur))
+        for j, limit in options.joint_limits.items():
+            if j in structure.col:
+                k = int(np.searchsorted(joints, j))
+                off = quat_to_rotvec(qmul(new[:, k], qconj(attraction_rot[active][:, j])))
+                ang = np.linalg.norm(off, axis=-1, keepdims=True)
+                off = off * np.minimum(1.0, limit / np.maximum(ang, 1e-12))
+                new[:, k] = qmul(rotvec_to_quat(off), attraction_rot[active][:, j])
+        r = r.copy()
+        r[:, joints] = new
+        rot[active] = r
+        tra[active] = t
+    return rot, tra, residual, iterations
