@@ -46,14 +46,16 @@ def cmd_info(args) -> int:
         sys.stdout.write("\n")
         return 0
     sk = motion.skeleton
-    unit_note = "detected" if info["detected"] else "given"
+    # the reader keeps one "detected" flag; say per figure whether the user gave it
+    unit_note = "given" if args.units or args.scale is not None else "detected"
+    up_note = "given" if args.up_axis else "detected"
     lines = [
         f"file:        {args.file}",
         f"frames:      {info['frames']}",
         f"frame rate:  {info['fps']:.6g} fps (frame time {info['frame_time']!r} s)",
         f"duration:    {info['duration']:.3f} s",
         f"units:       {info['units']} ({info['metres_per_unit']:.6g} m per unit, {unit_note})",
-        f"up axis:     {info['up_axis']} ({unit_note})",
+        f"up axis:     {info['up_axis']} ({up_note})",
     ]
     if info["detection"]:
         lines.append(f"detection:   {info['detection']}")

@@ -78,6 +78,12 @@ class BVHRecord:
         return self.values.shape[0]
 
 
+def _is_count(token: str) -> bool:
+    """True for a whole number written in ASCII digits (``str.isdigit`` also takes '²',
+    which ``int`` refuses)."""
+    return token.isascii() and token.isdigit()
+
+
 class _Tokens:
     """Whitespace tokens of the hierarchy with their line numbers."""
 
@@ -256,7 +262,7 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
             if channels[j] is not None:
                 raise BVHError(f"a second CHANNELS line for joint {names[j]!r}", path, line)
             count_tok, cline, _ = toks.next("the channel count after CHANNELS")
-            if not count_tok.isdigit() or int(count_tok) > 6:
+            if not _is_count(count_tok) or int(count_tok) > 6:
                 raise BVHError(f"expected a channel count from 0 to 6 after CHANNELS, found "
                                f"{count_tok!r}", path, cline)
             found = []
@@ -308,8 +314,10 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
         while k < len(motion_rest) and not motion_rest[k].strip():
             k += 1
         if k >= len(motion_rest):
+            # point at the last line with content (MOTION itself, or the Frames: line)
+            last = max((i for i in range(start) if motion_rest[i].strip()), default=-1)
             raise BVHError(f"the file ends after MOTION; expected a '{label}' line", path,
-                           line_no + k)
+                           line_no + last + 1)
         m = regex.match(motion_rest[k])
         if not m:
             raise BVHError(f"expected '{label} <number>', found {motion_rest[k].strip()[:60]!r}",
@@ -318,7 +326,7 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
 
     frames_tok, k = header(_FRAMES_RE, "Frames:", 0)
     frames_line = line_no + k + 1
-    if not frames_tok.isdigit():
+    if not _is_count(frames_tok):
         raise BVHError(f"expected a whole number of frames after 'Frames:', found "
                        f"{frames_tok!r}", path, frames_line)
     n_frames = int(frames_tok)
@@ -334,7 +342,7 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
         frame_time = float(ft_tok)
     except ValueError:
         frame_time = float("nan")
-    if not (math.isfinite(frame_time) and frame_time > 0):
+    if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
         raise BVHError(f"expected a positive number of seconds after 'Frame Time:', found "
                        f"{ft_tok!r}", path, ft_line)
 
@@ -374,11 +382,15 @@ def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names
     """The slow path: parse row by row so that the first problem is reported exactly."""
     values = np.empty((n_frames, n_cols))
     row = 0
+    line = first_row                        # the last line with content (Frame Time: at first)
     for k in range(first_row, len(lines)):
         parts = lines[k].split()
         if not parts:
             continue
         line = k + 1
+        if not n_cols:
+            raise BVHError(f"a row of {len(parts)} values, but the hierarchy declares no "
+                           "channels; expected empty rows", path, line)
         if row >= n_frames:
             extra = sum(1 for rest in lines[k:] if rest.strip())
             raise BVHError(f"'Frames: {n_frames}' (line {frames_line}) but {n_frames + extra} "
@@ -398,10 +410,10 @@ def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names
                                f" is {tok[:40]!r}; expected a finite number", path, line)
             values[row, c] = v
         row += 1
-    if row < n_frames:
+    if row < n_frames and n_cols:
         raise BVHError(f"'Frames: {n_frames}' (line {frames_line}) but the file ends after "
                        f"{row} rows; the frame count disagrees with the rows (truncated file?)",
-                       path, len(lines))
+                       path, line)
     return values
 
 
