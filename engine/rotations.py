@@ -57,7 +57,16 @@ def quat_to_euler(quats: np.ndarray, order: str, *, unwrap: bool = True) -> np.n
         # at gimbal lock scipy sets the third angle to zero and warns; the angles still
         # give the same rotation, which is all a channel needs
         warnings.simplefilter("ignore", UserWarning)
-        angles = Rotation.from_quat(quats).as_euler(seq, degrees=True)[:, : len(order)]
+        angles = Rotation.from_quat(quats).as_euler(seq, degrees=True)
+    if len(order) == 2:
+        # seq is Tait-Bryan (A, B, C), where (a, b, c) and (a + 180, 180 - b, c + 180) are the
+        # same rotation. scipy returns |b| <= 90, so a rotation A(a) B(b) with |b| > 90 comes
+        # back with c = +-180: take the other triple, whose dropped angle C is then ~0.
+        flip = np.abs(angles[:, 2]) > 90.0
+        angles[flip, 0] += 180.0
+        angles[flip, 1] = 180.0 - angles[flip, 1]
+        angles[:, :2] = (angles[:, :2] + 180.0) % 360.0 - 180.0
+    angles = angles[:, : len(order)]
     if unwrap and len(angles) > 1:
         angles = np.unwrap(angles, period=360.0, axis=0)
     return angles

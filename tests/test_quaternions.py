@@ -1,0 +1,123 @@
+"""engine.quaternions against scipy's Rotation, value by value, on seeded random data."""
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from engine.quaternions import axis_angle, from_euler, qconj, qmul, qrot
+from engine.rotations import euler_to_quat, quat_to_euler
+
+RNG_SEED = 20240611
+N = 2000
+
+ORDERS_1 = ["X", "Y", "Z"]
+ORDERS_2 = ["".join(p) for p in itertools.permutations("XYZ", 2)]
+ORDERS_3 = (["".join(p) for p in itertools.permutations("XYZ")] +               # Tait-Bryan
+            [a + b + a for a in "XYZ" for b in "XYZ" if a != b])             # proper Euler
+ALL_ORDERS = ORDERS_1 + ORDERS_2 + ORDERS_3
+
+
+def _rng(salt: int = 0) -> np.random.Generator:
+    return np.random.default_rng(RNG_SEED + salt)
+
+
+def _unit_quats(rng, n=N) -> np.ndarray:
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _same_up_to_sign(a, b, atol=1e-12):
+    """Element-wise equal after giving ``b`` the sign of ``a`` (q and -q: one rotation)."""
+    sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    np.testing.assert_allclose(a, sign * b, rtol=0, atol=atol)
+
+
+def test_order_lists_are_complete():
+    assert len(ALL_ORDERS) == 3 + 6 + 12 and len(set(ALL_ORDERS)) == len(ALL_ORDERS)
+    assert "ZXZ" in ORDERS_3 and "ZYX" in ORDERS_3
+
+
+def test_qmul_matches_scipy_composition():
+    rng = _rng(1)
+    a, b = _unit_quats(rng), _unit_quats(rng)
+    got = qmul(a, b)
+    want = (Rotation.from_quat(a) * Rotation.from_quat(b)).as_quat()
+    _same_up_to_sign(got, want)
+    # the Hamilton product itself (no sign freedom): check against the matrix form of a * b
+    x1, y1, z1, w1 = a.T
+    L = np.stack([np.stack([w1, -z1, y1, x1], -1), np.stack([z1, w1, -x1, y1], -1),
+                  np.stack([-y1, x1, w1, z1], -1), np.stack([-x1, -y1, -z1, w1], -1)], 1)
+    np.testing.assert_allclose(got, np.einsum("nij,nj->ni", L, b), rtol=0, atol=1e-14)
+
+
+def test_qmul_broadcasts():
+    rng = _rng(2)
+    a = _unit_quats(rng, 35).reshape(5, 7, 4)
+    b = _unit_quats(rng, 7)
+    got = qmul(a, b[None])
+    want = (Rotation.from_quat(a.reshape(-1, 4)) *
+            Rotation.from_quat(np.tile(b, (5, 1)))).as_quat().reshape(5, 7, 4)
+    _same_up_to_sign(got, want)
+
+
+def test_qrot_matches_scipy_apply():
+    rng = _rng(3)
+    q = _unit_quats(rng)
+    v = rng.normal(scale=50.0, size=(N, 3))
+    np.testing.assert_allclose(qrot(q, v), Rotation.from_quat(q).apply(v), rtol=0, atol=1e-11)
+    # one rotation, many vectors and many rotations, one vector
+    np.testing.assert_allclose(qrot(q[0], v), Rotation.from_quat(q[0]).apply(v), rtol=0,
+                               atol=1e-11)
+    np.testing.assert_allclose(qrot(q, v[0]), Rotation.from_quat(q).apply(v[0]), rtol=0,
+                               atol=1e-11)
+
+
+def test_qconj_is_the_inverse():
+    q = _unit_quats(_rng(4))
+    _same_up_to_sign(qconj(q), Rotation.from_quat(q).inv().as_quat())
+    _same_up_to_sign(qmul(q, qconj(q)), np.tile([0.0, 0.0, 0.0, 1.0], (N, 1)))
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_axis_angle_matches_rotvec(axis):
+    angles = _rng(5 + axis).uniform(-4 * np.pi, 4 * np.pi, N)
+    rotvec = np.zeros((N, 3))
+    rotvec[:, axis] = angles
+    _same_up_to_sign(axis_angle(axis, angles), Rotation.from_rotvec(rotvec).as_quat())
+
+
+@pytest.mark.parametrize("order", ALL_ORDERS)
+def test_from_euler_matches_scipy_intrinsic(order):
+    rng = _rng(10 + ALL_ORDERS.index(order))
+    angles = rng.uniform(-400.0, 400.0, size=(N, len(order)))   # beyond +-360 on purpose
+    angles[:10] = rng.choice([-180.0, -90.0, 0.0, 90.0, 180.0], size=(10, len(order)))
+    got = from_euler(angles, order)
+    want = Rotation.from_euler(order, angles, degrees=True).as_quat()
+    _same_up_to_sign(got, want)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, rtol=0, atol=1e-14)
+    # the engine's edge function gives the same quaternions
+    np.testing.assert_array_equal(euler_to_quat(angles, order), got)
+
+
+@pytest.mark.parametrize("order", ["ZYX", "ZXZ", "YX"])
+def test_from_euler_keeps_leading_shape(order):
+    angles = _rng(40).uniform(-180, 180, size=(4, 6, len(order)))
+    got = from_euler(angles, order)
+    assert got.shape == (4, 6, 4)
+    want = Rotation.from_euler(order, angles.reshape(-1, len(order)),
+                               degrees=True).as_quat().reshape(4, 6, 4)
+    _same_up_to_sign(got, want)
+
+
+@pytest.mark.parametrize("order", ALL_ORDERS)
+def test_quat_to_euler_gives_back_the_rotation(order):
+    """Euler angles written for a rotation that the order can express give that rotation."""
+    rng = _rng(60 + ALL_ORDERS.index(order))
+    angles = rng.uniform(-170.0, 170.0, size=(N, len(order)))
+    q = Rotation.from_euler(order, angles, degrees=True).as_quat()
+    back = quat_to_euler(q, order, unwrap=False)
+    assert back.shape == angles.shape
+    _same_up_to_sign(Rotation.from_euler(order, back, degrees=True).as_quat(), q, atol=1e-10)
