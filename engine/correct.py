@@ -39,7 +39,7 @@ from .displacement import DisplacementMap
 from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
 from .kinematics import fk_arrays
 from .motion import Motion
-from .quaternions import qconj, qmul, qnormalize, qpow
+from .quaternions import qconj, qmul, qnormalize, qpow, qpow_many
 
 __all__ = ["Correction", "enforce", "describe_residuals"]
 
@@ -90,19 +90,55 @@ def _check(constraints, composed: Motion):
     return out
 
 
-def _task(c: Constraint, sk, frames: np.ndarray, goal=None) -> Task:
-    j = sk.index[c.joint]
-    label = c.name or c.joint
+_SIDES = {"above": 1, "on": 0, "below": -1}
+
+
+def _kind(c: Constraint) -> str:
+    return "position" if c.kind in ("position", "trajectory") else c.kind
+
+
+def _goals(c: Constraint, frames: np.ndarray) -> np.ndarray:
+    """Per-frame goals of ``c`` on its active frames."""
     if c.kind in ("position", "trajectory"):
-        g = c.goal_point(frames) if goal is None else goal
-        return Task("position", j, g, priority=c.priority, weight=c.weight, label=label)
+        return c.goal_point(frames)
     if c.kind == "plane":
-        g = np.broadcast_to(c.goal["point"], (len(frames), 3)) if goal is None else goal
-        return Task("plane", j, np.array(g), normal=c.goal["normal"], side=c.goal["side"],
-                    priority=c.priority, weight=c.weight, label=label)
-    g = np.broadcast_to(c.goal["quaternion"], (len(frames), 4)) if goal is None else goal
-    return Task("orientation", j, np.array(g), priority=c.priority, weight=c.weight,
-                label=label)
+        return np.broadcast_to(c.goal["point"], (len(frames), 3)).copy()
+    return np.broadcast_to(c.goal["quaternion"], (len(frames), 4)).copy()
+
+
+def _assign_slots(entries, cons, sk, F) -> list[dict]:
+    """Task slots: entries on the same joint, kind and priority share a slot unless their
+    frames overlap. Each slot holds per-frame goal, weight, plane normal and side, and the
+    index of the constraint that owns each frame."""
+    slots: list[dict] = []
+    for i, frames, goals in entries:
+        if len(frames) == 0:
+            continue
+        c = cons[i]
+        kind = _kind(c)
+        j = sk.index[c.joint]
+        home = None
+        for sl in slots:
+            if (sl["joint"], sl["kind"], sl["priority"]) == (j, kind, c.priority) and \
+                    not np.any(sl["weight"][frames] > 0):
+                home = sl
+                break
+        if home is None:
+            dim = 4 if kind == "orientation" else 3
+            goal0 = np.zeros((F, dim))
+            if dim == 4:
+                goal0[:, 3] = 1.0
+            home = {"joint": j, "kind": kind, "priority": c.priority, "goal": goal0,
+                    "weight": np.zeros(F), "normal": np.tile([0.0, 1.0, 0.0], (F, 1)),
+                    "side": np.zeros(F, dtype=np.int8), "owner": np.full(F, -1)}
+            slots.append(home)
+        home["goal"][frames] = goals
+        home["weight"][frames] = c.weight
+        home["owner"][frames] = i
+        if kind == "plane":
+            home["normal"][frames] = c.goal["normal"]
+            home["side"][frames] = _SIDES[c.goal["side"]]
+    return slots
 
 
 def _chain(sk, joint: int) -> np.ndarray:
@@ -139,72 +175,66 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         if cancel is not None and cancel():
             raise MotionComposerError("the correction was cancelled")
 
-    def run(frame_tasks: dict, attraction_rot, attraction_tra, start_rot, start_tra):
-        """Solve frames grouped by their task signature. ``frame_tasks``: frame -> list of
-        (constraint index, goal array row or None). Returns rot, tra, residuals, iters."""
-        rot = start_rot.copy()
-        tra = start_tra.copy()
+    def run(entries, attraction_rot, attraction_tra):
+        """Solve the frames that ``entries`` cover: a list of (constraint index, frames,
+        per-frame goals). Entries share task slots where they do not overlap in time, so all
+        frames form one batch. Returns rot, tra, residual per constraint, iterations."""
+        rot = attraction_rot.copy()
+        tra = attraction_tra.copy()
         residual = {i: np.full(F, np.nan) for i in range(len(cons))}
         iters = np.zeros(F, dtype=np.intp)
-        groups: dict[tuple, list[int]] = {}
-        for f, items in frame_tasks.items():
-            key = tuple(sorted((i, mode) for i, mode, _ in items))
-            groups.setdefault(key, []).append(f)
-        done = 0
-        order = sorted(groups.items(), key=lambda kv: kv[1][0])
-        for key, frames in order:
-            frames = np.array(sorted(frames))
-            goals = {}
-            for f in frames:
-                for i, mode, g in frame_tasks[int(f)]:
-                    goals.setdefault((i, mode), []).append(g)
-            tasks, owners = [], []
-            for i, mode in key:
-                c = cons[i]
-                g = goals[(i, mode)]
-                goal = None if g[0] is None else np.array(g)
-                tasks.append(_task(c, sk, frames, goal))
-                owners.append(i)
-            if warm_start:
-                prev_r = prev_t = None
-                for f in frames:
-                    if prev_r is not None and f - 1 in frame_tasks:
-                        r0, t0 = rot[f - 1:f].copy(), tra[f - 1:f].copy()
-                        t0[:, 1:] = tra[f:f + 1, 1:]
-                    else:
-                        r0, t0 = rot[f:f + 1], tra[f:f + 1]
-                    k = int(np.searchsorted(frames, f))
-                    single = [Task(t.kind, t.joint, t.goal[k:k + 1], t.normal, t.side,
-                                   t.priority, t.weight, t.label) for t in tasks]
-                    r, t, res, it = solve_frames(sk, single, r0, t0, attraction_rot[f:f + 1],
-                                                 attraction_tra[f:f + 1, 0], options)
-                    rot[f], tra[f] = r[0], t[0]
-                    for col, i in enumerate(owners):
-                        residual[i][f] = res[0, col]
-                    iters[f] = it[0]
-                    prev_r = r
-            else:
-                r, t, res, it = solve_frames(sk, tasks, rot[frames], tra[frames],
-                                             attraction_rot[frames], attraction_tra[frames, 0],
-                                             options)
-                rot[frames], tra[frames] = r, t
-                for col, i in enumerate(owners):
-                    residual[i][frames] = res[:, col]
-                iters[frames] = it
-            done += len(frames)
-            check_cancel()
-            if progress is not None:
-                progress(min(1.0, done / max(1, len(frame_tasks))))
+        slots = _assign_slots(entries, cons, sk, F)
+        if not slots:
+            return rot, tra, residual, iters
+        covered = np.zeros(F, dtype=bool)
+        for slot in slots:
+            covered |= slot["weight"] > 0
+        frames = np.flatnonzero(covered)
+        tasks = [Task(sl["kind"], sl["joint"], sl["goal"][frames], sl["weight"][frames],
+                      sl["normal"][frames], sl["side"][frames], sl["priority"])
+                 for sl in slots]
+        if warm_start:
+            res = np.zeros((len(frames), len(tasks)))
+            it = np.zeros(len(frames), dtype=np.intp)
+            for k, f in enumerate(frames):
+                if k and frames[k - 1] == f - 1:
+                    r0 = rot[f - 1:f].copy()
+                    t0 = tra[f:f + 1].copy()
+                    t0[:, 0] = tra[f - 1, 0]
+                else:
+                    r0, t0 = rot[f:f + 1], tra[f:f + 1]
+                r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
+                    sk, [task.take([k]) for task in tasks], r0, t0,
+                    attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], options)
+                rot[f], tra[f] = r[0], t[0]
+                if cancel is not None and k % 64 == 0:
+                    check_cancel()
+                if progress is not None and k % 64 == 0:
+                    progress(k / len(frames))
+        else:
+            r, t, res, it = solve_frames(sk, tasks, rot[frames], tra[frames],
+                                         attraction_rot[frames], attraction_tra[frames, 0],
+                                         options)
+            rot[frames], tra[frames] = r, t
+        iters[frames] = it
+        for col, sl in enumerate(slots):
+            owner = sl["owner"][frames]
+            for i in np.unique(owner[owner >= 0]):
+                sel = owner == i
+                residual[int(i)][frames[sel]] = res[sel, col]
+        check_cancel()
         return rot, tra, residual, iters
 
     # ---------------------------------------------------------------- pass one
     t0 = time.perf_counter()
-    pass1_tasks: dict[int, list] = {}
+    entries1 = []
     for i, c in enumerate(cons):
-        for f in range(c.start, c.end + 1):
-            pass1_tasks.setdefault(f, []).append((i, "active", _goal_at(c, f)))
-    rot1, tra1, _, _ = run(pass1_tasks, base_rot, base_tra, base_rot, base_tra)
+        frames = np.arange(c.start, c.end + 1)
+        entries1.append((i, frames, _goals(c, frames)))
+    rot1, tra1, _, _ = run(entries1, base_rot, base_tra)
     timings["pass one"] = time.perf_counter() - t0
+    if progress is not None:
+        progress(0.5)
 
     # ---------------------------------------------------------------- pass two
     t0 = time.perf_counter()
@@ -217,36 +247,36 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     attraction_rot = base_rot.copy()
     attraction_tra = base_tra.copy()
     touched = np.zeros(F, dtype=bool)
-    pass2_tasks: dict[int, list] = {}
+    entries2 = []
     for i, c in enumerate(cons):
         j = sk.index[c.joint]
-        for f in range(c.start, c.end + 1):
-            pass2_tasks.setdefault(f, []).append((i, "active", _goal_at(c, f)))
-        if c.smooth_in < c.start:
+        frames = np.arange(c.start, c.end + 1)
+        entries2.append((i, frames, _goals(c, frames)))
+        if c.smooth_in < c.start - 1:
             pos, wrot = effector_at[c.smooth_in]
-            for f in range(c.smooth_in + 1, c.start):
-                u = (f - c.smooth_in) / (c.start - c.smooth_in)
-                pass2_tasks.setdefault(f, []).append(
-                    (i, "ramp in", _ramp_goal(c, pos[j], wrot[j], u)))
-        if c.smooth_out > c.end:
+            frames = np.arange(c.smooth_in + 1, c.start)
+            u = (frames - c.smooth_in) / (c.start - c.smooth_in)
+            entries2.append((i, frames, np.array([_ramp_goal(c, pos[j], wrot[j], x)
+                                                  for x in u])))
+        if c.smooth_out > c.end + 1:
             chain = _chain(sk, j)
             frames = np.arange(c.end + 1, c.smooth_out)
             u = ((frames - c.end) / (c.smooth_out - c.end))[:, None]
             a, b = rot1[c.end, chain], rot1[c.smooth_out, chain]
-            delta = qmul(b, qconj(a))                                         # (C, 4)
-            steps = np.stack([qpow(delta, float(x)) for x in u[:, 0]])       # (n, C, 4)
+            steps = qpow_many(qmul(b, qconj(a)), u[:, 0])                     # (n, C, 4)
             attraction_rot[frames[:, None], chain[None, :]] = qnormalize(qmul(steps, a))
             root_a, root_b = tra1[c.end, 0], tra1[c.smooth_out, 0]
             attraction_tra[frames, 0] = root_a + (root_b - root_a) * u
             touched[frames] = True
-    rot2, tra2, residual, iters = run(pass2_tasks, attraction_rot, attraction_tra,
-                                      attraction_rot, attraction_tra)
+    rot2, tra2, residual, iters = run(entries2, attraction_rot, attraction_tra)
     timings["pass two"] = time.perf_counter() - t0
+    if progress is not None:
+        progress(1.0)
 
     # ---------------------------------------------------------------- displacement
-    changed = np.zeros(F, dtype=bool)
-    changed[list(pass2_tasks)] = True
-    changed |= touched
+    changed = touched.copy()
+    for _, frames, _ in entries2:
+        changed[frames] = True
     rot = base_rot.copy()
     tra = base_tra.copy()
     rot[changed] = rot2[changed]
@@ -254,8 +284,6 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     rotvecs = np.zeros((F, sk.num_joints, 3))
     rotvecs[changed] = quat_to_rotvec(qmul(rot[changed], qconj(base_rot[changed])))
     root = tra[:, 0] - base_tra[:, 0]
-    # the motion is the composed motion plus the displacement, exactly as the map applies it
-    motion = DisplacementMap().apply(composed)
     motion = _apply_dense(composed, rotvecs, root, changed)
     return Correction(motion=motion, rotvecs=rotvecs, root=root, residual=residual,
                       iterations=iters, seconds=timings)
@@ -268,14 +296,6 @@ def _apply_dense(composed: Motion, rotvecs, root, changed) -> Motion:
     translations = composed.translations.copy()
     translations[:, 0] += root
     return composed.replace(rotations=rotations, translations=translations)
-
-
-def _goal_at(c: Constraint, f: int):
-    if c.kind in ("position", "trajectory"):
-        return c.goal_point(np.array([f]))[0]
-    if c.kind == "plane":
-        return np.array(c.goal["point"])
-    return np.array(c.goal["quaternion"])
 
 
 def _ramp_goal(c: Constraint, pos: np.ndarray, wrot: np.ndarray, u: float):

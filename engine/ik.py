@@ -84,32 +84,40 @@ def _matrices(q: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Task:
-    """One Cartesian task for a batch of frames.
+    """One Cartesian task slot for a batch of frames; its goal may differ per frame and it may
+    be switched off on some frames (``weight`` 0 there), so frames whose tasks differ can
+    still share one batch.
 
     Attributes:
         kind: ``"position"``, ``"plane"`` or ``"orientation"``.
         joint: the constrained joint's index.
-        goal: ``(B, 3)`` points (position), ``(B, 4)`` quaternions (orientation), or for a
-            plane ``(B, 3)`` points on the plane (the plane may move over the batch).
-        normal: ``(3,)`` the plane's unit normal (plane only).
-        side: ``"above"``, ``"on"`` or ``"below"`` (plane only).
+        goal: ``(B, 3)`` points (position; for a plane, a point on it) or ``(B, 4)``
+            quaternions (orientation).
+        weight: ``(B,)`` scales the task's rows within its level; 0 switches it off.
+        normal: ``(B, 3)`` the plane's unit normal (plane only).
+        side: ``(B,)`` +1 above (one-sided), 0 on, -1 below (one-sided) (plane only).
         priority: 1 is the highest.
-        weight: scales the task's rows within its level.
-        label: for residual reports.
+        label: for reports.
     """
 
     kind: str
     joint: int
     goal: np.ndarray
+    weight: np.ndarray
     normal: np.ndarray | None = None
-    side: str = "on"
+    side: np.ndarray | None = None
     priority: int = 1
-    weight: float = 1.0
     label: str = ""
 
     @property
     def rows(self) -> int:
         return 1 if self.kind == "plane" else 3
+
+    def take(self, index) -> "Task":
+        """The task on a subset of the batch's frames."""
+        return Task(self.kind, self.joint, self.goal[index], self.weight[index],
+                    None if self.normal is None else self.normal[index],
+                    None if self.side is None else self.side[index], self.priority, self.label)
 
 
 @dataclass(frozen=True)
@@ -186,21 +194,28 @@ def _fk_partial(skeleton: Skeleton, joints: np.ndarray, rot: np.ndarray, tra: np
 
 
 def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
-                            tra: np.ndarray, slot: dict, select=None):
+                            tra: np.ndarray, slot: dict, select=None, sticky=None):
     """Errors ``(B, K)`` and Jacobians ``(B, K, N)`` of the tasks at the current posture.
 
     Columns: root translation (3), then 3 per unknown joint (rotation vector in its parent's
     frame). Rows of a satisfied one-sided plane are zero. Weights are not applied here.
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
+    ``sticky``: ``(B, T)`` one-sided planes already activated in this solve stay active (held
+    on the plane) so that the attraction cannot pull them back through it on every other
+    iteration; the array is updated in place.
     """
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure.fk_joints, rot, tra, slot)
     err = np.zeros((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
     parent_m = {}
-    for task, chain, r0 in zip(structure.tasks, structure.chains, structure.row0):
+    for ti, (task, chain, r0) in enumerate(zip(structure.tasks, structure.chains,
+                                               structure.row0)):
         e = task.joint
-        goal = task.goal if select is None else task.goal[select]
+        if select is not None:
+            task = task.take(select)
+        goal = task.goal
+        on = task.weight > 0
         mats = []
         for a in chain:
             a = int(a)
@@ -212,33 +227,33 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
         cols = np.concatenate([np.arange(structure.col[int(a)], structure.col[int(a)] + 3)
                                for a in chain]) if len(chain) else np.zeros(0, dtype=np.intp)
         if task.kind == "orientation":
-            err[:, r0:r0 + 3] = quat_to_rotvec(qmul(goal, qconj(wq[e])))
+            err[:, r0:r0 + 3] = np.where(on[:, None],
+                                         quat_to_rotvec(qmul(goal, qconj(wq[e]))), 0.0)
             if len(chain):
-                jac[:, r0:r0 + 3, cols] = np.concatenate(mats, axis=2)
+                jac[:, r0:r0 + 3, cols] = np.concatenate(mats, axis=2) * on[:, None, None]
             continue
         pe = wp[e]
         if len(chain):
             blocks = [-_skew(pe - wp[int(a)]) @ m for a, m in zip(chain, mats)]
             jpos = np.concatenate(blocks, axis=2)                      # (B, 3, 3C)
         if task.kind == "position":
-            err[:, r0:r0 + 3] = goal - pe
-            jac[:, r0:r0 + 3, 0:3] = np.eye(3)
+            err[:, r0:r0 + 3] = np.where(on[:, None], goal - pe, 0.0)
+            jac[:, r0:r0 + 3, 0:3] = np.eye(3) * on[:, None, None]
             if len(chain):
-                jac[:, r0:r0 + 3, cols] = jpos
+                jac[:, r0:r0 + 3, cols] = jpos * on[:, None, None]
         else:                                                           # plane
-            n = task.normal
-            s = (pe - goal) @ n                                     # signed distance
-            if task.side == "above":
-                active = s < 0
-            elif task.side == "below":
-                active = s > 0
-            else:
-                active = np.ones(B, dtype=bool)
+            n = task.normal                                              # (B, 3)
+            s = np.sum((pe - goal) * n, axis=1)                          # signed distance
+            side = task.side
+            active = on & ((side == 0) | ((side > 0) & (s < 0)) | ((side < 0) & (s > 0)))
+            if sticky is not None:
+                active |= on & sticky[:, ti]
+                sticky[:, ti] |= active
             err[:, r0] = np.where(active, -s, 0.0)
             row = np.zeros((B, structure.n))
             row[:, 0:3] = n
             if len(chain):
-                row[:, cols] = np.einsum("i,bij->bj", n, jpos)
+                row[:, cols] = np.einsum("bi,bij->bj", n, jpos)
             jac[:, r0] = np.where(active[:, None], row, 0.0)
     return err, jac
 
@@ -283,7 +298,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     ns_lam2 = (1e-6 * scale) ** 2
     max_step = options.max_step * scale
     tol = options.tolerance
-    weights = np.concatenate([[t.weight] * t.rows for t in tasks])
+    weights = np.concatenate([np.repeat(t.weight[:, None], t.rows, axis=1) for t in tasks],
+                             axis=1)                                             # (B, K)
     task_of_row = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
     level_rows = [np.flatnonzero([tasks[i].priority == lvl for i in task_of_row])
                   for lvl in structure.levels]
@@ -297,9 +313,12 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     iterations = np.zeros(B, dtype=np.intp)
     residual = np.zeros((B, len(tasks)))
     active = np.arange(B)
+    sticky_all = np.zeros((B, len(tasks)), dtype=bool)
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
-        err, jac = task_error_and_jacobian(skeleton, structure, r, t, slot, active)
+        sticky = sticky_all[active]
+        err, jac = task_error_and_jacobian(skeleton, structure, r, t, slot, active, sticky)
+        sticky_all[active] = sticky
         task_err = np.sqrt(np.add.reduceat(err * err, structure.row0[:-1], axis=1))
         residual[active] = task_err
         met = np.all(np.abs(err) <= row_tol, axis=1)
@@ -309,8 +328,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         # clamp the correction asked of each task
         norms = task_err[:, task_of_row]
         err = err * np.minimum(1.0, max_step / np.maximum(norms, 1e-12))
-        err = err * weights
-        jac = jac * weights[:, None]
+        w = weights[active]
+        err = err * w
+        jac = jac * w[:, :, None]
         nb = len(active)
         dq = np.zeros((nb, structure.n))
         stacked = None

@@ -172,3 +172,19 @@ def about_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     out[..., :3] = axis * np.sin(half)[..., None]
     out[..., 3] = np.cos(half)
     return out
+
+
+def qpow_many(q: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+    """``q`` ``(..., 4)`` raised to each of ``fractions`` ``(n,)``: ``(n, ..., 4)``."""
+    q = np.asarray(q, dtype=float)
+    q = np.where(q[..., 3:4] < 0, -q, q)
+    vec = q[..., :3]
+    s = np.linalg.norm(vec, axis=-1)
+    angle = 2.0 * np.arctan2(s, q[..., 3])
+    axis = vec / np.where(s > 1e-12, s, 1.0)[..., None]
+    f = np.asarray(fractions, dtype=float).reshape((-1,) + (1,) * angle.ndim)
+    half = 0.5 * f * angle
+    out = np.empty(half.shape + (4,))
+    out[..., :3] = axis * np.sin(half)[..., None]
+    out[..., 3] = np.cos(half)
+    return out
