@@ -1,0 +1,69 @@
+"""Shared set-ups for the IK tests: real clips converted onto other skeletons."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+from engine import read_bvh
+from engine.correspondence import Correspondence
+from engine.retarget import retarget
+
+from conftest import clip_path, shared_path
+
+#: the bundled CMU 3dsMax walk onto the bundled CMU (Holden) T-pose skeleton: same topology,
+#: other names, other bone lengths
+MAX_TO_HOLDEN = {
+    "Hips": "Hips", "LHipJoint": "LHipJoint", "LeftUpLeg": "LeftHip", "LeftLeg": "LeftKnee",
+    "LeftFoot": "LeftAnkle", "LeftToeBase": "LeftToe", "RHipJoint": "RHipJoint",
+    "RightUpLeg": "RightHip", "RightLeg": "RightKnee", "RightFoot": "RightAnkle",
+    "RightToeBase": "RightToe", "LowerBack": "lowerback", "Spine": "Chest", "Spine1": "Chest2",
+    "Neck": "lowerneck", "Neck1": "Neck", "Head": "Head", "LeftShoulder": "LeftCollar",
+    "LeftArm": "LeftShoulder", "LeftForeArm": "LeftElbow", "LeftHand": "LeftWrist",
+    "RightShoulder": "RightCollar", "RightArm": "RightShoulder", "RightForeArm": "RightElbow",
+    "RightHand": "RightWrist",
+}
+
+#: CMU 3dsMax names onto Bandai
+MAX_TO_BANDAI = {
+    "Hips": "Hips", "Spine": "Chest", "Chest": "Chest2", "Neck": "Neck", "Head": "Head",
+    "Shoulder_L": "LeftCollar", "UpperArm_L": "LeftShoulder", "LowerArm_L": "LeftElbow",
+    "Hand_L": "LeftWrist", "Shoulder_R": "RightCollar", "UpperArm_R": "RightShoulder",
+    "LowerArm_R": "RightElbow", "Hand_R": "RightWrist", "UpperLeg_L": "LeftHip",
+    "LowerLeg_L": "LeftKnee", "Foot_L": "LeftAnkle", "Toes_L": "LeftToe",
+    "UpperLeg_R": "RightHip", "LowerLeg_R": "RightKnee", "Foot_R": "RightAnkle",
+    "Toes_R": "RightToe",
+}
+
+#: Bandai onto Bandai-named... CMU MotionBuilder names (the Xia run) onto Bandai
+MB_TO_BANDAI = {
+    "Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",
+    "Shoulder_L": "LeftShoulder", "UpperArm_L": "LeftArm", "LowerArm_L": "LeftForeArm",
+    "Hand_L": "LeftHand", "Shoulder_R": "RightShoulder", "UpperArm_R": "RightArm",
+    "LowerArm_R": "RightForeArm", "Hand_R": "RightHand", "UpperLeg_L": "LeftUpLeg",
+    "LowerLeg_L": "LeftLeg", "Foot_L": "LeftFoot", "Toes_L": "LeftToeBase",
+    "UpperLeg_R": "RightUpLeg", "LowerLeg_R": "RightLeg", "Foot_R": "RightFoot",
+    "Toes_R": "RightToeBase",
+}
+
+
+@lru_cache(maxsize=None)
+def walk_on_holden():
+    performer = read_bvh(clip_path("cmu_131_01_walk.bvh"))
+    target = read_bvh(clip_path("cmu_rest_tpose.bvh"))
+    corr = Correspondence(MAX_TO_HOLDEN)
+    return performer, target, corr, retarget(performer, target, corr)
+
+
+@lru_cache(maxsize=None)
+def walk_on_bandai():
+    performer = read_bvh(shared_path("cmu_max_131_01_walk.bvh"))
+    target = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))
+    corr = Correspondence(MAX_TO_BANDAI)
+    return performer, target, corr, retarget(performer, target, corr)
+
+
+@lru_cache(maxsize=None)
+def run_on_bandai():
+    performer = read_bvh(shared_path("cmu_xia_angry_13_000_run.bvh"))
+    target = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))
+    corr = Correspondence(MB_TO_BANDAI)
+    return performer, target, corr, retarget(performer, target, corr)

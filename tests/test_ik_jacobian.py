@@ -1,0 +1,152 @@
+"""Each analytic Jacobian against central finite differences, on real skeletons and postures."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
+                       solve_frames, task_error_and_jacobian)
+from engine.kinematics import fk_arrays
+from engine.quaternions import qmul
+from ik_fixtures import walk_on_holden
+
+EPS = 1e-6
+
+
+def _posture():
+    _, target, _, composed = walk_on_holden()
+    frames = np.array([0, 250, 600, 900])
+    return target.skeleton, composed.rotations[frames], composed.translations[frames]
+
+
+def _perturb(structure, rot, tra, col, eps):
+    rot, tra = rot.copy(), tra.copy()
+    if col < 3:
+        tra[:, 0, col] += eps
+        return rot, tra
+    k, axis = divmod(col - 3, 3)
+    j = structure.joints[k]
+    v = np.zeros(3)
+    v[axis] = eps
+    rot[:, j] = qmul(rotvec_to_quat(v), rot[:, j])
+    return rot, tra
+
+
+def _check(sk, tasks, rot, tra):
+    structure = _Structure(sk, tasks)
+    slot = {int(j): k for k, j in enumerate(sk.translated)}
+    err, jac = task_error_and_jacobian(sk, structure, rot, tra, slot)
+    numeric = np.zeros_like(jac)
+    for col in range(structure.n):
+        rp, tp = _perturb(structure, rot, tra, col, EPS)
+        rm, tm = _perturb(structure, rot, tra, col, -EPS)
+        ep, _ = task_error_and_jacobian(sk, structure, rp, tp, slot)
+        em, _ = task_error_and_jacobian(sk, structure, rm, tm, slot)
+        numeric[:, :, col] = -(ep - em) / (2 * EPS)       # error = goal - f, so -d(error)
+    assert np.abs(jac).max() > 0.1                         # not vacuous
+    np.testing.assert_allclose(jac, numeric, atol=1e-6)
+    return structure
+
+
+def _world(sk, rot, tra):
+    return fk_arrays(sk, rot, tra)
+
+
+@pytest.mark.parametrize("joint", ["LeftFoot", "RightHand", "Head", "Hips"])
+def test_position_jacobian(joint):
+    sk, rot, tra = _posture()
+    j = sk.index[joint]
+    goal = _world(sk, rot, tra).positions[:, j] + [0.05, -0.02, 0.03]
+    task = Task("position", j, goal, np.ones(len(rot)))
+    _check(sk, [task], rot, tra)
+
+
+@pytest.mark.parametrize("normal", [[0, 1, 0], [0.3, 0.9, -0.2]])
+def test_plane_jacobian(normal):
+    sk, rot, tra = _posture()
+    j = sk.index["LeftToeBase"]
+    n = np.array(normal, float) / np.linalg.norm(normal)
+    above = _world(sk, rot, tra).positions[:, j] + 0.02 * n    # the toe is below: active
+    task = Task("plane", j, above, np.ones(len(rot)), np.tile(n, (len(rot), 1)),
+                np.zeros(len(rot), dtype=np.int8))
+    _check(sk, [task], rot, tra)
+
+
+@pytest.mark.parametrize("joint", ["LeftHand", "Head", "RightFoot"])
+def test_orientation_jacobian(joint):
+    sk, rot, tra = _posture()
+    j = sk.index[joint]
+    # the goal is the current orientation: the error's map is linear to first order there
+    goal = _world(sk, rot, tra).rotations[:, j]
+    task = Task("orientation", j, goal, np.ones(len(rot)))
+    _check(sk, [task], rot, tra)
+
+
+def test_several_tasks_stack_their_rows():
+    sk, rot, tra = _posture()
+    pose = _world(sk, rot, tra)
+    B = len(rot)
+    tasks = [Task("position", sk.index["LeftFoot"], pose.positions[:, sk.index["LeftFoot"]] + 0.01,
+                  np.ones(B)),
+             Task("orientation", sk.index["RightHand"], pose.rotations[:, sk.index["RightHand"]],
+                  np.ones(B)),
+             Task("plane", sk.index["RightToeBase"],
+                  pose.positions[:, sk.index["RightToeBase"]] + [0, 0.01, 0], np.ones(B),
+                  np.tile([0.0, 1.0, 0.0], (B, 1)), np.ones(B, dtype=np.int8))]
+    structure = _check(sk, tasks, rot, tra)
+    assert structure.k == 7
+
+
+def test_a_satisfied_one_sided_plane_has_no_rows():
+    sk, rot, tra = _posture()
+    j = sk.index["LeftToeBase"]
+    below = _world(sk, rot, tra).positions[:, j] - [0, 0.05, 0]
+    task = Task("plane", j, below, np.ones(len(rot)), np.tile([0.0, 1.0, 0.0], (len(rot), 1)),
+                np.ones(len(rot), dtype=np.int8))
+    structure = _Structure(sk, [task])
+    err, jac = task_error_and_jacobian(sk, structure, rot, tra,
+                                       {int(k): i for i, k in enumerate(sk.translated)})
+    assert np.all(err == 0) and np.all(jac == 0)
+
+
+def test_a_satisfied_task_gives_a_zero_step():
+    sk, rot, tra = _posture()
+    j = sk.index["LeftHand"]
+    here = _world(sk, rot, tra).positions[:, j]
+    task = Task("position", j, here, np.ones(len(rot)))
+    out_rot, out_tra, res, it = solve_frames(sk, [task], rot, tra, rot, tra[:, 0],
+                                             IKOptions(scale=1.7))
+    assert np.all(it == 0)
+    np.testing.assert_array_equal(out_rot, rot)
+    np.testing.assert_array_equal(out_tra, tra)
+
+
+def test_the_error_strictly_decreases_on_a_reachable_goal():
+    sk, rot, tra = _posture()
+    j = sk.index["RightHand"]
+    goal = _world(sk, rot, tra).positions[:, j] + [0.15, 0.10, -0.05]
+    task = Task("position", j, goal, np.ones(len(rot)))
+    errors = []
+    for n in range(0, 12):
+        _, _, res, _ = solve_frames(sk, [task], rot, tra, rot, tra[:, 0],
+                                    IKOptions(scale=1.7, max_iterations=n, settle=0.0))
+        errors.append(res[:, 0])
+    errors = np.array(errors)
+    assert errors[0].min() > 0.15
+    moving = errors[:-1] > 1e-9
+    assert np.all(errors[1:][moving] < errors[:-1][moving])
+    assert errors[-1].max() < 1e-4
+
+
+def test_rotation_vector_helpers_are_inverse_and_match_scipy():
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(3)
+    axis = rng.normal(size=(500, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    v = axis * rng.uniform(0, 3.1, size=(500, 1))         # the shortest rotation: below pi
+    v[:5] = 0.0
+    v[5:10] *= 1e-9
+    q = rotvec_to_quat(v)
+    np.testing.assert_allclose(np.abs(np.sum(q * Rotation.from_rotvec(v).as_quat(), 1)), 1,
+                               atol=1e-12)
+    np.testing.assert_allclose(quat_to_rotvec(q), v, atol=1e-9)
