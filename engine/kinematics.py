@@ -1,6 +1,7 @@
 """Forward kinematics, vectorised over frames.
 
-The only loop is over joints (parents before children); every step handles all frames at once.
+The only loop is over the hierarchy's depth levels (a 100-joint skeleton has about a dozen):
+each step places every joint of one level, all frames at once, from its parent's world pose.
 """
 from __future__ import annotations
 
@@ -48,28 +49,41 @@ def fk_arrays(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarra
     rotations = np.asarray(rotations, dtype=float)
     F, J = rotations.shape[:2]
     translations = np.asarray(translations, dtype=float)
+    # joint-major (J, F, ...) keeps each joint's frames together; a level's joints are
+    # gathered from the inputs' transposed views, which costs no more than a copy up front
+    local_q = rotations.transpose(1, 0, 2)
     if translations.shape[1] != J or J == len(skeleton.translated):
-        full = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
-        full[:, skeleton.translated] = translations
-        translations = full
+        local_t = np.empty((J, F, 3))
+        local_t[:] = skeleton.offsets[:, None, :]
+        local_t[skeleton.translated] = translations.transpose(1, 0, 2)
+    else:
+        local_t = translations.transpose(1, 0, 2)
     parents = skeleton.parents
-    # joint-major scratch arrays keep each joint's frames contiguous
-    local_q = np.ascontiguousarray(rotations.transpose(1, 0, 2))
-    local_t = np.ascontiguousarray(translations.transpose(1, 0, 2))
     world_q = np.empty((J, F, 4))
     world_p = np.empty((J, F, 3))
     world_q[0] = local_q[0]
     world_p[0] = local_t[0]
-    for j in range(1, J):
-        p = parents[j]
-        world_q[j] = qmul(world_q[p], local_q[j])
-        world_p[j] = world_p[p] + qrot(world_q[p], local_t[j])
+    for joints in _levels(skeleton):
+        up = parents[joints]
+        parent_q = world_q[up]
+        world_q[joints] = qmul(parent_q, local_q[joints])
+        world_p[joints] = world_p[up] + qrot(parent_q, local_t[joints])
     sites = skeleton.end_sites if end_sites else ()
-    end_p = np.empty((len(sites), F, 3))
-    for e, site in enumerate(sites):
-        end_p[e] = world_p[site.parent] + qrot(world_q[site.parent], site.offset)
+    if sites:
+        up = np.array([site.parent for site in sites])
+        offsets = np.array([site.offset for site in sites])[:, None, :]    # (E, 1, 3)
+        end_p = world_p[up] + qrot(world_q[up], offsets)
+    else:
+        end_p = np.empty((0, F, 3))
     return WorldPose(world_q.transpose(1, 0, 2), world_p.transpose(1, 0, 2),
                      end_p.transpose(1, 0, 2))
+
+
+def _levels(skeleton: Skeleton) -> list[np.ndarray]:
+    """Joint indices by depth below the root, depth 1 first: every joint's parent is in the
+    level before its own, so one level at a time can be placed in a single vectorised step."""
+    depth = skeleton.depth
+    return [np.flatnonzero(depth == d) for d in range(1, int(depth.max(initial=0)) + 1)]
 
 
 def forward_kinematics(motion: Motion, *, end_sites: bool = True) -> WorldPose:
