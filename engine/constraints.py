@@ -147,6 +147,9 @@ class Constraint:
     def with_range(self, smooth_in, start, end, smooth_out) -> "Constraint":
         return replace(self, smooth_in=smooth_in, start=start, end=end, smooth_out=smooth_out)
 
+    def with_priority(self, priority: int) -> "Constraint":
+        return replace(self, priority=priority)
+
     def goal_point(self, frames: np.ndarray) -> np.ndarray:
         """``(n, 3)`` goal positions at ``frames`` for position and trajectory kinds."""
         frames = np.asarray(frames)

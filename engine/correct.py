@@ -282,17 +282,20 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     rot[changed] = rot2[changed]
     tra[changed, 0] = tra2[changed, 0]
     rotvecs = np.zeros((F, sk.num_joints, 3))
-    rotvecs[changed] = quat_to_rotvec(qmul(rot[changed], qconj(base_rot[changed])))
+    moved = np.any(rot != base_rot, axis=-1)                       # (F, J), bit for bit
+    rotvecs[moved] = quat_to_rotvec(qmul(rot[moved], qconj(base_rot[moved])))
     root = tra[:, 0] - base_tra[:, 0]
-    motion = _apply_dense(composed, rotvecs, root, changed)
+    motion = _apply_dense(composed, rotvecs, root, moved)
     return Correction(motion=motion, rotvecs=rotvecs, root=root, residual=residual,
                       iterations=iters, seconds=timings)
 
 
-def _apply_dense(composed: Motion, rotvecs, root, changed) -> Motion:
+def _apply_dense(composed: Motion, rotvecs, root, moved) -> Motion:
+    """The composed motion plus the displacement, exactly as a displacement map applies it;
+    joints with no offset keep the composed values bit for bit."""
     from .ik import rotvec_to_quat
     rotations = composed.rotations.copy()
-    rotations[changed] = qmul(rotvec_to_quat(rotvecs[changed]), rotations[changed])
+    rotations[moved] = qmul(rotvec_to_quat(rotvecs[moved]), rotations[moved])
     translations = composed.translations.copy()
     translations[:, 0] += root
     return composed.replace(rotations=rotations, translations=translations)

@@ -140,7 +140,7 @@ class IKOptions:
 
     tolerance: float = 1e-4
     max_iterations: int = 60
-    damping: float = 2e-3
+    damping: float = 0.005
     max_step: float = 0.05
     attraction: float = 0.5
     settle: float = 1e-5
@@ -325,6 +325,10 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         if it == options.max_iterations:
             break
         iterations[active] += 1
+        err_raw = err
+        # the last quarter of the cap only restores the first level (for frames still going:
+        # unreachable lower levels, which would otherwise end mid-oscillation)
+        polishing = len(level_rows) > 1 and it >= int(0.75 * options.max_iterations)
         # clamp the correction asked of each task
         norms = task_err[:, task_of_row]
         err = err * np.minimum(1.0, max_step / np.maximum(norms, 1e-12))
@@ -334,13 +338,22 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         nb = len(active)
         dq = np.zeros((nb, structure.n))
         stacked = None
+        behind = np.zeros(nb)               # how far the higher levels are from being met
         for rows in level_rows:
             jl, el = jac[:, rows], err[:, rows]
             if stacked is None:
                 jt = jl
+                gate = 1.0
             else:
                 jt = jl - (jl @ _damped_pinv(stacked, ns_lam2)) @ stacked
-            dq += _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
+                # a lower level waits while a higher one is not met: its steps are first-order
+                # invisible to the higher levels, but near their singularities (a stretched
+                # leg) the second-order part would push them off faster than they recover
+                gate = np.clip(2.0 - behind / 10.0, 0.0, 1.0)[:, None]
+                if polishing:
+                    gate = 0.0
+            dq += gate * _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
+            behind = np.maximum(behind, (np.abs(err_raw[:, rows]) / row_tol[rows]).max(axis=1))
             stacked = jl if stacked is None else np.concatenate([stacked, jl], axis=1)
         # attraction, in the null space of every task
         dz = np.zeros((nb, structure.n))
@@ -348,7 +361,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         cur = r[:, joints]
         dz[:, 3:] = quat_to_rotvec(qmul(attraction_rot[active][:, joints],
                                         qconj(cur))).reshape(nb, -1)
-        dz *= options.attraction
+        dz *= 0.0 if polishing else options.attraction
         dq += dz - (_damped_pinv(stacked, ns_lam2) @ (stacked @ dz[..., None]))[..., 0]
         # a frame is done when its tasks are met and the posture has stopped moving
         settled = met & (np.abs(dq).max(axis=1) < options.settle)
@@ -363,8 +376,12 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         t = t.copy()
         t[:, 0] += dq[:, 0:3]
         step = dq[:, 3:].reshape(nb, len(joints), 3)
-        angle = np.linalg.norm(step, axis=-1, keepdims=True)
-        step = step * np.minimum(1.0, 0.5 / np.maximum(angle, 1e-12))      # <= 0.5 rad a step
+        # at most 0.3 rad for any joint in one step, scaling the whole step alike so that
+        # it stays in the null space of the higher priorities
+        biggest = np.linalg.norm(step, axis=-1).max(axis=1)
+        shrink = np.minimum(1.0, 0.3 / np.maximum(biggest, 1e-12))
+        step = step * shrink[:, None, None]
+        t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
         new = qnormalize(qmul(rotvec_to_quat(step), cur))
         for j, limit in options.joint_limits.items():
             if j in structure.col:

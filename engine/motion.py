@@ -52,7 +52,10 @@ class Motion:
             raise MotionComposerError("rotations must be finite, non-zero quaternions")
         if not np.all(np.isfinite(tra)):
             raise MotionComposerError("translations must be finite numbers")
-        rot /= norms
+        # renormalise only what needs it, so that unit input passes through bit for bit
+        off = np.abs(norms - 1.0) > 1e-12
+        if np.any(off):
+            rot = np.where(off, rot / norms, rot)
         rot.setflags(write=False)
         tra.setflags(write=False)
         object.__setattr__(self, "rotations", rot)

@@ -73,6 +73,11 @@ def quat_to_euler(quats: np.ndarray, order: str, *, unwrap: bool = True) -> np.n
 
 
 def angle_between(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """The rotation angle in radians between two arrays of quaternions ``(..., 4)``."""
-    dot = np.abs(np.sum(np.asarray(qa) * np.asarray(qb), axis=-1))
-    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+    """The rotation angle in radians between two arrays of quaternions ``(..., 4)``.
+
+    Computed as ``2 atan2(|v|, |w|)`` of ``qa conj(qb)``, accurate for tiny angles too
+    (``arccos`` of a dot product loses everything below about 1e-8 rad).
+    """
+    from .quaternions import qconj, qmul
+    d = qmul(np.asarray(qa, dtype=float), qconj(np.asarray(qb, dtype=float)))
+    return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
