@@ -85,8 +85,12 @@ def cmd_retarget(args) -> int:
     import time
 
     from engine.bvh import write_bvh
+    from engine.constraints import constraints_from_json
     from engine.correspondence import Correspondence
-    from engine.retarget import BindOptions, RootOptions, retarget
+    from engine.errors import MotionComposerError
+    from engine.fileio import atomic_write
+    from engine.pipeline import Job, run_job
+    from engine.retarget import BindOptions, RootOptions
 
     started = time.perf_counter()
     performer = read_bvh(args.performer)
@@ -97,19 +101,40 @@ def cmd_retarget(args) -> int:
     else:
         from engine.automap import automap
         correspondence = automap(target.skeleton, performer.skeleton)
-    options = BindOptions(performer_reference=args.reference,
-                          target_reference=args.target_reference,
-                          rest_alignment=not args.keep_target_pose,
-                          distribute=args.distribute)
-    root = RootOptions(mode=args.root, scale=tuple(args.root_scale) if args.root_scale else None)
-    result = retarget(performer, target, correspondence, bind_options=options, root=root)
-    write_bvh(result, args.output)
+    constraints = ()
+    if args.constraints:
+        try:
+            with open(args.constraints, encoding="utf-8") as handle:
+                text = handle.read()
+        except OSError as exc:
+            raise MotionComposerError(f"{args.constraints}: cannot be read: "
+                                      f"{exc.strerror or exc}") from None
+        constraints = tuple(constraints_from_json(text, args.constraints))
+    job = Job(performer=performer, target=target, correspondence=correspondence,
+              bind_options=BindOptions(performer_reference=args.reference,
+                                       target_reference=args.target_reference,
+                                       rest_alignment=not args.keep_target_pose,
+                                       distribute=args.distribute),
+              root=RootOptions(mode=args.root,
+                               scale=tuple(args.root_scale) if args.root_scale else None),
+              constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
+    result = run_job(job)
+    write_bvh(result.motion, args.output)
     if args.save_map:
         correspondence.save(args.save_map)
     elapsed = time.perf_counter() - started
-    print(f"wrote {args.output}: {result.num_frames} frames at {result.fps:.6g} fps onto "
-          f"{result.skeleton.num_joints} joints ({len(correspondence)} mapped) in "
-          f"{elapsed:.2f} s")
+    if args.report:
+        report = dict(result.report, output=str(args.output), total_s=elapsed)
+        atomic_write(args.report, json.dumps(report, indent=2) + "\n")
+    note = ""
+    if result.correction is not None:
+        worst = max((c["max_residual"] or 0.0 for c in result.report["constraints"]),
+                    default=0.0)
+        note = (f", {len(result.constraints)} constraints (largest residual "
+                f"{worst * 1000:.2f} mm)")
+    print(f"wrote {args.output}: {result.motion.num_frames} frames at "
+          f"{result.motion.fps:.6g} fps onto {result.motion.skeleton.num_joints} joints "
+          f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")
     return 0
 
 
@@ -152,6 +177,16 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--distribute", choices=("even", "first"), default="even",
                     help="how a target chain with unmapped inner joints turns: spread over "
                          "the chain (default) or all at its first joint")
+    fix = rt.add_argument_group("correction (inverse kinematics)")
+    fix.add_argument("--constraints", metavar="FILE.json",
+                     help='Cartesian constraints to enforce (JSON: {"constraints": [...]})')
+    fix.add_argument("--auto-contacts", action="store_true",
+                     help="detect the performer's foot contacts and pin the target's feet")
+    fix.add_argument("--floor", type=float, metavar="HEIGHT",
+                     help="keep the target's feet and toes on or above a floor at HEIGHT "
+                          "metres (also the floor automatic contacts stand on)")
+    fix.add_argument("--report", metavar="REPORT.json",
+                     help="write residuals per constraint, contact drift and timings")
     rt.set_defaults(func=cmd_retarget)
     return parser
 
