@@ -27,17 +27,13 @@ absolute`` shows that writing "relative" channels instead does make bvhio disagr
 """
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import subprocess
-import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from blender_util import blender_or_skip, run_blender_import
 from conftest import BUNDLED_BVH, SHARED_BVH, SHARED_DATA, all_bvh_params, resolve
 from engine.bvh import read_bvh, write_bvh
 from engine.describe import stature
@@ -158,44 +154,6 @@ def test_bvhio_reads_position_channels_as_absolute(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- Blender
-BLENDER_SCRIPT = textwrap.dedent(r'''
-    import builtins, json, sys
-    import bpy
-    import io_anim_bvh.import_bvh as import_bvh
-
-    # Blender 3.4's importer opens files with mode 'rU', which Python 3.11 refuses
-    def _open(file, mode="r", *args, **kwargs):
-        return builtins.open(file, mode.replace("U", ""), *args, **kwargs)
-    import_bvh.open = _open
-
-    job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
-    results = {}
-    scene = bpy.context.scene
-    for item in job["files"]:
-        before = set(bpy.data.objects)
-        bpy.ops.import_anim.bvh(filepath=item["path"], target="ARMATURE", global_scale=1.0,
-                                rotate_mode="NATIVE", axis_forward="Y", axis_up="Z",
-                                frame_start=1, use_fps_scale=False, use_cyclic=False,
-                                update_scene_fps=False, update_scene_duration=False)
-        new = [o for o in bpy.data.objects if o not in before]
-        assert len(new) == 1 and new[0].type == "ARMATURE", new
-        arm = new[0]
-        action = arm.animation_data.action
-        keys = sorted({len(c.keyframe_points) for c in action.fcurves})
-        first = sorted({c.keyframe_points[0].co[0] for c in action.fcurves})
-        positions = {}
-        for f in item["frames"]:
-            scene.frame_set(f + 1)          # file frame f (from 0) is scene frame f + 1
-            positions[f] = {pb.name: list(arm.matrix_world @ pb.head) for pb in arm.pose.bones}
-        results[item["key"]] = {"keys_per_curve": keys, "first_key_frame": first,
-                                "matrix_world": [list(r) for r in arm.matrix_world],
-                                "positions": positions}
-        bpy.data.objects.remove(arm, do_unlink=True)   # keep later frame_set calls cheap
-        bpy.data.actions.remove(action)
-    json.dump(results, open(job["out"], "w"))
-''')
-
-
 def _available_specs():
     specs = [("bundled", n) for n in BUNDLED_BVH]
     if SHARED_DATA.is_dir():
@@ -205,29 +163,14 @@ def _available_specs():
 
 @pytest.fixture(scope="module")
 def blender_results(written, tmp_path_factory):
-    blender = shutil.which("blender")
-    if blender is None:
-        pytest.skip("Blender is not installed (no 'blender' on PATH); the Debian package "
-                    "'blender' provides the independent BVH importer this test uses")
+    blender_or_skip()
     folder = tmp_path_factory.mktemp("blender")
     files = []
     for spec in _available_specs():
         w = written(spec)
         files.append({"key": f"{spec[0]}/{spec[1]}", "path": str(w.out),
                       "frames": _frames(w.motion.num_frames)})
-    script = folder / "read_bvh_in_blender.py"
-    script.write_text(BLENDER_SCRIPT)
-    job = folder / "job.json"
-    out = folder / "result.json"
-    job.write_text(json.dumps({"files": files, "out": str(out)}))
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(script), "--", str(job)],
-                          capture_output=True, text=True, timeout=300, env=env)
-    if proc.returncode != 0 or not out.is_file():
-        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
-                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return json.loads(out.read_text())
+    return run_blender_import(files, folder)
 
 
 @pytest.mark.blender

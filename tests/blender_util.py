@@ -1,0 +1,100 @@
+"""Blender as an independent BVH reader, shared by the tests that use it.
+
+:func:`run_blender_import` starts Debian's Blender (3.4) headless once, imports every listed BVH
+file with its own importer (``io_anim_bvh``) and reports, per file, the world position of every
+pose bone's head at the requested file frames, the armature's world matrix, the number of keys
+per animation curve and the scene frame of the first key.
+
+Importer settings (see ``io_anim_bvh/import_bvh.py``): ``axis_forward='Y', axis_up='Z'`` make
+its axis conversion the identity and ``global_scale=1`` keeps the file's units, so the
+positions are in the file's own units and axes; ``frame_start=1`` puts file frame ``f``
+(counted from 0) at scene frame ``f + 1``; ``use_fps_scale`` off gives one scene frame per file
+frame. Blender reads every position channel as "absolute" (it replaces the OFFSET) and
+rotations as R = R1 R2 R3 in channel order.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import textwrap
+from pathlib import Path
+
+import pytest
+
+BLENDER_SCRIPT = textwrap.dedent(r'''
+    import builtins, json, sys
+    import bpy
+    import io_anim_bvh.import_bvh as import_bvh
+
+    # Blender 3.4's importer opens files with mode 'rU', which Python 3.11 refuses
+    def _open(file, mode="r", *args, **kwargs):
+        return builtins.open(file, mode.replace("U", ""), *args, **kwargs)
+    import_bvh.open = _open
+
+    job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
+    results = {}
+    scene = bpy.context.scene
+    for item in job["files"]:
+        before = set(bpy.data.objects)
+        bpy.ops.import_anim.bvh(filepath=item["path"], target="ARMATURE", global_scale=1.0,
+                                rotate_mode="NATIVE", axis_forward="Y", axis_up="Z",
+                                frame_start=1, use_fps_scale=False, use_cyclic=False,
+                                update_scene_fps=False, update_scene_duration=False)
+        new = [o for o in bpy.data.objects if o not in before]
+        assert len(new) == 1 and new[0].type == "ARMATURE", new
+        arm = new[0]
+        action = arm.animation_data.action
+        keys = sorted({len(c.keyframe_points) for c in action.fcurves})
+        first = sorted({c.keyframe_points[0].co[0] for c in action.fcurves})
+        positions = {}
+        for f in item["frames"]:
+            scene.frame_set(f + 1)          # file frame f (from 0) is scene frame f + 1
+            positions[f] = {pb.name: list(arm.matrix_world @ pb.head) for pb in arm.pose.bones}
+        results[item["key"]] = {"keys_per_curve": keys, "first_key_frame": first,
+                                "matrix_world": [list(r) for r in arm.matrix_world],
+                                "positions": positions}
+        bpy.data.objects.remove(arm, do_unlink=True)   # keep later frame_set calls cheap
+        bpy.data.actions.remove(action)
+    json.dump(results, open(job["out"], "w"))
+''')
+
+
+def blender_or_skip() -> str:
+    """The ``blender`` executable, or skip the test saying why."""
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Blender is not installed (no 'blender' on PATH); the Debian package "
+                    "'blender' provides the independent BVH importer this test uses")
+    return blender
+
+
+def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) -> dict:
+    """Import BVH files in one headless Blender process.
+
+    Args:
+        files: ``{"key": str, "path": str, "frames": [int, ...]}`` per file (frames counted
+            from 0, as in the file).
+        folder: where the script, the job and the result are written.
+
+    Returns:
+        key -> ``{"keys_per_curve": [...], "first_key_frame": [...], "matrix_world": 4x4,
+        "positions": {str(frame): {bone name: [x, y, z]}}}`` (JSON turns the frame keys into
+        strings).
+    """
+    blender = blender_or_skip()
+    folder = Path(folder)
+    script = folder / "read_bvh_in_blender.py"
+    script.write_text(BLENDER_SCRIPT)
+    job = folder / "job.json"
+    out = folder / "result.json"
+    job.write_text(json.dumps({"files": files, "out": str(out)}))
+    env = dict(os.environ, PYTHONNOUSERSITE="1")
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                           "--python", str(script), "--", str(job)],
+                          capture_output=True, text=True, timeout=timeout, env=env)
+    if proc.returncode != 0 or not out.is_file():
+        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
+                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return json.loads(out.read_text())
