@@ -1,0 +1,196 @@
+"""Helpers shared by the benchmark scripts: timing, data paths, child processes, the report table.
+
+Benchmarks are reports, not tests: they print figures against targets and exit 0 either way.
+Run them from anywhere; paths are resolved relative to the repository.
+"""
+from __future__ import annotations
+
+import gc
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+REPO = Path(__file__).resolve().parent.parent
+CLIPS = REPO / "resources" / "clips"
+#: ``../shared/data`` beside the repository, or ``$MC_SHARED_DATA`` (as in tests/conftest.py)
+SHARED_DATA = Path(os.environ.get("MC_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+# --------------------------------------------------------------------------- data
+def data_file(name: str, fallback: str, explicit: str | os.PathLike | None = None) -> Path:
+    """The benchmark's input: ``explicit`` if given, else ``SHARED_DATA / name``, else the
+    bundled clip ``fallback`` (saying so on stdout, since the figures then are not comparable).
+    """
+    if explicit is not None:
+        path = Path(explicit)
+        if not path.is_file():
+            sys.exit(f"error: {path} is not a file")
+        return path
+    path = SHARED_DATA / name
+    if path.is_file():
+        return path
+    bundled = CLIPS / fallback
+    print(f"note: {path} is absent (set MC_SHARED_DATA to the shared data folder); "
+          f"measuring the bundled {bundled.relative_to(REPO)} instead, so the figures are "
+          "not comparable with the targets, which are set for the large file.\n")
+    return bundled
+
+
+# --------------------------------------------------------------------------- timing
+@dataclass
+class Timing:
+    """Wall-clock seconds of repeated runs of one call."""
+
+    label: str
+    seconds: list[float] = field(default_factory=list)
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.seconds)
+
+    @property
+    def best(self) -> float:
+        return min(self.seconds)
+
+    @property
+    def worst(self) -> float:
+        return max(self.seconds)
+
+    def spread(self) -> str:
+        """``min..max`` over the runs, for the report."""
+        return f"{fmt_seconds(self.best)}..{fmt_seconds(self.worst)} over {len(self.seconds)}"
+
+
+def time_runs(fn: Callable[[], object], repeat: int, *, warmup: int = 1,
+              label: str = "") -> Timing:
+    """Time ``repeat`` calls of ``fn`` with :func:`time.perf_counter`, after ``warmup`` calls.
+
+    The garbage collector runs before each call (not inside the timed part), so that one call's
+    garbage is not collected on the next call's time.
+    """
+    for _ in range(warmup):
+        fn()
+    timing = Timing(label)
+    for _ in range(repeat):
+        gc.collect()
+        start = time.perf_counter()
+        fn()
+        timing.seconds.append(time.perf_counter() - start)
+    return timing
+
+
+def time_interleaved(calls: dict[str, tuple[Callable[[], object], int]],
+                     rounds: int) -> dict[str, Timing]:
+    """Time several calls taking turns, for a ratio that a change in the machine's load
+    during the benchmark does not skew: ``{label: (fn, runs)}``, each call's runs spread over
+    ``rounds`` rounds. No warm-up: warm the calls up first where that matters.
+    """
+    timings = {label: Timing(label) for label in calls}
+    rounds = max(1, rounds)
+    for r in range(rounds):
+        for label, (fn, runs) in calls.items():
+            # runs * (r + 1) // rounds - runs * r // rounds: spread evenly, summing to runs
+            share = runs * (r + 1) // rounds - runs * r // rounds
+            if share:
+                timings[label].seconds += time_runs(fn, share, warmup=0).seconds
+    return timings
+
+
+def fmt_seconds(seconds: float) -> str:
+    """``0.0912 s`` style, milliseconds for short times."""
+    return f"{seconds * 1e3:.1f} ms" if seconds < 1.0 else f"{seconds:.2f} s"
+
+
+# --------------------------------------------------------------------------- child processes
+def run_child(script: Path, args: list[str], *, timeout: float = 600) -> dict:
+    """Run ``python script *args`` in a fresh interpreter and return the JSON it prints last.
+
+    For figures that a long-lived process would distort (peak memory above all; but see
+    :func:`max_rss_mib`). The child must print one JSON object as its last line of stdout.
+    """
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    proc = subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True,
+                          timeout=timeout, env=env, cwd=REPO)
+    if proc.returncode != 0:
+        raise RuntimeError(f"child {script.name} {' '.join(args)} failed "
+                           f"(exit {proc.returncode}):\n{proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def max_rss_mib() -> float:
+    """This process's peak resident set size so far, in MiB (``ru_maxrss``, KiB on Linux).
+
+    Linux caveat: a child process starts with its parent's ``ru_maxrss`` (the kernel carries
+    the peak across fork and exec), so in a child this only means something if the parent was
+    smaller than the child's own baseline when it started the child. Start memory children
+    early, before the parent grows; :func:`proc_status_mib` ``("VmHWM")`` has no such carry-over
+    and serves as a cross-check.
+    """
+    import resource
+    kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    if sys.platform == "darwin":           # bytes there
+        kib /= 1024
+    return kib / 1024
+
+
+def proc_status_mib(key: str) -> float | None:
+    """A memory line of ``/proc/self/status`` in MiB: ``"VmRSS"`` (now), ``"VmHWM"`` (peak).
+
+    None where there is no such file (not Linux).
+    """
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
+# --------------------------------------------------------------------------- report
+@dataclass
+class Row:
+    """One line of the report: a figure, optionally against a target."""
+
+    what: str
+    value: str
+    target: str = ""
+    ok: bool | None = None          # None: no target, just a figure
+    note: str = ""
+
+
+def print_table(title: str, rows: list[Row]) -> None:
+    """Print ``rows`` as an aligned plain-text table with PASS/MISS per target."""
+    header = ("measure", "figure", "target", "result", "")
+    cells = [(r.what, r.value, r.target, "" if r.ok is None else ("PASS" if r.ok else "MISS"),
+              r.note) for r in rows]
+    widths = [max(len(str(c[i])) for c in [header, *cells]) for i in range(4)]
+    line = "  ".join("-" * w for w in widths)
+    print(title)
+    print(line)
+    print("  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip())
+    print(line)
+    for c in cells:
+        text = "  ".join(str(x).ljust(w) for x, w in zip(c, widths))
+        print((text + ("  " + c[4] if c[4] else "")).rstrip())
+    print(line)
+    targets = [r for r in rows if r.ok is not None]
+    met = sum(1 for r in targets if r.ok)
+    print(f"{met} of {len(targets)} targets met")
+
+
+def environment() -> str:
+    """One line naming the interpreter, numpy and the machine, to read the figures against."""
+    import platform
+
+    import numpy
+    return (f"Python {platform.python_version()}, numpy {numpy.__version__}, "
+            f"{platform.machine()}, {os.cpu_count()} CPUs, {platform.system()}")
