@@ -154,8 +154,9 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     ``pairs``: target joint -> performer joint (the correspondence). Each contact gives a
     position constraint on the target joint mapped to the performer's ankle: horizontally at
     the converted foot's median position over the contact, vertically at the target's planted
-    ankle height above ``floor`` (estimated from the converted feet when None) plus the
-    performer's own lift above its planted height, scaled to the target. Where the toe is
+    ankle height (measured above the ground the converted feet stand on) above ``floor``
+    [m, the target's own vertical axis; that ground when None], plus the performer's own lift
+    above its planted height, scaled to the target. Where the toe is
     mapped, a plane constraint keeps it on or above the floor over the same range.
     """
     from .describe import stature
@@ -171,9 +172,12 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     feet_t = sorted({by_performer[c.joint] for c in contacts if c.joint in by_performer})
     if not feet_t:
         return []
-    t_low = t_pos[:, [sk.index[n] for n in feet_t], 1]
-    t_floor = estimate_floor(t_low) if floor is None else float(floor)
-    p_feet = sorted({c.joint for c in contacts})
+    # the ground is under the lowest point of the feet: the toes where they are mapped
+    low_t = feet_t + sorted({by_performer[c.toe] for c in contacts if c.toe in by_performer})
+    t_low = t_pos[:, [sk.index[n] for n in low_t], 1]
+    ground = estimate_floor(t_low)              # where the converted feet stand
+    t_floor = ground if floor is None else float(floor)
+    p_feet = sorted({c.joint for c in contacts} | {c.toe for c in contacts if c.toe})
     p_low = p_pos[:, [performer.skeleton.index[n] for n in p_feet], 1]
     p_floor = estimate_floor(p_low)
     ratio = max(stature(composed), 0.1) / max(stature(performer), 0.1)
@@ -203,7 +207,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         smooth_in, smooth_out = spans[i]
         j = sk.index[target]
         pj = performer.skeleton.index[c.joint]
-        planted_t = np.percentile(t_pos[:, j, 1] - t_floor, 5.0)
+        planted_t = max(0.0, np.percentile(t_pos[:, j, 1] - ground, 5.0))
         planted_p = np.percentile(p_pos[:, pj, 1] - p_floor, 5.0)
         window = slice(c.start, c.end + 1)
         lift = float(np.median(p_pos[window, pj, 1] - p_floor)) - planted_p

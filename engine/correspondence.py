@@ -88,6 +88,17 @@ class Correspondence:
                 f"the target's root {target.names[0]!r} is unmapped and the mapped joints "
                 f"{', '.join(repr(t) for t in sorted(tops, key=target.index.get)[:4])} have no "
                 "mapped ancestor in common; map the target's root or hips", path)
+        top = target.index[tops[0]]
+        if top != 0:
+            # an unmapped root is a ground-level node above the body (Bandai's joint_Root,
+            # CC3's RL_BoneRoot, an armature's root bone): the mapped top must carry nearly
+            # the whole skeleton, not one limb
+            size = _subtree_size(target, top)
+            if size < 0.75 * target.num_joints:
+                raise MappingError(
+                    f"the target's root {target.names[0]!r} is unmapped and the top mapped "
+                    f"joint {tops[0]!r} carries only {size} of {target.num_joints} joints; map "
+                    "the target's root or hips", path)
         for t, p in self.pairs.items():
             a = _nearest_mapped_ancestor(target, target.index[t], self.pairs)
             if a is None:
@@ -146,6 +157,10 @@ def _unknown(side: str, name: str, skeleton: Skeleton) -> str:
     close = difflib.get_close_matches(name, skeleton.names, n=3)
     hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
     return f"{name!r} is not a joint of the {side} skeleton{hint}"
+
+
+def _subtree_size(skeleton: Skeleton, j: int) -> int:
+    return 1 + sum(1 for k in range(j + 1, skeleton.num_joints) if j in skeleton.ancestors(k))
 
 
 def _nearest_mapped_ancestor(skeleton: Skeleton, j: int, pairs) -> int | None:

@@ -4,7 +4,14 @@ from __future__ import annotations
 import os
 import tempfile
 
-__all__ = ["atomic_write"]
+from .errors import MotionComposerError
+
+__all__ = ["atomic_write", "FileWriteError"]
+
+
+class FileWriteError(MotionComposerError):
+    """A file that could not be written (no such folder, no permission, disk full); the
+    previous file, if any, is intact."""
 
 
 def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = "utf-8") -> None:
@@ -16,17 +23,24 @@ def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = 
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     payload = data.encode(encoding) if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
-                               dir=folder)
+    if not os.path.isdir(folder):
+        raise FileWriteError(f"{path}: cannot be written: the folder {folder} does not exist")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
+                                   dir=folder)
+    except OSError as exc:
+        raise FileWriteError(f"{path}: cannot be written: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError):
+            raise FileWriteError(f"{path}: cannot be written: {exc.strerror or exc}") from None
         raise

@@ -84,8 +84,7 @@ def run_job(job: Job, *, progress=None, cancel=None) -> JobResult:
         for ankle, toe in find_feet(job.target.skeleton):
             for joint in (ankle, toe):
                 if joint:
-                    constraints.append(floor_constraint(joint, composed.num_frames, job.floor,
-                                                        priority=2))
+                    constraints.append(floor_constraint(joint, composed.num_frames, job.floor))
     correction = None
     motion = composed
     if constraints:

@@ -308,7 +308,7 @@ def test_failed_rename_leaves_the_old_file_intact(tmp_path, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(engine.fileio.os, "replace", broken)
-    with pytest.raises(OSError):
+    with pytest.raises(engine.fileio.FileWriteError, match="No space left on device"):
         write_bvh(_tiny_motion(rotate_leaf=False), out)
     assert out.read_bytes() == old
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"]

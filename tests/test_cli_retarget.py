@@ -520,20 +520,12 @@ def test_bad_input_exits_2_with_one_line(case, capsys, tmp_path):
     assert not (tmp_path / "used.json").exists()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "Correspondence.validate accepts a map whose top mapped joint is a limb (here the left "
-    "upper arm) while the target's root 'Hips' is unmapped: the issue asks for a typed error "
-    "on an unmapped root; only the hips below an unmapped ground-level root should stand in"))
 def test_a_limb_chain_alone_is_an_unmapped_root(capsys, tmp_path):
     code, out, err = cli(capsys, *_args(tmp_path, pairs={"LeftArm": "LeftShoulder",
                                                          "LeftForeArm": "LeftElbow"}))
     assert code == 2 and err.count("\n") == 1 and "Hips" in err
 
 
-@pytest.mark.xfail(strict=True, raises=OSError, reason=(
-    "app/cli.py cmd_retarget: write_bvh / Correspondence.save into a folder that does not "
-    "exist raise FileNotFoundError from engine.fileio.atomic_write (tempfile.mkstemp), which "
-    "main() does not catch: a traceback and exit code 1 instead of one line and exit 2"))
 @pytest.mark.parametrize("option", ["-o", "--save-map"])
 def test_writing_into_a_missing_folder_exits_2(option, capsys, tmp_path):
     argv = [str(a) for a in _args(tmp_path, pairs=MAX_TO_HOLDEN)]
