@@ -27,6 +27,10 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from app.runtime import tune_allocator  # noqa: E402
+
+ALLOCATOR = tune_allocator()         # as motion-composer does at start-up (app/runtime.py)
 from _common import (Row, data_file, environment, fmt_seconds, max_rss_mib,  # noqa: E402
                      print_table, proc_status_mib, run_child, time_interleaved, time_runs)
 
@@ -111,7 +115,7 @@ def main(argv=None) -> int:
     sk = motion.skeleton
     print(f"file: {path} ({path.stat().st_size / 1e6:.1f} MB): {motion.num_frames} frames, "
           f"{sk.num_joints} joints, {sk.num_channels} channels, {len(sk.end_sites)} End Sites")
-    print(f"      {environment()}\n")
+    print(f"      {environment()}; allocator tuned as the application does: {ALLOCATOR}\n")
 
     rows: list[Row] = []
 

@@ -31,6 +31,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from app.runtime import tune_allocator  # noqa: E402
+
+ALLOCATOR = tune_allocator()         # as motion-composer does at start-up (app/runtime.py)
 from _common import (Row, environment, fmt_seconds, print_table, time_runs,  # noqa: E402
                      SHARED_DATA)
 
@@ -109,7 +113,7 @@ def main() -> None:
                       label="warm start") if args.with_warm_start else None)
     fps = F / full.median
 
-    print(f"{environment()}; BLAS threads pinned to 1")
+    print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
     print(f"{walk.name} ({F} frames) onto {bandai.name}'s skeleton, {how}; "
           f"{len(contacts)} contacts -> {len(cons)} constraints, plus a hand constraint\n")
     print_table("Whole-body IK (two passes)", [

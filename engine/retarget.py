@@ -159,6 +159,8 @@ class Binding:
         chains: per mapped target joint, the unmapped joints between it and its primary
             child (turned together with ``distribute="even"``).
         body_root: the top-most mapped target joint (its translation follows the performer).
+        above_mapped: ``(J,)`` joints with a mapped descendant (the only unmapped joints whose
+            world rotation conversion needs).
         driven: target joints whose world position follows their performer joint's (scaled):
             the body root, and mapped joints with animated translation whose performer joint's
             translation is animated too (Bandai's hips under its ground-level root).
@@ -182,6 +184,7 @@ class Binding:
     chains: dict
     body_root: int
     driven: list
+    above_mapped: np.ndarray
     root_translation: np.ndarray
     hip_height_ratio: float
     options: BindOptions
@@ -367,6 +370,11 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                                 body_root)
     p_hip = _height_above_floor(p_all, int(mapped[body_root]))
     ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
+    above_mapped = np.zeros(J, dtype=bool)          # unmapped joints with a mapped descendant
+    for j in range(J):
+        if mapped[j] >= 0:
+            for a in tsk.ancestors(j):
+                above_mapped[a] = True
     driven = [body_root]
     for j in tsk.translated[1:]:
         p = int(mapped[j])
@@ -375,7 +383,8 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
                    rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
                    performer_rest_world=p_world, performer_rest_positions=p_pos, bones=bones,
-                   chains=chains, body_root=body_root, driven=driven, root_translation=t_tra,
+                   chains=chains, body_root=body_root, driven=driven,
+                   above_mapped=above_mapped, root_translation=t_tra,
                    hip_height_ratio=float(ratio), options=options,
                    notes={"performer reference": p_label, "target reference": t_label,
                           "hip height ratio": f"{ratio:.4f}"})
@@ -386,13 +395,18 @@ class IntermediatePose:
     """The Intermediate Skeleton over frames.
 
     Attributes:
-        world: ``(F, J, 4)`` world rotations of the target's joints.
+        world: ``(F, J, 4)`` world rotations of the target's joints where ``known``; the
+            others are unmapped joints below every mapped one, whose local value is their
+            bound rest rotation (forward kinematics of the composed motion gives their world
+            rotation when it is wanted).
         positions: target joint index -> ``(F, 3)`` [m] world positions of the joints whose
             translation is driven (``Binding.driven``: the body root first).
+        known: ``(J,)`` which joints of ``world`` are filled.
     """
 
     world: np.ndarray
     positions: dict
+    known: np.ndarray
 
 
 def convert(binding: Binding, performer: Motion, root: RootOptions | None = None,
@@ -416,7 +430,10 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
     # performer alone (so no mapped joint waits for its parent)
     mj = np.flatnonzero(mapped >= 0)
     pm = mapped[mj]
-    delta = qmul(pq[:, pm], qconj(binding.performer_rest_world[pm]))     # whole-joint change
+    ref_inv = qconj(binding.performer_rest_world[pm])
+    # a joint without virtual bones takes the performer joint's whole change:
+    # world = pq * (ref^-1 * rest_world), one product with a constant
+    world[:, mj] = qmul(pq[:, pm], qmul(ref_inv, binding.rest_world[mj]))
     by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
     if by_twist:
         js = mj[by_twist]
@@ -424,31 +441,35 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
         now = pp[:, [bones[j].performer[0] for j in js]] - pp[:, mapped[js]]
         swing = quat_between(ref, now)
         axis = ref / np.linalg.norm(ref, axis=-1, keepdims=True)
-        twist = twist_about(qmul(qconj(swing), delta[:, by_twist]), axis)
-        delta[:, by_twist] = qmul(swing, twist)
+        full = qmul(pq[:, pm[by_twist]], ref_inv[by_twist])
+        twist = twist_about(qmul(qconj(swing), full), axis)
+        world[:, js] = qmul(qmul(swing, twist), binding.rest_world[js])
     for k, j in enumerate(mj):
         b = bones[j]
         if b.children and b.roll_by_bones:
             now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (F, C, 3)
-            delta[:, k] = _align(np.broadcast_to(b.reference, now.shape), now, True)
-    world[:, mj] = qmul(delta, binding.rest_world[mj])
+            delta = _align(np.broadcast_to(b.reference, now.shape), now, True)
+            world[:, j] = qmul(delta, binding.rest_world[j])
 
-    # unmapped joints follow their parent; chains share their first joint's turn
+    # unmapped joints follow their parent (their local value is their bound rest one, so only
+    # those above a mapped joint need a world rotation); chains share their first joint's turn
     even = binding.options.distribute == "even"
-    done = mapped >= 0
+    known = mapped >= 0
     for j in range(J):
         parent = tsk.parents[j]
-        if done[j]:
+        if known[j]:
             chain = binding.chains.get(j)
             if chain and even and mapped[j] >= 0:
                 b = bones[j]
                 world[:, j] = _distribute(binding, j, chain, world[:, j], world,
                                           pp[:, b.performer[0]] - pp[:, mapped[j]], local_t)
-                done[chain] = True
+                known[chain] = True
+            continue
+        if not binding.above_mapped[j]:
             continue
         world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
                        else qmul(world[:, parent], binding.rest_local[j]))
-        done[j] = True
+        known[j] = True
     if progress is not None:
         progress(1.0)
     positions = {}
@@ -463,7 +484,7 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
             if root.mode == "in-place":
                 scaled[:, [0, 2]] = 0.0
             positions[j] = binding.rest_positions[j] + scaled
-    return IntermediatePose(world=world, positions=positions)
+    return IntermediatePose(world=world, positions=positions, known=known)
 
 
 def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
@@ -515,8 +536,12 @@ def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
     world = pose.world
     F = world.shape[0]
     local = np.empty_like(world)
-    local[:, 0] = world[:, 0]
-    local[:, 1:] = qmul(qconj(world[:, tsk.parents[1:]]), world[:, 1:])
+    local[:] = binding.rest_local                         # unmapped joints below the mapped
+    known = np.flatnonzero(pose.known)
+    top = known[tsk.parents[known] < 0]
+    local[:, top] = world[:, top]
+    inner = known[tsk.parents[known] >= 0]
+    local[:, inner] = qmul(qconj(world[:, tsk.parents[inner]]), world[:, inner])
     translations = np.broadcast_to(binding.root_translation,
                                    (F,) + binding.root_translation.shape).copy()
     slot = {int(j): k for k, j in enumerate(tsk.translated)}

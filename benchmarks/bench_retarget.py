@@ -1,0 +1,115 @@
+"""Direct conversion speed (Motion Converter + Motion Composer): frames per second.
+
+    python benchmarks/bench_retarget.py [--repeat N]
+
+Converts ``cmu_mb_01_01_jumps.bvh`` (2752 frames at 120 fps) onto the Bandai skeleton (22
+joints) and the CC3 skeleton (100 joints), and reports for each, as medians of ``--repeat``
+runs (9) after a warm-up:
+
+* the conversion itself (``convert`` then ``compose``: performer forward kinematics, every
+  target joint's rotation, local values, root translation): frames per second, target
+  >= 100,000 (the paper: real time);
+* the one-off Anatomic Binding (``bind``) that precedes it, for information;
+* the whole ``retarget`` call (bind + convert + compose).
+
+The mapping is the automatic one when ``engine.automap`` exists, else a fixed table.
+BLAS threads are pinned to 1. This is a report, not a test.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from app.runtime import tune_allocator  # noqa: E402
+
+ALLOCATOR = tune_allocator()         # as motion-composer does at start-up (app/runtime.py)
+from _common import (Row, SHARED_DATA, environment, fmt_seconds, print_table,  # noqa: E402
+                     time_runs)
+
+FPS_TARGET = 100_000.0
+
+CMU_TO_BANDAI = {
+    "Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",
+    "Shoulder_L": "LeftShoulder", "UpperArm_L": "LeftArm", "LowerArm_L": "LeftForeArm",
+    "Hand_L": "LeftHand", "Shoulder_R": "RightShoulder", "UpperArm_R": "RightArm",
+    "LowerArm_R": "RightForeArm", "Hand_R": "RightHand", "UpperLeg_L": "LeftUpLeg",
+    "LowerLeg_L": "LeftLeg", "Foot_L": "LeftFoot", "Toes_L": "LeftToeBase",
+    "UpperLeg_R": "RightUpLeg", "LowerLeg_R": "RightLeg", "Foot_R": "RightFoot",
+    "Toes_R": "RightToeBase",
+}
+CMU_TO_CC3 = {
+    "CC_Base_Hip": "Hips", "CC_Base_Waist": "LowerBack", "CC_Base_Spine01": "Spine",
+    "CC_Base_Spine02": "Spine1", "CC_Base_NeckTwist01": "Neck", "CC_Base_NeckTwist02": "Neck1",
+    "CC_Base_Head": "Head",
+    "CC_Base_L_Clavicle": "LeftShoulder", "CC_Base_L_Upperarm": "LeftArm",
+    "CC_Base_L_Forearm": "LeftForeArm", "CC_Base_L_Hand": "LeftHand",
+    "CC_Base_R_Clavicle": "RightShoulder", "CC_Base_R_Upperarm": "RightArm",
+    "CC_Base_R_Forearm": "RightForeArm", "CC_Base_R_Hand": "RightHand",
+    "CC_Base_L_Thigh": "LeftUpLeg", "CC_Base_L_Calf": "LeftLeg", "CC_Base_L_Foot": "LeftFoot",
+    "CC_Base_L_ToeBase": "LeftToeBase", "CC_Base_R_Thigh": "RightUpLeg",
+    "CC_Base_R_Calf": "RightLeg", "CC_Base_R_Foot": "RightFoot",
+    "CC_Base_R_ToeBase": "RightToeBase",
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=9)
+    args = parser.parse_args()
+
+    from engine import read_bvh
+    from engine.correspondence import Correspondence
+    from engine.retarget import bind, compose, convert, retarget
+
+    clip = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
+    targets = {"Bandai": ("bandai1_walk_normal_001.bvh", CMU_TO_BANDAI),
+               "CC3": ("cc3_cmu_02_06_pickup.bvh", CMU_TO_CC3)}
+    if not clip.is_file():
+        sys.exit(f"error: this benchmark needs {clip} (set MC_SHARED_DATA)")
+    performer = read_bvh(clip)
+    F = performer.num_frames
+    try:
+        from engine.automap import automap
+    except ImportError:
+        automap = None
+    print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
+    print(f"{clip.name}: {F} frames, {performer.skeleton.num_joints} joints\n")
+    for label, (name, table) in targets.items():
+        target = read_bvh(SHARED_DATA / name)
+        if automap is not None:
+            corr, how = automap(target.skeleton, performer.skeleton), "automatic mapping"
+        else:
+            corr, how = Correspondence(table), "fixed mapping"
+        binding = bind(performer, target, corr)
+
+        def conversion():
+            return compose(binding, convert(binding, performer), performer.frame_time)
+
+        conv = time_runs(conversion, args.repeat)
+        binds = time_runs(lambda: bind(performer, target, corr), args.repeat)
+        whole = time_runs(lambda: retarget(performer, target, corr), args.repeat)
+        fps = F / conv.median
+        print_table(f"onto {label} ({target.skeleton.num_joints} joints, {len(corr)} mapped, "
+                    f"{how})", [
+                        Row("conversion (convert + compose)", fmt_seconds(conv.median), "",
+                            note=conv.spread()),
+                        Row("frames per second", f"{fps:,.0f}", f">= {FPS_TARGET:,.0f}",
+                            fps >= FPS_TARGET),
+                        Row("anatomic binding (once)", fmt_seconds(binds.median), "",
+                            note=binds.spread()),
+                        Row("whole retarget call", fmt_seconds(whole.median), "",
+                            note=f"{F / whole.median:,.0f} frames per second"),
+                    ])
+        print()
+
+
+if __name__ == "__main__":
+    main()
