@@ -298,7 +298,8 @@ def _apply_dense(composed: Motion, rotvecs, root, moved) -> Motion:
     rotations[moved] = qmul(rotvec_to_quat(rotvecs[moved]), rotations[moved])
     translations = composed.translations.copy()
     translations[:, 0] += root
-    return composed.replace(rotations=rotations, translations=translations)
+    return Motion._trusted(composed.skeleton, rotations, translations, composed.frame_time,
+                           composed.name)
 
 
 def _ramp_goal(c: Constraint, pos: np.ndarray, wrot: np.ndarray, u: float):

@@ -47,7 +47,7 @@ class Motion:
         if not (np.isfinite(self.frame_time) and self.frame_time > 0):
             raise MotionComposerError(f"frame time must be a positive number of seconds, "
                                       f"not {self.frame_time!r}")
-        norms = np.linalg.norm(rot, axis=-1, keepdims=True)
+        norms = np.sqrt(np.einsum("...i,...i->...", rot, rot))[..., None]
         if rot.size and not (np.all(np.isfinite(rot)) and np.all(norms > 1e-9)):
             raise MotionComposerError("rotations must be finite, non-zero quaternions")
         if not np.all(np.isfinite(tra)):
@@ -61,6 +61,21 @@ class Motion:
         object.__setattr__(self, "rotations", rot)
         object.__setattr__(self, "translations", tra)
         object.__setattr__(self, "frame_time", float(self.frame_time))
+
+    @classmethod
+    def _trusted(cls, skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                 frame_time: float, name: str = "") -> "Motion":
+        """A motion from arrays the engine has just computed (unit quaternions, finite, the
+        right shapes, owned by nobody else): no copies and no checks, for the hot paths.
+        The arrays are made read-only."""
+        motion = object.__new__(cls)
+        rotations.setflags(write=False)
+        translations.setflags(write=False)
+        for key, value in (("skeleton", skeleton), ("rotations", rotations),
+                           ("translations", translations), ("frame_time", float(frame_time)),
+                           ("name", name)):
+            object.__setattr__(motion, key, value)
+        return motion
 
     @property
     def num_frames(self) -> int:

@@ -133,13 +133,13 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     any length). Opposite directions turn 180 degrees about an axis normal to ``a``."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
-    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
     a, b = np.broadcast_arrays(a, b)
+    # q = (a x b, |a||b| + a.b), normalised: the half-way rotation without normalising a, b
     q = np.empty(a.shape[:-1] + (4,))
     q[..., :3] = np.cross(a, b)
-    q[..., 3] = 1.0 + np.sum(a * b, axis=-1)
-    opposite = q[..., 3] < 1e-9
+    lengths = np.sqrt(np.einsum("...i,...i->...", a, a) * np.einsum("...i,...i->...", b, b))
+    q[..., 3] = lengths + np.einsum("...i,...i->...", a, b)
+    opposite = q[..., 3] < 1e-9 * np.maximum(lengths, 1e-300)
     if np.any(opposite):
         aa = a[opposite]
         # any axis normal to a: cross with the coordinate axis least aligned with it
@@ -147,7 +147,7 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         axis = np.cross(aa, pick)
         q[opposite, :3] = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
         q[opposite, 3] = 0.0
-    return qnormalize(q)
+    return q / np.sqrt(np.einsum("...i,...i->...", q, q))[..., None]
 
 
 def twist_about(q: np.ndarray, axis: np.ndarray) -> np.ndarray:

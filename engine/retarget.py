@@ -409,17 +409,41 @@ class IntermediatePose:
     known: np.ndarray
 
 
+#: frames converted at a time, which bounds the temporaries' memory on long clips (every frame
+#: is independent, so the pieces give exactly the same result; smaller pieces measured slower)
+_CHUNK = 8192
+
+
 def convert(binding: Binding, performer: Motion, root: RootOptions | None = None,
             progress=None) -> IntermediatePose:
     """Motion Converter: orient the intermediate bones along the virtual bones, every frame."""
     root = root or RootOptions()
-    tsk = binding.target
     if performer.skeleton.names != binding.performer.names:
         raise MappingError("this binding was made for another performer skeleton")
-    pose = fk_arrays(performer.skeleton, performer.rotations, performer.translations,
-                     end_sites=False)
+    F, J = performer.num_frames, binding.target.num_joints
+    world = np.empty((F, J, 4))
+    positions = {j: np.empty((F, 3)) for j in binding.driven}
+    known = None
+    for lo in range(0, F, _CHUNK):
+        hi = min(F, lo + _CHUNK)
+        w, pos, known = _convert_frames(binding, performer.skeleton,
+                                        performer.rotations[lo:hi],
+                                        performer.translations[lo:hi], root)
+        world[lo:hi] = w
+        for j, p in pos.items():
+            positions[j][lo:hi] = p
+        if progress is not None:
+            progress(hi / F)
+    return IntermediatePose(world=world, positions=positions, known=known)
+
+
+def _convert_frames(binding: Binding, psk: Skeleton, rotations: np.ndarray,
+                    translations: np.ndarray, root: RootOptions):
+    """:func:`convert` on a run of frames: world rotations, driven positions, known mask."""
+    tsk = binding.target
+    pose = fk_arrays(psk, rotations, translations, end_sites=False)
     pq, pp = pose.rotations, pose.positions
-    F, J = performer.num_frames, tsk.num_joints
+    F, J = rotations.shape[0], tsk.num_joints
     world = np.empty((F, J, 4))
     local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
     local_t[tsk.translated] = binding.root_translation
@@ -433,7 +457,10 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
     ref_inv = qconj(binding.performer_rest_world[pm])
     # a joint without virtual bones takes the performer joint's whole change:
     # world = pq * (ref^-1 * rest_world), one product with a constant
-    world[:, mj] = qmul(pq[:, pm], qmul(ref_inv, binding.rest_world[mj]))
+    whole = [k for k, j in enumerate(mj) if not bones[j].children]
+    if whole:
+        world[:, mj[whole]] = qmul(pq[:, pm[whole]],
+                                   qmul(ref_inv[whole], binding.rest_world[mj[whole]]))
     by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
     if by_twist:
         js = mj[by_twist]
@@ -470,8 +497,6 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
         world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
                        else qmul(world[:, parent], binding.rest_local[j]))
         known[j] = True
-    if progress is not None:
-        progress(1.0)
     positions = {}
     for j in binding.driven:
         ph = mapped[j]
@@ -484,7 +509,7 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
             if root.mode == "in-place":
                 scaled[:, [0, 2]] = 0.0
             positions[j] = binding.rest_positions[j] + scaled
-    return IntermediatePose(world=world, positions=positions, known=known)
+    return world, positions, known
 
 
 def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
@@ -560,8 +585,7 @@ def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
         if parent >= 0:
             shift = qrot(qconj(rot[parent]), shift)
         translations[:, slot[carrier]] += shift
-    return Motion(skeleton=tsk, rotations=local, translations=translations,
-                  frame_time=frame_time, name=name)
+    return Motion._trusted(tsk, local, translations, frame_time, name)
 
 
 def retarget(performer: Motion, target: Motion, correspondence: Correspondence, *,
