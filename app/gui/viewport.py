@@ -1,0 +1,407 @@
+"""The 3D viewport: performer, intermediate and target skeletons, floor, goals, picking.
+
+pyqtgraph's GL view is Z-up; the engine is Y-up. Everything shown goes through
+:func:`to_view` ((x, y, z) -> (x, -z, y)), a rotation, so nothing is mirrored.
+
+Mouse, as in Blender and Maya: left click selects a joint; left drag (or Alt + left, or middle
+drag) orbits; Shift + drag or middle + Shift pans; the wheel or right drag zooms; F frames all.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from app.gui.qt import QtCore, QtGui, QtWidgets
+
+import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
+
+__all__ = ["Viewport", "to_view", "bone_mesh"]
+
+COLORS = {
+    "performer": (0.45, 0.62, 0.85, 1.0),
+    "intermediate": (0.65, 0.65, 0.65, 0.6),
+    "target": (0.95, 0.60, 0.25, 1.0),
+}
+SELECTED = (1.0, 1.0, 0.2, 1.0)
+VIRTUAL = (0.2, 1.0, 0.5, 1.0)
+
+
+def to_view(points: np.ndarray) -> np.ndarray:
+    """Engine (Y up) to view (Z up) coordinates."""
+    p = np.asarray(points, dtype=float)
+    return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
+
+
+# an octahedral bone from (0,0,0) to (0,0,1) with its waist at 0.15 and radius 0.08
+_OCTA_V = np.array([[0, 0, 0], [0.08, 0, 0.15], [0, 0.08, 0.15], [-0.08, 0, 0.15],
+                    [0, -0.08, 0.15], [0, 0, 1.0]])
+_OCTA_F = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1],
+                    [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
+
+
+def bone_mesh(heads: np.ndarray, tails: np.ndarray, width: float):
+    """Vertices and faces of octahedral bones from ``heads`` to ``tails`` ``(B, 3)``.
+
+    ``width`` caps the bones' thickness for long bones; short bones stay proportionate.
+    """
+    d = tails - heads
+    length = np.linalg.norm(d, axis=1)
+    keep = length > 1e-9
+    heads, d, length = heads[keep], d[keep], length[keep]
+    z = d / length[:, None]
+    helper = np.where(np.abs(z[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    thick = np.minimum(length, width / 0.16)[:, None]
+    v = (heads[:, None, :] + _OCTA_V[None, :, 0:1] * thick[:, None] * x[:, None, :]
+         + _OCTA_V[None, :, 1:2] * thick[:, None] * y[:, None, :]
+         + _OCTA_V[None, :, 2:3] * length[:, None, None] * z[:, None, :])
+    faces = (_OCTA_F[None, :, :] + 6 * np.arange(len(heads))[:, None, None]).reshape(-1, 3)
+    return v.reshape(-1, 3), faces
+
+
+class _Figure:
+    """One skeleton's items: bones as a shaded mesh, joints as spheres."""
+
+    def __init__(self, view: gl.GLViewWidget, color):
+        self.color = color
+        self.mesh = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
+                                  color=color, shader="shaded", smooth=False,
+                                  glOptions="opaque")
+        self.joints = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), color=color, size=0.02,
+                                           pxMode=False)
+        self.joints.setGLOptions("opaque")
+        view.addItem(self.mesh)
+        view.addItem(self.joints)
+
+    def set_visible(self, on: bool) -> None:
+        self.mesh.setVisible(on)
+        self.joints.setVisible(on)
+
+    def update(self, positions: np.ndarray, parents: np.ndarray, offset: np.ndarray,
+               width: float, selected: int = -1) -> None:
+        pts = to_view(positions) + offset
+        child = np.flatnonzero(parents >= 0)
+        verts, faces = bone_mesh(pts[parents[child]], pts[child], width)
+        if len(faces):
+            self.mesh.setMeshData(vertexes=verts, faces=faces, color=self.color,
+                                  shader="shaded", smooth=False)
+        colors = np.tile(self.color, (len(pts), 1))
+        sizes = np.full(len(pts), width * 1.2)
+        if 0 <= selected < len(pts):
+            colors[selected] = SELECTED
+            sizes[selected] = width * 2.5
+        self.joints.setData(pos=pts, color=colors, size=sizes)
+        self.points = pts
+
+    def remove(self, view) -> None:
+        view.removeItem(self.mesh)
+        view.removeItem(self.joints)
+
+
+class Viewport(gl.GLViewWidget):
+    """The document's skeletons at its current frame."""
+
+    #: a joint was clicked: side ("performer", "target") and name
+    jointPicked = QtCore.Signal(str, str)
+
+    def __init__(self, document, parent=None):
+        super().__init__(parent)
+        self.doc = document
+        self.setBackgroundColor((38, 40, 44))
+        self.setMinimumSize(320, 240)
+        self.grid = gl.GLGridItem()
+        self.grid.setSpacing(0.5, 0.5)
+        self.grid.setSize(20, 20)
+        self.grid.setColor((120, 120, 120, 90))
+        self.addItem(self.grid)
+        self.figures: dict[str, _Figure] = {}
+        self.virtual = gl.GLLinePlotItem(pos=np.zeros((2, 3)), color=VIRTUAL, width=3,
+                                         mode="lines")
+        self.virtual.setVisible(False)
+        self.addItem(self.virtual)
+        self.goals = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), color=(1, 0.3, 0.3, 1),
+                                          size=0.05, pxMode=False)
+        self.goals.setVisible(False)
+        self.addItem(self.goals)
+        self.paths = gl.GLLinePlotItem(pos=np.zeros((2, 3)), color=(1, 0.3, 0.3, 0.8),
+                                       width=2, mode="lines")
+        self.paths.setVisible(False)
+        self.addItem(self.paths)
+        self.planes = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
+                                    color=(0.3, 0.6, 1.0, 0.25), glOptions="translucent",
+                                    smooth=False)
+        self.planes.setVisible(False)
+        self.addItem(self.planes)
+        self._press = None
+        self._framed = False
+        self.setCameraPosition(distance=5.0, elevation=15, azimuth=-90)
+        document.frameChanged.connect(lambda _f: self.refresh())
+        document.motionChanged.connect(self._motion_changed)
+        document.selectionChanged.connect(lambda *_: self.refresh())
+        document.constraintsChanged.connect(self.refresh)
+        self._motion_changed()
+
+    # ------------------------------------------------------------------ content
+    def _motion_changed(self) -> None:
+        if not self._framed and self.doc.performer is not None:
+            self.frame_all()
+        self.refresh()
+
+    def _layout(self) -> dict[str, np.ndarray]:
+        """View-space offsets of the shown skeletons (side by side along X, or overlaid)."""
+        v = self.doc.viewer
+        shown = [k for k, on in (("performer", v.show_performer),
+                                 ("intermediate", v.show_intermediate),
+                                 ("target", v.show_target)) if on]
+        gap = 1.2 * self._size()
+        out = {}
+        # every skeleton starts where the performer starts (its root over the performer's at
+        # frame 0), then travels as it travels; side by side, each is moved along the view's x
+        anchor = self._root_start("performer")
+        for i, k in enumerate(shown):
+            x = (i - (len(shown) - 1) / 2) * gap if v.side_by_side else 0.0
+            start = self._root_start(k)
+            shift = np.zeros(3) if anchor is None or start is None else anchor - start
+            shift[2] = 0.0
+            out[k] = np.array([x, 0.0, 0.0]) + shift
+        return out
+
+    def _root_start(self, which: str):
+        pose = {"performer": self.doc.pose("performer"),
+                "intermediate": self.doc.pose("composed"),
+                "target": self.doc.pose("target") or self.doc.pose("character")}.get(which)
+        return None if pose is None else to_view(pose.positions[0, 0])
+
+    def _size(self) -> float:
+        from engine.describe import stature
+        m = self.doc.target if self.doc.target is not None else self.doc.performer
+        if m is None:
+            return 1.7
+        if not hasattr(self, "_size_cache") or self._size_cache[0] is not m:
+            self._size_cache = (m, max(stature(m), 0.2))
+        return self._size_cache[1]
+
+    def skeleton_points(self, which: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """World positions (engine axes) of a skeleton at the current frame, and parents."""
+        doc = self.doc
+        f = doc.viewer.current_frame
+        if which == "performer":
+            pose = doc.pose("performer")
+            sk = doc.performer.skeleton if doc.performer is not None else None
+        elif which == "target":
+            pose = doc.pose("target") or doc.pose("character")
+            sk = doc.target.skeleton if doc.target is not None else None
+            if doc.motion is None and pose is not None:
+                f = 0
+        else:                                                     # intermediate
+            pose = doc.pose("composed")
+            sk = doc.target.skeleton if doc.target is not None else None
+        if pose is None or sk is None:
+            return None
+        f = min(f, pose.positions.shape[0] - 1)
+        return pose.positions[f], sk.parents
+
+    def refresh(self) -> None:
+        doc = self.doc
+        layout = self._layout()
+        width = 0.04 * self._size()
+        side, joint = doc.selection
+        for which in ("performer", "intermediate", "target"):
+            data = self.skeleton_points(which) if which in layout else None
+            if data is None:
+                if which in self.figures:
+                    self.figures[which].set_visible(False)
+                continue
+            if which not in self.figures:
+                self.figures[which] = _Figure(self, COLORS[which])
+            fig = self.figures[which]
+            fig.set_visible(True)
+            sk = (doc.performer if which == "performer" else doc.target).skeleton
+            sel = sk.index.get(joint, -1) if side == (
+                "performer" if which == "performer" else "target") else -1
+            fig.update(data[0], data[1], layout[which], width, sel)
+            fig.offset = layout[which]
+        self._refresh_virtual(layout)
+        self._refresh_goals(layout)
+
+    def _refresh_virtual(self, layout) -> None:
+        """Highlight the virtual bones of the selected mapping on the performer."""
+        doc = self.doc
+        side, joint = doc.selection
+        pairs = doc.correspondence.pairs
+        performer_joint = (pairs.get(joint) if side == "target" else
+                           joint if side == "performer" else None)
+        if not performer_joint or "performer" not in layout or doc.performer is None:
+            self.virtual.setVisible(False)
+            return
+        psk = doc.performer.skeleton
+        tsk = doc.target.skeleton if doc.target is not None else None
+        data = self.skeleton_points("performer")
+        if data is None or performer_joint not in psk.index or tsk is None:
+            self.virtual.setVisible(False)
+            return
+        pts = to_view(data[0]) + layout["performer"]
+        inverse = {p: t for t, p in pairs.items()}
+        t_joint = inverse.get(performer_joint)
+        segments = []
+        if t_joint is not None:
+            tj = tsk.index[t_joint]
+            for k in range(tsk.num_joints):
+                anc = [a for a in tsk.ancestors(k) if tsk.names[a] in pairs]
+                if tsk.names[k] in pairs and anc and anc[0] == tj:
+                    segments += [pts[psk.index[performer_joint]],
+                                 pts[psk.index[pairs[tsk.names[k]]]]]
+        if not segments:
+            self.virtual.setVisible(False)
+            return
+        self.virtual.setData(pos=np.array(segments), color=VIRTUAL, width=3, mode="lines")
+        self.virtual.setVisible(True)
+
+    def _refresh_goals(self, layout) -> None:
+        doc = self.doc
+        if "target" not in layout or not doc.constraints:
+            for item in (self.goals, self.paths, self.planes):
+                item.setVisible(False)
+            return
+        off = layout["target"]
+        f = doc.viewer.current_frame
+        points, lines, quads = [], [], []
+        size = self._size()
+        for c in doc.constraints:
+            if not c.enabled:
+                continue
+            if c.kind == "position":
+                points.append(to_view(c.goal["point"]) + off)
+            elif c.kind == "trajectory":
+                frames = np.arange(c.start, c.end + 1)
+                path = to_view(c.goal_point(frames)) + off
+                lines += [path[:-1], path[1:]]
+                if c.start <= f <= c.end:
+                    points.append(path[f - c.start])
+            elif c.kind == "plane" and c.smooth_in <= f <= c.smooth_out:
+                quads.append(self._plane_quad(c, off, size))
+        if points:
+            self.goals.setData(pos=np.array(points), color=(1, 0.3, 0.3, 1), size=0.03 * size)
+        self.goals.setVisible(bool(points))
+        if lines:
+            seg = np.stack([np.concatenate(lines[0::2]), np.concatenate(lines[1::2])], axis=1)
+            self.paths.setData(pos=seg.reshape(-1, 3), mode="lines")
+        self.paths.setVisible(bool(lines))
+        if quads:
+            v = np.concatenate(quads)
+            faces = np.concatenate([[[4 * i, 4 * i + 1, 4 * i + 2], [4 * i, 4 * i + 2, 4 * i + 3]]
+                                    for i in range(len(quads))])
+            self.planes.setMeshData(vertexes=v, faces=faces, color=(0.3, 0.6, 1.0, 0.25))
+        self.planes.setVisible(bool(quads))
+
+    @staticmethod
+    def _plane_quad(c, off, size):
+        n = c.goal["normal"]
+        helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 0, 1.0])
+        u = np.cross(n, helper)
+        u /= np.linalg.norm(u)
+        w = np.cross(n, u)
+        p = c.goal["point"]
+        r = 0.25 * size
+        corners = [p + r * (a * u + b * w) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        return to_view(np.array(corners)) + off
+
+    # ------------------------------------------------------------------ camera
+    def frame_all(self) -> None:
+        """Fit every shown skeleton, as it stands at the current frame, in the view."""
+        layout = self._layout()
+        boxes = []
+        for which, off in layout.items():
+            data = self.skeleton_points(which)
+            if data is not None:
+                pts = to_view(data[0]) + off
+                boxes.append(np.array([pts.min(axis=0), pts.max(axis=0)]))
+        if not boxes:
+            return
+        lo = np.min([b[0] for b in boxes], axis=0)
+        hi = np.max([b[1] for b in boxes], axis=0)
+        center = (lo + hi) / 2
+        radius = max(float(np.linalg.norm(hi - lo)) / 2, 0.5)
+        self.setCameraPosition(pos=QtGui.QVector3D(*center), distance=radius * 2.6)
+        self._framed = True
+        self.update()
+
+    def camera_state(self) -> dict:
+        c = self.opts["center"]
+        return {"center": [c.x(), c.y(), c.z()], "distance": float(self.opts["distance"]),
+                "elevation": float(self.opts["elevation"]),
+                "azimuth": float(self.opts["azimuth"])}
+
+    def set_camera_state(self, state: dict) -> None:
+        if not state:
+            return
+        self.setCameraPosition(pos=QtGui.QVector3D(*state.get("center", (0, 0, 0))),
+                               distance=state.get("distance", 5.0),
+                               elevation=state.get("elevation", 15.0),
+                               azimuth=state.get("azimuth", -90.0))
+        self._framed = True
+
+    # ------------------------------------------------------------------ picking
+    def project(self, points_view: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (x right, y down) of view-space points ``(N, 3)``."""
+        m = np.array(self.projectionMatrix().data()).reshape(4, 4).T @ \
+            np.array(self.viewMatrix().data()).reshape(4, 4).T
+        h = np.concatenate([points_view, np.ones((len(points_view), 1))], axis=1) @ m.T
+        ndc = h[:, :2] / h[:, 3:4]
+        w, hgt = self.width(), self.height()
+        return np.stack([(ndc[:, 0] + 1) * w / 2, (1 - ndc[:, 1]) * hgt / 2], axis=1)
+
+    def joint_at(self, x: float, y: float, radius: float = 12.0):
+        """The (side, joint name) nearest to pixel (x, y) within ``radius``, or None."""
+        best = None
+        for which in ("target", "performer"):
+            fig = self.figures.get(which)
+            if fig is None or not fig.mesh.visible() or not hasattr(fig, "points"):
+                continue
+            px = self.project(fig.points)
+            d = np.hypot(px[:, 0] - x, px[:, 1] - y)
+            k = int(np.argmin(d))
+            if d[k] <= radius and (best is None or d[k] < best[0]):
+                sk = (self.doc.performer if which == "performer" else self.doc.target).skeleton
+                best = (d[k], which, sk.names[k])
+        return None if best is None else (best[1], best[2])
+
+    # ------------------------------------------------------------------ mouse and keys
+    def mousePressEvent(self, ev):
+        self._press = ev.position()
+        self.mousePos = ev.position()
+
+    def mouseMoveEvent(self, ev):
+        pos = ev.position()
+        diff = pos - self.mousePos
+        self.mousePos = pos
+        buttons = ev.buttons()
+        mods = ev.modifiers()
+        shift = bool(mods & QtCore.Qt.KeyboardModifier.ShiftModifier)
+        if buttons & QtCore.Qt.MouseButton.RightButton:
+            self.opts["distance"] *= 0.995 ** diff.y()
+        elif shift and buttons & (QtCore.Qt.MouseButton.LeftButton |
+                                  QtCore.Qt.MouseButton.MiddleButton):
+            self.pan(diff.x(), diff.y(), 0, relative="view")
+        elif buttons & (QtCore.Qt.MouseButton.LeftButton | QtCore.Qt.MouseButton.MiddleButton):
+            self.orbit(-diff.x(), diff.y())
+        self.update()
+
+    def mouseReleaseEvent(self, ev):
+        if self._press is not None and ev.button() == QtCore.Qt.MouseButton.LeftButton:
+            moved = ev.position() - self._press
+            if abs(moved.x()) + abs(moved.y()) < 4:
+                hit = self.joint_at(ev.position().x(), ev.position().y())
+                if hit is not None:
+                    self.doc.select(*hit)
+                    self.jointPicked.emit(*hit)
+                else:
+                    self.doc.select("", "")
+        self._press = None
+
+    def keyPressEvent(self, ev):
+        if ev.key() == QtCore.Qt.Key.Key_F:
+            self.frame_all()
+            return
+        super().keyPressEvent(ev)
