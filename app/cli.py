@@ -191,10 +191,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _gui(argv: list[str]) -> int:
+    """``motion-composer [PROJECT] [--demo] [--frame N] [--screenshot PNG]``: the window."""
+    parser = argparse.ArgumentParser(prog="motion-composer",
+                                     description="Open the composer window (or run a command: "
+                                                 "motion-composer info|retarget|export ...).")
+    parser.add_argument("project", nargs="?", help="a .mcp project to open")
+    parser.add_argument("--demo", action="store_true", help="open the bundled demo project")
+    parser.add_argument("--frame", type=int, help="go to this frame")
+    parser.add_argument("--screenshot", metavar="PNG",
+                        help="save a picture of the window once drawn, then quit")
+    args = parser.parse_args(argv)
+    from app.gui.main import run
+    return run(args.project, demo=args.demo, screenshot=args.screenshot, frame=args.frame)
+
+
 def main(argv: list[str] | None = None) -> int:
+    import sys as _sys
     from app.runtime import tune_allocator
     tune_allocator()
+    argv = list(_sys.argv[1:] if argv is None else argv)
     parser = build_parser()
+    commands = set(parser._subparsers._group_actions[0].choices)   # noqa: SLF001
+    if not argv or (argv[0] not in commands and argv[0] not in ("-h", "--help")):
+        try:
+            return _gui(argv)
+        except MotionComposerError as exc:
+            print(f"motion-composer: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            return EXIT_USER_ERROR
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -1,0 +1,385 @@
+"""The composer window: viewport, correspondence editor, binding panel, playback, menus."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.gui.qt import QtCore, QtGui, QtWidgets
+from app.gui.commands import push_constraints, push_sources
+from app.gui.document import Document
+from app.gui.viewport import Viewport
+from app.gui.worker import Job
+from engine.errors import MotionComposerError
+
+__all__ = ["MainWindow"]
+
+MAX_RECENT = 8
+AUTOSAVE_MS = 60_000
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    """One document, its panels and its menus."""
+
+    def __init__(self, document: Document | None = None, parent=None):
+        super().__init__(parent)
+        self.doc = document or Document(self)
+        self.settings = QtCore.QSettings()
+        self.job: Job | None = None
+        self.setWindowTitle(self.doc.title)
+        self.resize(1400, 900)
+
+        self.viewport = Viewport(self.doc)
+        self.setCentralWidget(self.viewport)
+        self._build_docks()
+        self._build_menus()
+        self._build_status()
+
+        self.doc.changed.connect(self._update_title)
+        self.doc.errorRaised.connect(self.show_error)
+        self.doc.motionChanged.connect(self._motion_changed)
+        self.autosave_timer = QtCore.QTimer(self)
+        self.autosave_timer.setInterval(AUTOSAVE_MS)
+        self.autosave_timer.timeout.connect(self.autosave)
+        self.autosave_timer.start()
+        self._update_title()
+
+    # ------------------------------------------------------------------ building
+    def _build_docks(self) -> None:
+        from app.gui.binding_panel import BindingPanel
+        from app.gui.correspondence_panel import CorrespondencePanel
+        from app.gui.playback import PlaybackBar
+
+        self.correspondence_panel = CorrespondencePanel(self.doc)
+        self.binding_panel = BindingPanel(self.doc)
+        self.playback = PlaybackBar(self.doc)
+        for title, widget, area, name in (
+                ("Correspondence", self.correspondence_panel,
+                 QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
+                ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea,
+                 "binding"),
+                ("Playback", self.playback, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
+                 "playback")):
+            dock = QtWidgets.QDockWidget(title, self)
+            dock.setObjectName(name)
+            dock.setWidget(widget)
+            self.addDockWidget(area, dock)
+            setattr(self, f"{name}_dock", dock)
+        self.playback.install_shortcuts(self)
+
+    def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
+        action = QtGui.QAction(text, self)
+        if shortcut:
+            action.setShortcut(QtGui.QKeySequence(shortcut))
+        if checkable:
+            action.setCheckable(True)
+            action.setChecked(checked)
+            action.toggled.connect(slot)
+        else:
+            action.triggered.connect(lambda _checked=False: slot())
+        menu.addAction(action)
+        return action
+
+    def _build_menus(self) -> None:
+        bar = self.menuBar()
+        file = bar.addMenu("&File")
+        self._action(file, "&New", self.new_project, QtGui.QKeySequence.StandardKey.New)
+        self._action(file, "&Open...", self.open_dialog, QtGui.QKeySequence.StandardKey.Open)
+        self.recent_menu = file.addMenu("Open &Recent")
+        self._action(file, "&Save", self.save, QtGui.QKeySequence.StandardKey.Save)
+        self._action(file, "Save &As...", self.save_as, QtGui.QKeySequence.StandardKey.SaveAs)
+        file.addSeparator()
+        self._action(file, "Import &Performer...", lambda: self.import_dialog("performer"))
+        self._action(file, "Import &Target...", lambda: self.import_dialog("target"))
+        self._action(file, "&Export BVH...", self.export_dialog, "Ctrl+E")
+        file.addSeparator()
+        self._action(file, "&Quit", self.close, QtGui.QKeySequence.StandardKey.Quit)
+        self._refresh_recent()
+
+        edit = bar.addMenu("&Edit")
+        self.undo_action = self.doc.undo_stack.createUndoAction(self, "&Undo")
+        self.undo_action.setShortcut(QtGui.QKeySequence.StandardKey.Undo)
+        self.redo_action = self.doc.undo_stack.createRedoAction(self, "&Redo")
+        self.redo_action.setShortcut(QtGui.QKeySequence.StandardKey.Redo)
+        edit.addAction(self.undo_action)
+        edit.addAction(self.redo_action)
+
+        view = bar.addMenu("&View")
+        v = self.doc.viewer
+        self._action(view, "Show &Performer", lambda on: self._show("show_performer", on),
+                     checkable=True, checked=v.show_performer)
+        self._action(view, "Show &Intermediate", lambda on: self._show("show_intermediate", on),
+                     checkable=True, checked=v.show_intermediate)
+        self._action(view, "Show &Target", lambda on: self._show("show_target", on),
+                     checkable=True, checked=v.show_target)
+        self._action(view, "Side by &Side", lambda on: self._show("side_by_side", on),
+                     checkable=True, checked=v.side_by_side)
+        view.addSeparator()
+        self._action(view, "&Frame All", self.viewport.frame_all, "F")
+
+        tools = bar.addMenu("&Tools")
+        self._action(tools, "Add &Foot Contacts and Solve", self.solve_contacts)
+        self._action(tools, "&Solve Constraints", self.solve)
+
+    def _build_status(self) -> None:
+        self.progress = QtWidgets.QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.progress.setMaximumWidth(220)
+        self.progress.setVisible(False)
+        self.cancel_button = QtWidgets.QPushButton("Cancel")
+        self.cancel_button.setVisible(False)
+        self.cancel_button.clicked.connect(self.cancel_job)
+        self.statusBar().addPermanentWidget(self.progress)
+        self.statusBar().addPermanentWidget(self.cancel_button)
+
+    # ------------------------------------------------------------------ state display
+    def _update_title(self) -> None:
+        self.setWindowTitle(self.doc.title)
+        self.setWindowModified(self.doc.modified)
+
+    def _motion_changed(self) -> None:
+        if self.doc.evaluation_error:
+            self.statusBar().showMessage(self.doc.evaluation_error, 10000)
+
+    def _show(self, key: str, on: bool) -> None:
+        setattr(self.doc.viewer, key, on)
+        self.viewport.refresh()
+
+    # ------------------------------------------------------------------ dialogs (tests replace)
+    def show_error(self, message: str) -> None:
+        QtWidgets.QMessageBox.critical(self, "Motion Composer", message)
+
+    def ask_open_path(self, caption: str, filters: str) -> str:
+        return QtWidgets.QFileDialog.getOpenFileName(self, caption, "", filters)[0]
+
+    def ask_save_path(self, caption: str, filters: str) -> str:
+        return QtWidgets.QFileDialog.getSaveFileName(self, caption, "", filters)[0]
+
+    def ask_unsaved(self) -> str:
+        """'save', 'discard' or 'cancel' for a modified document about to be closed."""
+        box = QtWidgets.QMessageBox(self)
+        box.setWindowTitle("Motion Composer")
+        box.setText(f"Save the changes to {self.doc.path.name if self.doc.path else 'Untitled'}?")
+        box.setStandardButtons(QtWidgets.QMessageBox.StandardButton.Save |
+                               QtWidgets.QMessageBox.StandardButton.Discard |
+                               QtWidgets.QMessageBox.StandardButton.Cancel)
+        answer = box.exec()
+        return {QtWidgets.QMessageBox.StandardButton.Save: "save",
+                QtWidgets.QMessageBox.StandardButton.Discard: "discard"}.get(
+            QtWidgets.QMessageBox.StandardButton(answer), "cancel")
+
+    def ask_yes_no(self, question: str) -> bool:
+        return QtWidgets.QMessageBox.question(self, "Motion Composer", question) == \
+            QtWidgets.QMessageBox.StandardButton.Yes
+
+    # ------------------------------------------------------------------ files
+    def _guard(self, fn, *args) -> bool:
+        """Run ``fn``; a user error shows in a dialog and the window keeps running."""
+        try:
+            fn(*args)
+        except MotionComposerError as exc:
+            self.show_error(str(exc))
+            return False
+        return True
+
+    def maybe_save(self) -> bool:
+        if not self.doc.modified:
+            return True
+        answer = self.ask_unsaved()
+        if answer == "save":
+            return self.save()
+        return answer == "discard"
+
+    def new_project(self) -> None:
+        if not self.maybe_save():
+            return
+        from app.gui import project_io
+        project_io.reset(self.doc)
+
+    def open_dialog(self) -> None:
+        if not self.maybe_save():
+            return
+        path = self.ask_open_path("Open project", "Motion Composer projects (*.mcp);;All (*)")
+        if path:
+            self.open_project(path)
+
+    def open_project(self, path) -> bool:
+        from app.gui import project_io
+        ok = self._guard(project_io.load_into, self.doc, Path(path), self)
+        if ok:
+            self._add_recent(path)
+            self.viewport.set_camera_state(self.doc.viewer.camera)
+            if not self.doc.viewer.camera:
+                self.viewport.frame_all()
+        return ok
+
+    def save(self) -> bool:
+        if self.doc.path is None:
+            return self.save_as()
+        return self._save_to(self.doc.path)
+
+    def save_as(self) -> bool:
+        path = self.ask_save_path("Save project", "Motion Composer projects (*.mcp)")
+        if not path:
+            return False
+        if not path.endswith(".mcp"):
+            path += ".mcp"
+        return self._save_to(Path(path))
+
+    def _save_to(self, path: Path) -> bool:
+        from app.gui import project_io
+        self.doc.viewer.camera = self.viewport.camera_state()
+        ok = self._guard(project_io.save_from, self.doc, Path(path))
+        if ok:
+            self._add_recent(str(path))
+            self.statusBar().showMessage(f"Saved {path}", 5000)
+        return ok
+
+    def autosave(self) -> None:
+        if not self.doc.modified or not self.doc.ready:
+            return
+        from app.gui import project_io
+        try:
+            project_io.autosave(self.doc)
+        except MotionComposerError as exc:
+            self.statusBar().showMessage(f"Autosave failed: {exc}", 10000)
+
+    def import_dialog(self, side: str) -> None:
+        path = self.ask_open_path(f"Import {side}", "Motion files (*.bvh);;All (*)")
+        if path:
+            self.import_file(side, path)
+
+    def import_file(self, side: str, path) -> bool:
+        from engine.bvh import read_bvh
+
+        def load():
+            motion = read_bvh(path)
+            if side == "performer":
+                push_sources(self.doc, performer=motion, performer_path=Path(path),
+                             text=f"Import performer {Path(path).name}")
+            else:
+                push_sources(self.doc, target=motion, target_path=Path(path),
+                             text=f"Import target {Path(path).name}")
+            if self.doc.performer is not None and self.doc.target is not None and \
+                    not len(self.doc.correspondence):
+                from app.gui.commands import push_correspondence
+                from engine.automap import automap
+                push_correspondence(self.doc, automap(self.doc.target.skeleton,
+                                                      self.doc.performer.skeleton),
+                                    "Auto-map")
+            self.viewport.frame_all()
+        return self._guard(load)
+
+    def export_dialog(self) -> None:
+        if not self.doc.ready:
+            self.show_error("Nothing to export yet: import a performer and a target and map "
+                            "them first.")
+            return
+        path = self.ask_save_path("Export BVH", "BVH (*.bvh)")
+        if path:
+            self.export_bvh(path if path.endswith(".bvh") else path + ".bvh")
+
+    def export_bvh(self, path) -> bool:
+        from engine.bvh import write_bvh
+        ok = self._guard(write_bvh, self.doc.motion, path)
+        if ok:
+            self.statusBar().showMessage(f"Exported {path}", 5000)
+        return ok
+
+    # ------------------------------------------------------------------ recent files
+    def _recent(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        if isinstance(value, str):
+            value = [value]
+        return [v for v in (value or []) if v]
+
+    def _add_recent(self, path: str) -> None:
+        path = str(Path(path).resolve())
+        items = [path] + [p for p in self._recent() if p != path]
+        self.settings.setValue("recent", items[:MAX_RECENT])
+        self._refresh_recent()
+
+    def _refresh_recent(self) -> None:
+        self.recent_menu.clear()
+        for path in self._recent():
+            action = self.recent_menu.addAction(path)
+            action.triggered.connect(lambda _c=False, p=path: self.maybe_save() and
+                                     self.open_project(p))
+        self.recent_menu.setEnabled(bool(self._recent()))
+
+    # ------------------------------------------------------------------ long work
+    def run_job(self, fn, on_success, label: str) -> None:
+        if self.job is not None:
+            self.show_error("Another computation is running; wait for it or cancel it.")
+            return
+        self.job = Job(fn, self)
+        self.progress.setValue(0)
+        self.progress.setFormat(f"{label} %p%")
+        self.progress.setVisible(True)
+        self.cancel_button.setVisible(True)
+        self.job.progressed.connect(lambda f: self.progress.setValue(int(f * 1000)))
+        self.job.succeeded.connect(on_success)
+        self.job.failed.connect(self.show_error)
+        self.job.done.connect(self._job_done)
+        self.job.start()
+
+    def _job_done(self) -> None:
+        self.progress.setVisible(False)
+        self.cancel_button.setVisible(False)
+        if self.job is not None and self.job.cancelled:
+            self.statusBar().showMessage("Cancelled", 5000)
+        self.job = None
+
+    def cancel_job(self) -> None:
+        if self.job is not None:
+            self.job.cancel()
+
+    def solve(self, constraints=None) -> None:
+        """Enforce ``constraints`` (the document's by default) in a worker; on success one
+        command sets them and the displacement map they give."""
+        if not self.doc.ready:
+            self.show_error("Nothing to solve yet: import a performer and a target first.")
+            return
+        from engine.correct import enforce
+        composed = self.doc.composed
+        constraints = list(self.doc.constraints if constraints is None else constraints)
+        if not constraints:
+            self.show_error("There are no constraints to enforce.")
+            return
+
+        def work(progress, cancel):
+            correction = enforce(composed, constraints, progress=progress, cancel=cancel)
+            return constraints, correction.displacement_map(
+                rotation_tolerance=1.7e-4, translation_tolerance=5e-5)
+
+        def done(result):
+            cons, displacement = result
+            push_constraints(self.doc, cons, displacement, text="Solve constraints")
+
+        self.run_job(work, done, "Solving")
+
+    def solve_contacts(self) -> None:
+        if not self.doc.ready:
+            self.show_error("Nothing to solve yet: import a performer and a target first.")
+            return
+        from engine.contacts import contact_constraints, detect_contacts, find_feet
+        doc = self.doc
+        mapped = set(doc.correspondence.pairs.values())
+        feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.performer.skeleton)
+                if a in mapped]
+        contacts = detect_contacts(doc.performer, feet)
+        kept = [c for c in doc.constraints if not (c.auto and c.meta.get("source") ==
+                                                     "contact")]
+        new = contact_constraints(contacts, doc.performer, doc.composed,
+                                  doc.correspondence.pairs, floor=doc.floor)
+        self.solve(kept + new)
+
+    # ------------------------------------------------------------------ closing
+    def closeEvent(self, event) -> None:   # noqa: N802 - Qt's name
+        if self.job is not None:
+            self.job.cancel()
+            self.job.wait()
+        if self.maybe_save():
+            from app.gui import project_io
+            project_io.discard_autosave(self.doc)
+            event.accept()
+        else:
+            event.ignore()
