@@ -246,7 +246,12 @@ class Viewport(gl.GLViewWidget):
         t_joint = inverse.get(performer_joint)
         segments = []
         if t_joint is not None:
+            # the virtual bone that ends at the selection and those that start from it
             tj = tsk.index[t_joint]
+            up = [a for a in tsk.ancestors(tj) if tsk.names[a] in pairs]
+            if up:
+                segments += [pts[psk.index[pairs[tsk.names[up[0]]]]],
+                             pts[psk.index[performer_joint]]]
             for k in range(tsk.num_joints):
                 anc = [a for a in tsk.ancestors(k) if tsk.names[a] in pairs]
                 if tsk.names[k] in pairs and anc and anc[0] == tj:
@@ -345,7 +350,8 @@ class Viewport(gl.GLViewWidget):
     # ------------------------------------------------------------------ picking
     def project(self, points_view: np.ndarray) -> np.ndarray:
         """Pixel coordinates (x right, y down) of view-space points ``(N, 3)``."""
-        m = np.array(self.projectionMatrix().data()).reshape(4, 4).T @ \
+        viewport = (0, 0, self.width(), self.height())
+        m = np.array(self.projectionMatrix(viewport, viewport).data()).reshape(4, 4).T @ \
             np.array(self.viewMatrix().data()).reshape(4, 4).T
         h = np.concatenate([points_view, np.ones((len(points_view), 1))], axis=1) @ m.T
         ndc = h[:, :2] / h[:, 3:4]

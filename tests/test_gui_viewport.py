@@ -1,0 +1,117 @@
+"""The 3D viewport under a real GL context (Xvfb): drawing, picking, camera, visibility."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gui_support import demo_document, require_gl
+
+
+@pytest.fixture()
+def view(qtbot):
+    require_gl()
+    from app.gui.viewport import Viewport
+    doc = demo_document()
+    v = Viewport(doc)
+    qtbot.addWidget(v)
+    v.resize(800, 600)
+    v.show()
+    qtbot.waitExposed(v)
+    doc.set_frame(300)
+    v.frame_all()
+    qtbot.wait(50)
+    return doc, v
+
+
+def _pixels(v, rgb, tol=40):
+    img = v.grabFramebuffer()
+    ptr = img.constBits()
+    arr = np.frombuffer(ptr, dtype=np.uint8).reshape(img.height(), img.bytesPerLine() // 4, 4)
+    bgr = arr[..., :3][..., ::-1].astype(int)            # Format_RGB32 / ARGB32: B G R A
+    return int(np.sum(np.all(np.abs(bgr - rgb) < tol, axis=-1)))
+
+
+def test_both_skeletons_are_drawn_where_forward_kinematics_puts_them(view):
+    doc, v = view
+    from app.gui.viewport import to_view
+    fig = v.figures["target"]
+    pos = doc.pose("target").positions[300]
+    np.testing.assert_allclose(fig.points - fig.offset, to_view(pos), atol=1e-9)
+    perf = v.figures["performer"]
+    np.testing.assert_allclose(perf.points - perf.offset,
+                               to_view(doc.pose("performer").positions[300]), atol=1e-9)
+    # and they are really on screen: orange (target) and blue (performer) pixels
+    assert _pixels(v, (242, 153, 64)) > 200
+    assert _pixels(v, (115, 158, 217)) > 200
+
+
+def test_the_view_follows_the_frame(view):
+    doc, v = view
+    before = v.figures["target"].points.copy()
+    doc.set_frame(600)
+    assert not np.allclose(v.figures["target"].points, before)
+
+
+def test_clicking_a_joint_selects_it_everywhere(view, qtbot):
+    from app.gui.qt import QtCore
+    doc, v = view
+    j = doc.target.skeleton.index["LeftHand"]
+    x, y = v.project(v.figures["target"].points[[j]])[0]
+    got = []
+    doc.selectionChanged.connect(lambda side, name: got.append((side, name)))
+    qtbot.mouseClick(v, QtCore.Qt.MouseButton.LeftButton,
+                     pos=QtCore.QPoint(int(round(x)), int(round(y))))
+    assert doc.selection == ("target", "LeftHand")
+    assert got[-1] == ("target", "LeftHand")
+    # the selected joint is drawn bigger, in the selection colour
+    sizes = v.figures["target"].joints.size
+    assert np.argmax(sizes) == j
+    # the virtual bones of the selected mapping are highlighted on the performer
+    assert v.virtual.visible()
+    # a click on empty floor clears the selection
+    qtbot.mouseClick(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(5, 5))
+    assert doc.selection == ("", "")
+
+
+def test_orbit_pan_zoom_and_frame_all(view, qtbot):
+    from app.gui.qt import QtCore
+    doc, v = view
+    az, dist, center = v.opts["azimuth"], v.opts["distance"], v.opts["center"]
+    qtbot.mousePress(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(400, 300))
+    qtbot.mouseMove(v, QtCore.QPoint(460, 300))
+    qtbot.mouseRelease(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(460, 300))
+    assert v.opts["azimuth"] != az                                # left drag orbits
+    assert doc.selection == ("", "")                              # a drag is not a click
+    state = v.camera_state()
+    v.set_camera_state({**state, "distance": state["distance"] * 3})
+    assert v.opts["distance"] == pytest.approx(dist * 3 if False else state["distance"] * 3)
+    v.frame_all()
+    framed = v.camera_state()
+    assert framed["distance"] < state["distance"] * 3
+    assert center is not None
+
+
+def test_hiding_and_overlaying(view):
+    doc, v = view
+    doc.viewer.show_performer = False
+    v.refresh()
+    assert not v.figures["performer"].mesh.visible()
+    doc.viewer.show_performer = True
+    doc.viewer.side_by_side = False
+    v.refresh()
+    # overlaid: both start at the same place
+    assert np.allclose(v.figures["performer"].offset[:2] + v._root_start("performer")[:2],
+                       v.figures["target"].offset[:2] + v._root_start("target")[:2])
+
+
+def test_constraint_goals_are_drawn(view):
+    doc, v = view
+    from app.gui.commands import push_constraints
+    from engine.constraints import Constraint, floor_constraint
+    hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
+    push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + 0.1}, 280, 290,
+                                      310, 320),
+                           floor_constraint("LeftToeBase", doc.num_frames, -0.9)])
+    assert v.goals.visible() and v.planes.visible()
+    doc.undo_stack.undo()
+    assert not v.goals.visible()
