@@ -1,0 +1,101 @@
+"""Displacement maps: curves, interpolation, key reduction, applying to real motion."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.correct import enforce
+from engine.constraints import Constraint
+from engine.displacement import ROOT, Curve, DisplacementMap, reduce_keys
+from engine.errors import MotionComposerError
+from engine import forward_kinematics
+from engine.rotations import angle_between
+from ik_fixtures import walk_on_holden
+
+
+def test_linear_smooth_and_constant_interpolation():
+    t = np.array([0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 20.0])
+    lin = Curve([0, 10, 20], [0.0, 1.0, 0.0])
+    np.testing.assert_allclose(lin.evaluate(t), [0, .25, .5, .75, 1, .75, .5, 0])
+    step = Curve([0, 10, 20], [0.0, 1.0, 0.0], ("constant", "constant", "constant"))
+    np.testing.assert_allclose(step.evaluate(t), [0, 0, 0, 0, 1, 1, 1, 0])
+    smooth = Curve([0, 10, 20, 30], [0.0, 1.0, 3.0, 3.0], ("smooth",) * 4)
+    v = smooth.evaluate(np.linspace(0, 30, 301))
+    assert np.all(np.diff(v) >= -1e-12)                  # monotone keys: no overshoot
+    assert v.max() <= 3.0 + 1e-12
+    np.testing.assert_allclose(smooth.evaluate([0, 10, 20, 30]), [0, 1, 3, 3])
+    # outside the keys the end values hold
+    np.testing.assert_allclose(lin.evaluate([-5, 25]), [0, 0])
+
+
+def test_curve_validation():
+    with pytest.raises(MotionComposerError, match="increase"):
+        Curve([0, 0], [1, 2])
+    with pytest.raises(MotionComposerError, match="interpolation"):
+        Curve([0, 1], [1, 2], ("linear", "bezier"))
+    with pytest.raises(MotionComposerError, match="as many values"):
+        Curve([0, 1, 2], [1, 2])
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-3, 1e-4])
+def test_key_reduction_stays_within_its_tolerance_with_few_keys(tolerance):
+    x = np.arange(600)
+    signal = 0.2 * np.sin(x / 40.0) * np.exp(-((x - 300) / 150.0) ** 2)
+    curve = reduce_keys(signal, tolerance)
+    assert np.abs(curve.evaluate(x) - signal).max() <= tolerance
+    assert len(curve) < 600 / 4
+    linear = reduce_keys(signal, tolerance, smooth=False)
+    assert np.abs(linear.evaluate(x) - signal).max() <= tolerance
+    assert len(curve) <= len(linear)
+
+
+def test_a_dense_ik_result_becomes_few_keys_and_applies_back():
+    performer, target, corr, composed = walk_on_holden()
+    hand = forward_kinematics(composed).positions[:, target.skeleton.index["LeftHand"]]
+    c = Constraint("LeftHand", "position", {"point": hand[420] + [0.1, 0.2, 0.05]},
+                   380, 420, 520, 570)
+    result = enforce(composed, [c])
+    dmap = result.displacement_map(rotation_tolerance=np.radians(0.01),
+                                   translation_tolerance=1e-5)
+    keys = sum(len(curve) for curve in dmap.curves.values())
+    dense = np.count_nonzero(result.rotvecs)                # channel-frames the IK changed
+    # the corrections follow a walking arm: about half the frames stay keys at 0.01 degree
+    assert 0 < keys < dense * 0.6
+    applied = dmap.apply(composed)
+    assert np.degrees(angle_between(applied.rotations, result.motion.rotations)).max() < 0.02
+    # the map is zero before smooth_in and after smooth_out: the composed motion exactly
+    np.testing.assert_array_equal(applied.rotations[:c.smooth_in],
+                                  composed.rotations[:c.smooth_in])
+    np.testing.assert_array_equal(applied.rotations[c.smooth_out + 1:],
+                                  composed.rotations[c.smooth_out + 1:])
+    # the hand still reaches within about a millimetre
+    got = forward_kinematics(applied).positions[420:521, target.skeleton.index["LeftHand"]]
+    assert np.linalg.norm(got - c.goal["point"], axis=1).max() < 2e-3
+
+
+def test_offsets_add_to_the_composed_motion_which_never_changes():
+    performer, target, corr, composed = walk_on_holden()
+    before = composed.rotations.copy()
+    dmap = DisplacementMap({("LeftForeArm", "rx"): Curve([0, 100, 200], [0.0, 0.5, 0.0]),
+                            (ROOT, "ty"): Curve([0, 200], [0.0, 0.1])})
+    out = dmap.apply(composed)
+    np.testing.assert_array_equal(composed.rotations, before)
+    j = target.skeleton.index["LeftForeArm"]
+    turn = angle_between(out.rotations[100, j], composed.rotations[100, j])
+    assert turn == pytest.approx(0.5, abs=1e-9)
+    np.testing.assert_allclose(out.translations[:, 0, 1] - composed.translations[:, 0, 1],
+                               np.clip(np.arange(composed.num_frames) / 200 * 0.1, 0, 0.1),
+                               atol=1e-12)
+    others = [k for k in range(target.skeleton.num_joints) if k != j]
+    np.testing.assert_array_equal(out.rotations[:, others], composed.rotations[:, others])
+
+
+def test_maps_round_trip_through_plain_data_and_reject_unknown_channels():
+    dmap = DisplacementMap({("Hips", "rz"): Curve([0, 5.5], [0.1, -0.2], ("smooth", "linear")),
+                            (ROOT, "tx"): Curve([3], [0.25])})
+    back = DisplacementMap.from_dict(dmap.to_dict())
+    assert back.to_dict() == dmap.to_dict()
+    with pytest.raises(MotionComposerError, match="root channels"):
+        DisplacementMap({(ROOT, "rx"): Curve([0], [0])})
+    with pytest.raises(MotionComposerError, match="joint channels"):
+        DisplacementMap({("Hips", "tx"): Curve([0], [0])})
