@@ -109,24 +109,48 @@ class RootOptions:
 
 
 def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> bool:
-    """Whether a single pose stands up along +Y: its vertical extent is at least 0.7 of its
-    widest horizontal extent (a T-pose's arm span is about its height; a skeleton lying along
-    an axis fails)."""
+    """Whether a single pose stands up along +Y.
+
+    Its vertical extent must be at least 0.7 of its widest horizontal extent (a T-pose's arm
+    span is about its height; a skeleton lying along an axis fails), and where the head and
+    feet can be told (:func:`engine.automap.identify`), the head must be above the hips and
+    the hips above the feet (CC3's zero pose stands upside down).
+    """
     pose = fk_arrays(skeleton, rotations[None], translations[None])
     pts = pose.all_positions()[0]
     ext = pts.max(axis=0) - pts.min(axis=0)
-    return bool(ext[1] >= 0.7 * max(ext[0], ext[2]))
+    if ext[1] < 0.7 * max(ext[0], ext[2]):
+        return False
+    try:
+        from .automap import identify
+        roles = identify(skeleton)
+    except Exception:                         # noqa: BLE001 - names say nothing: extents
+        return True
+    y = pose.positions[0, :, 1]
+    idx = skeleton.index
+    hips, head = roles.get("hips"), roles.get("head")
+    feet = [roles.get(k) for k in ("foot_l", "foot_r", "shin_l", "shin_r")]
+    feet = [f for f in feet if f]
+    if hips in idx and head in idx and y[idx[head]] <= y[idx[hips]]:
+        return False
+    if hips in idx and feet and min(y[idx[f]] for f in feet) >= y[idx[hips]]:
+        return False
+    return True
 
 
 def reference_pose(motion: Motion, choice: str | int) -> tuple[np.ndarray, np.ndarray, str]:
     """Local rotations ``(J, 4)`` and translations ``(K, 3)`` of a reference pose, and a label.
 
-    ``choice`` is ``"rest"`` (zero rotations, offsets, the root at its first-frame position),
+    ``choice`` is ``"rest"`` (zero channel values: offsets, no rotation but the file's own
+    up-axis turn at the root, the root at its first-frame position),
     a frame number, or ``"auto"`` (rest if it stands upright, else frame 0).
     """
     sk = motion.skeleton
     rest_rot = np.zeros((sk.num_joints, 4))
     rest_rot[:, 3] = 1.0
+    # zero channel values: the root keeps the turn from the file's up axis to +Y
+    from scipy.spatial.transform import Rotation
+    rest_rot[0] = Rotation.from_matrix(sk.source.rotation).as_quat()
     rest_tra = sk.offsets[sk.translated].copy()
     rest_tra[0] = motion.translations[0, 0]
     if choice == "auto":
