@@ -129,6 +129,17 @@ class Document(QtCore.QObject):
                 self.evaluation_error = str(exc)
         self.motionChanged.emit()
 
+    def show_preview(self, motion: Motion | None) -> None:
+        """Show ``motion`` as the target's motion without changing the document (a live
+        preview while a handle or goal is dragged); ``None`` goes back to the evaluated one.
+        Nothing is pushed on the undo stack."""
+        if motion is None:
+            self.evaluate()
+            return
+        self.motion = motion
+        self._poses.pop("target", None)
+        self.motionChanged.emit()
+
     def pose(self, which: str) -> WorldPose | None:
         """World pose over all frames of ``"performer"``, ``"target"`` (the final motion),
         ``"composed"`` or ``"character"`` (the target file itself), computed once."""
