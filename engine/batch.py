@@ -1,0 +1,151 @@
+"""Batch retargeting: one recipe (mapping, binding, root, automatic contacts, floor) applied
+to many clips, each in its own process; one failing clip never stops the rest.
+
+A :class:`Recipe` is plain, picklable data, so the same :func:`process_clip` runs in a local
+process pool or on a Dask cluster. Each clip gives a summary dict: ``status`` ``"written"`` or
+``"failed"`` with the ``reason`` (one line, as the CLI prints errors), the output path, the
+frame count, the largest constraint residual, contact drift figures and the time taken.
+"""
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["Recipe", "process_clip", "run_batch"]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """What to do to every clip.
+
+    Attributes:
+        target_path: the character (.bvh, or .glb/.gltf when engine.gltf is present).
+        pairs: the correspondence, target joint -> performer joint; empty means automatic
+            mapping for each clip (clips from different skeletons then work too).
+        bind: BindOptions fields; root: RootOptions fields.
+        auto_contacts: pin the feet where the performer plants them.
+        floor: keep the feet on or above this height [m], or None.
+        suffix: appended to each clip's stem for its output name.
+        target_reader: options for reading the target (units, up_axis, ...).
+    """
+
+    target_path: str
+    pairs: dict = field(default_factory=dict)
+    bind: dict = field(default_factory=dict)
+    root: dict = field(default_factory=dict)
+    auto_contacts: bool = True
+    floor: float | None = None
+    suffix: str = ""
+    target_reader: dict = field(default_factory=dict)
+
+
+def _read_character(path: str, options: dict):
+    from .bvh import read_bvh
+    if Path(path).suffix.lower() in (".glb", ".gltf"):
+        from .gltf import read_gltf           # noqa: PLC0415 - optional until present
+        return read_gltf(path).rest_motion()
+    return read_bvh(path, **options)
+
+
+def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
+    """Retarget one clip with ``recipe`` and write ``out_dir/<stem><suffix>.bvh``.
+
+    Never raises: a failure is reported in the summary with its reason.
+    """
+    from .bvh import read_bvh, write_bvh
+    from .correspondence import Correspondence
+    from .errors import MotionComposerError
+    from .pipeline import Job, run_job
+    from .retarget import BindOptions, RootOptions
+
+    started = time.perf_counter()
+    summary = {"clip": str(clip), "status": "failed", "output": None, "reason": ""}
+    try:
+        performer = read_bvh(clip)
+        target = _read_character(recipe.target_path, recipe.target_reader)
+        if recipe.pairs:
+            corr = Correspondence(recipe.pairs)
+            corr.validate(target.skeleton, performer.skeleton)
+        else:
+            from .automap import automap
+            corr = automap(target.skeleton, performer.skeleton)
+        job = Job(performer=performer, target=target, correspondence=corr,
+                  bind_options=BindOptions(**recipe.bind), root=RootOptions(**recipe.root),
+                  auto_contacts=recipe.auto_contacts, floor=recipe.floor)
+        result = run_job(job)
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        out = Path(out_dir) / f"{Path(clip).stem}{recipe.suffix}.bvh"
+        write_bvh(result.motion, out)
+        residuals = [c["max_residual"] for c in result.report["constraints"]
+                     if c["max_residual"] is not None]
+        summary.update(status="written", output=str(out), frames=result.motion.num_frames,
+                       constraints=len(result.constraints),
+                       max_residual_m=max(residuals) if residuals else 0.0,
+                       contact_drift=result.report.get("contact_drift"))
+    except MotionComposerError as exc:
+        summary["reason"] = " ".join(str(exc).split())
+    except Exception as exc:                  # noqa: BLE001 - a bug must not stop the batch
+        summary["reason"] = f"unexpected {type(exc).__name__}: {exc}"
+        summary["traceback"] = traceback.format_exc(limit=6)
+    summary["seconds"] = time.perf_counter() - started
+    return summary
+
+
+def _pin_threads() -> None:
+    # each worker is one process: keep BLAS to one thread so workers do not fight for cores
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
+def run_batch(recipe: Recipe, clips: list[str], out_dir: str, *, workers: int | None = None,
+              scheduler: str | None = None, progress=None) -> list[dict]:
+    """Process every clip; return the summaries in the order of ``clips``.
+
+    ``workers``: local processes (default: the number of CPUs). ``scheduler``: a Dask
+    scheduler address (``tcp://host:8786``) to run on a cluster instead (needs
+    ``dask.distributed``). ``progress(done, total, summary)`` is called as clips finish.
+    """
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    total = len(clips)
+    results: dict[int, dict] = {}
+    if scheduler:
+        try:
+            from distributed import Client, as_completed as dask_completed
+        except ImportError:
+            from .errors import MotionComposerError
+            raise MotionComposerError("--scheduler needs Dask: pip install 'dask[distributed]'"
+                                      ) from None
+        with Client(scheduler) as client:
+            futures = {client.submit(process_clip, recipe, str(c), str(out_dir), pure=False): i
+                       for i, c in enumerate(clips)}
+            for future in dask_completed(futures):
+                i = futures[future]
+                results[i] = future.result()
+                if progress is not None:
+                    progress(len(results), total, results[i])
+    else:
+        workers = workers or os.cpu_count() or 1
+        if workers <= 1 or total <= 1:
+            for i, c in enumerate(clips):
+                results[i] = process_clip(recipe, str(c), str(out_dir))
+                if progress is not None:
+                    progress(len(results), total, results[i])
+        else:
+            with ProcessPoolExecutor(max_workers=min(workers, total),
+                                     initializer=_pin_threads) as pool:
+                futures = {pool.submit(process_clip, recipe, str(c), str(out_dir)): i
+                           for i, c in enumerate(clips)}
+                for future in as_completed(futures):
+                    i = futures[future]
+                    try:
+                        results[i] = future.result()
+                    except Exception as exc:      # noqa: BLE001 - a worker died
+                        results[i] = {"clip": str(clips[i]), "status": "failed",
+                                      "reason": f"the worker process failed: {exc}"}
+                    if progress is not None:
+                        progress(len(results), total, results[i])
+    return [results[i] for i in range(total)]
