@@ -29,10 +29,12 @@ class _Swap(QtGui.QUndoCommand):
         return self._merge_id
 
     def mergeWith(self, other) -> bool:
-        # consecutive edits of one spin box become one step
+        # consecutive edits of one spin box become one step, named after the latest value
         if other.id() != self.id() or self._merge_id < 0:
             return False
         self.after = other.after
+        self.setText(other.text())
+        self.setObsolete(self.after == self.before)      # back where it started: no step
         return True
 
 
@@ -59,18 +61,26 @@ def push_pair(doc, target_joint: str, performer_joint: str | None) -> None:
     push_correspondence(doc, new, text)
 
 
-_OPTIONS_MERGE = 1001
+_MERGE_IDS: dict[str, int] = {}
+
+
+def merge_id(key: str) -> int:
+    """A stable merge id for edits of one control (``key`` names it, e.g. "root scale")."""
+    return _MERGE_IDS.setdefault(key, 1000 + len(_MERGE_IDS))
 
 
 def push_options(doc, bind_options: BindOptions | None = None,
                  root_options: RootOptions | None = None, text: str = "Change binding",
-                 merge: bool = False) -> None:
+                 merge: bool | str = False) -> None:
+    """Set binding and root options. ``merge``: a key naming the control (or True for a
+    generic one); consecutive pushes with the same key become one undo step."""
     before = (doc.bind_options, doc.root_options)
     after = (bind_options or doc.bind_options, root_options or doc.root_options)
     if after == before:
         return
+    key = merge if isinstance(merge, str) else ("options" if merge else None)
     doc.undo_stack.push(_Swap(text, lambda v: doc._set_options(*v), before, after,
-                              _OPTIONS_MERGE if merge else -1))
+                              merge_id(key) if key else -1))
 
 
 def push_constraints(doc, constraints: list, displacement=None, text: str = "Edit constraints"
