@@ -11,7 +11,6 @@ exponent notation are few in real files and go through ``float()`` one by one. A
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 __all__ = ["parse_number_rows"]
 
@@ -73,9 +72,9 @@ def _parse_piece(data: bytes, columns: int):
     rows = len(per_line)
 
     padded = np.concatenate([b, np.full(width, 32, dtype=np.uint8)])
-    mat = sliding_window_view(padded, width)[starts]             # (n, width) bytes
     cols = np.arange(width)
-    mat = np.where(cols < lengths[:, None], mat, np.uint8(32)).T.copy()   # (width, n)
+    mat = padded[cols[:, None] + starts]                         # (width, n) bytes, one gather
+    mat[cols[:, None] >= lengths] = 32                          # blank what is past each token
 
     digit = mat - np.uint8(48)
     is_digit = digit < 10

@@ -348,7 +348,8 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
 
     n_cols = sum(len(c) for c in channels)            # type: ignore[arg-type]
     first_row = ft_line                                # 0-based index of the first row line
-    block = "\n".join(lines[first_row:])
+    offset = sum(len(line) + 1 for line in lines[:first_row])   # the rows, as one slice
+    block = text[offset:]
     parsed = None
     if n_cols:
         try:
