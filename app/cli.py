@@ -122,6 +122,8 @@ def cmd_retarget(args) -> int:
     write_bvh(result.motion, args.output)
     if args.save_map:
         correspondence.save(args.save_map)
+    if args.save_project:
+        _save_retarget_project(args, job, result)
     elapsed = time.perf_counter() - started
     if args.report:
         report = dict(result.report, output=str(args.output), total_s=elapsed)
@@ -135,6 +137,44 @@ def cmd_retarget(args) -> int:
     print(f"wrote {args.output}: {result.motion.num_frames} frames at "
           f"{result.motion.fps:.6g} fps onto {result.motion.skeleton.num_joints} joints "
           f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")
+    return 0
+
+
+def _save_retarget_project(args, job, result) -> None:
+    """``retarget --save-project``: the session as a project, with every constraint enforced
+    (the user's and the automatic ones) and the IK correction as displacement-map keys."""
+    import os
+
+    from engine.project import Project, Source, correction_keys, embed_sources, save_project
+
+    project = Project(
+        performer=Source(os.path.abspath(args.performer)),
+        target=Source(os.path.abspath(args.target)),
+        correspondence=job.correspondence, bind_options=job.bind_options, root=job.root,
+        auto_contacts=job.auto_contacts, contact_options=job.contact_options, floor=job.floor,
+        constraints=tuple(result.constraints), displacement=correction_keys(result.correction))
+    if args.embed_sources:
+        project = embed_sources(project)
+    save_project(project, args.save_project)
+
+
+def cmd_export(args) -> int:
+    """``export P.mcp -o OUT.bvh``: evaluate a saved project headless and write its motion."""
+    import time
+
+    from engine.bvh import write_bvh
+    from engine.project import evaluate_project, open_project, solve_project
+
+    started = time.perf_counter()
+    project, performer, target = open_project(args.project)
+    if args.solve:
+        project = solve_project(project, performer, target)
+    motion = evaluate_project(project, performer, target).motion
+    write_bvh(motion, args.output)
+    print(f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:.6g} fps onto "
+          f"{motion.skeleton.num_joints} joints ({len(project.constraints)} constraints, "
+          f"{len(project.displacement)} displacement curves) in "
+          f"{time.perf_counter() - started:.2f} s")
     return 0
 
 
@@ -187,7 +227,24 @@ def build_parser() -> argparse.ArgumentParser:
                           "metres (also the floor automatic contacts stand on)")
     fix.add_argument("--report", metavar="REPORT.json",
                      help="write residuals per constraint, contact drift and timings")
+    proj = rt.add_argument_group("project")
+    proj.add_argument("--save-project", metavar="P.mcp",
+                      help="also save the session as a project file (sources, map, options, "
+                           "constraints and the IK correction), to reopen or export later")
+    proj.add_argument("--embed-sources", action="store_true",
+                      help="embed both clips in the project so that it can be sent on its own")
     rt.set_defaults(func=cmd_retarget)
+
+    ex = sub.add_parser("export", help="write the motion of a saved project",
+                        description="Load a project (.mcp), evaluate it headless (the direct "
+                                    "conversion plus the saved correction) and write the "
+                                    "result.")
+    ex.add_argument("project", help="the project (.mcp)")
+    ex.add_argument("-o", "--output", required=True, help="the .bvh to write")
+    ex.add_argument("--solve", action="store_true",
+                    help="solve the project's constraints with IK again instead of using the "
+                         "saved correction (hand edits to the curves are then replaced)")
+    ex.set_defaults(func=cmd_export)
     return parser
 
 

@@ -36,6 +36,16 @@ class ConstraintError(MotionComposerError):
     """A constraint that cannot be used; the message names the constraint and the field."""
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    """``v`` scaled to length 1; a vector already of unit length (within 1e-12) is kept bit for
+    bit, so that a constraint read back from a file is the constraint that was written."""
+    big = np.abs(v).max()
+    if big > 1e150:                           # the norm would overflow to inf
+        v = v / big
+    norm = np.linalg.norm(v)
+    return v if abs(norm - 1.0) <= 1e-12 else v / norm
+
+
 def _vec(value, n, what, label):
     try:
         arr = np.array(value, dtype=float).reshape(-1)
@@ -127,12 +137,12 @@ class Constraint:
                 raise ConstraintError(f"{label}: goal.side must be one of "
                                       f"{', '.join(PLANE_SIDES)}, not {side!r}")
             goal = {"point": _vec(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
-                    "normal": normal / np.linalg.norm(normal), "side": side}
+                    "normal": _unit(normal), "side": side}
         else:
             q = _vec(goal.get("quaternion"), 4, "goal.quaternion", label)
             if np.linalg.norm(q) < 1e-9:
                 raise ConstraintError(f"{label}: goal.quaternion must not be zero")
-            goal = {"quaternion": q / np.linalg.norm(q)}
+            goal = {"quaternion": _unit(q)}
         for v in goal.values():
             if isinstance(v, np.ndarray):
                 v.setflags(write=False)
