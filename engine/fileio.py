@@ -31,6 +31,15 @@ def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = 
     except OSError as exc:
         raise FileWriteError(f"{path}: cannot be written: {exc.strerror or exc}") from None
     try:
+        # mkstemp makes the file private (0600): give it the mode the file had, or the
+        # ordinary one a new file gets (0666 less the umask)
+        try:
+            mode = os.stat(path).st_mode & 0o7777
+        except FileNotFoundError:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(tmp, mode)
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
             handle.flush()

@@ -69,6 +69,8 @@ class Document(QtCore.QObject):
         self.target: Motion | None = None
         self.performer_path: Path | None = None
         self.target_path: Path | None = None
+        #: the project's sources as loaded (embedded text, reader overrides), by role
+        self.sources: dict = {}
         self.correspondence = Correspondence({})
         self.bind_options = BindOptions()
         self.root_options = RootOptions()

@@ -284,6 +284,24 @@ class MainWindow(QtWidgets.QMainWindow):
             self.statusBar().showMessage(f"Exported {path}", 5000)
         return ok
 
+    def offer_recovery(self, project_path=None) -> bool:
+        """If an autosave newer than the project (or of an unsaved one) exists, offer it."""
+        from app.gui import project_io
+        auto = project_io.recovery_candidate(project_path)
+        if auto is None:
+            return False
+        if not self.ask_yes_no(f"Motion Composer found unsaved work from an earlier session "
+                               f"({auto}). Recover it?"):
+            project_io.discard_autosave(self.doc) if project_path is None else None
+            return False
+        ok = self._guard(project_io.load_into, self.doc, auto, self)
+        if ok:
+            self.doc.path = Path(project_path) if project_path else None
+            self.doc.undo_stack.resetClean()          # recovered work still needs saving
+            self.doc.changed.emit()
+            self.viewport.frame_all()
+        return ok
+
     # ------------------------------------------------------------------ recent files
     def _recent(self) -> list[str]:
         value = self.settings.value("recent", [])

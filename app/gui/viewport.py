@@ -274,8 +274,8 @@ class Viewport(gl.GLViewWidget):
         points, lines, quads = [], [], []
         size = self._size()
         for c in doc.constraints:
-            if not c.enabled:
-                continue
+            if not c.enabled or not c.smooth_in <= f <= c.smooth_out:
+                continue                      # only what acts at this frame
             if c.kind == "position":
                 points.append(to_view(c.goal["point"]) + off)
             elif c.kind == "trajectory":
