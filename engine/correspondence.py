@@ -51,7 +51,9 @@ class Correspondence:
                  if t != target_joint and p != performer_joint}
         if performer_joint is not None:
             pairs[target_joint] = performer_joint
-        return Correspondence(pairs, {k: v for k, v in self.notes.items() if k in pairs})
+        # a pair set by hand loses the note of how it was decided automatically
+        notes = {k: v for k, v in self.notes.items() if k in pairs and k != target_joint}
+        return Correspondence(pairs, notes)
 
     # ------------------------------------------------------------------ validation
     def validate(self, target: Skeleton, performer: Skeleton, *, path=None) -> None:
