@@ -392,12 +392,20 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ closing
     def closeEvent(self, event) -> None:   # noqa: N802 - Qt's name
-        if self.job is not None:
-            self.job.cancel()
-            self.job.wait()
-        if self.maybe_save():
-            from app.gui import project_io
-            project_io.discard_autosave(self.doc)
-            event.accept()
-        else:
+        # an exception escaping a Qt event override crashes PySide's error reporting, so
+        # nothing may leave this method: an unexpected error is printed and the window stays
+        try:
+            if self.job is not None:
+                self.job.cancel()
+                self.job.wait()
+            if self.maybe_save():
+                from app.gui import project_io
+                project_io.discard_autosave(self.doc)
+                self.autosave_timer.stop()
+                event.accept()
+            else:
+                event.ignore()
+        except Exception:                   # noqa: BLE001
+            import traceback
+            traceback.print_exc()
             event.ignore()

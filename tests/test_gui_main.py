@@ -1,0 +1,200 @@
+"""The composer window: the demo project, files, undo, errors, long work, closing."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.gui.qt import QtCore, QtWidgets
+from conftest import REPO, clip_path
+
+DEMO = REPO / "resources" / "demo" / "demo.mcp"
+
+
+@pytest.fixture()
+def window(qtbot, tmp_path, monkeypatch):
+    from app.gui.main_window import MainWindow
+    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
+    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
+                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    w = MainWindow()
+    errors = []
+    w.show_error = errors.append
+    w.errors = errors
+    w.answers = []
+    w.ask_unsaved = lambda: w.answers.pop(0) if w.answers else "discard"
+    w.ask_yes_no = lambda question: True
+    qtbot.addWidget(w)
+    yield w
+    w.doc.undo_stack.setClean()
+
+
+def _demo_copy(tmp_path) -> Path:
+    folder = tmp_path / "project"
+    shutil.copytree(REPO / "resources", folder / "resources")
+    return folder / "resources" / "demo" / "demo.mcp"
+
+
+def test_the_demo_opens_ready_to_play(window):
+    assert window.open_project(DEMO), window.errors
+    doc = window.doc
+    assert doc.ready and doc.num_frames == 994
+    assert doc.viewer.current_frame == 560
+    assert any(c.auto for c in doc.constraints)                      # automatic foot contacts
+    assert any(not c.auto for c in doc.constraints)                  # and a hand constraint
+    assert len(doc.displacement) > 0
+    assert not doc.modified and window.windowTitle().startswith("demo.mcp - ")
+
+
+def test_edits_are_undoable_and_named_and_the_title_shows_them(window):
+    from app.gui.commands import push_pair
+    window.open_project(DEMO)
+    doc = window.doc
+    before = doc.motion.rotations.copy()
+    push_pair(doc, "LeftForeArm", None)
+    assert doc.modified and "*" in window.windowTitle()
+    assert window.undo_action.text() == "&Undo Unmap LeftForeArm"
+    assert not np.array_equal(doc.motion.rotations, before)
+    window.undo_action.trigger()
+    np.testing.assert_array_equal(doc.motion.rotations, before)
+    assert not doc.modified and "*" not in window.windowTitle()
+    assert window.redo_action.text() == "&Redo Unmap LeftForeArm"
+
+
+def test_save_as_open_and_recent(window, tmp_path):
+    from app.gui.commands import push_options
+    from engine.retarget import RootOptions
+    path = _demo_copy(tmp_path)
+    window.open_project(path)
+    push_options(window.doc, root_options=RootOptions(mode="in-place"), text="In place")
+    out = tmp_path / "saved.mcp"
+    window.ask_save_path = lambda *a: str(out)
+    assert window.save_as()
+    assert out.is_file() and not window.doc.modified
+    assert window.doc.path == out
+    window.new_project()
+    assert window.doc.performer is None
+    actions = window.recent_menu.actions()
+    assert actions and actions[0].text() == str(out.resolve())
+    actions[0].trigger()
+    assert window.doc.root_options.mode == "in-place"
+    assert window.doc.ready
+
+
+def test_import_export_and_automatic_mapping(window, tmp_path):
+    assert window.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
+    assert window.import_file("target", clip_path("cmu_rest_tpose.bvh"))
+    doc = window.doc
+    assert doc.ready and doc.correspondence.pairs["LeftArm"] == "LeftShoulder"
+    assert window.undo_action.text() == "&Undo Auto-map"
+    out = tmp_path / "out.bvh"
+    assert window.export_bvh(out)
+    from engine import read_bvh
+    assert read_bvh(out).num_frames == 994
+
+
+def test_bad_files_show_an_error_and_the_window_keeps_running(window, tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    assert not window.import_file("performer", bad)
+    assert window.errors and "bad.bvh:4" in window.errors[-1]
+    corrupt = tmp_path / "corrupt.mcp"
+    corrupt.write_text('{"format": "motion-composer-project", "version": 1, "performer": ')
+    assert not window.open_project(corrupt)
+    assert "corrupt.mcp" in window.errors[-1]
+    assert window.open_project(DEMO)                                  # still fine
+
+
+def test_a_moved_clip_is_asked_for(window, tmp_path):
+    path = _demo_copy(tmp_path)
+    clip = path.parent.parent / "clips" / "cmu_131_01_walk.bvh"
+    moved = tmp_path / "elsewhere.bvh"
+    clip.rename(moved)
+    asked = []
+    window.ask_open_path = lambda caption, filters: asked.append(caption) or str(moved)
+    assert window.open_project(path), window.errors
+    assert asked and "cmu_131_01_walk.bvh" in asked[0]
+    assert window.doc.ready and window.doc.performer_path == moved.resolve()
+    assert window.doc.modified                                       # the new place is unsaved
+
+
+def test_closing_with_unsaved_changes_asks(window, qtbot):
+    from app.gui.commands import push_pair
+    window.open_project(DEMO)
+    push_pair(window.doc, "Head", None)
+    window.answers = ["cancel"]
+    assert not window.close()
+    window.answers = ["discard"]
+    assert window.close()
+
+
+def test_long_work_runs_in_a_thread_with_progress_and_cancel(window, qtbot):
+    window.open_project(DEMO)
+    doc = window.doc
+    window.solve()
+    assert window.job is not None and window.progress.isVisibleTo(window)
+    ticks = []
+    timer = QtCore.QTimer()
+    timer.timeout.connect(lambda: ticks.append(1))
+    timer.start(5)
+    qtbot.waitUntil(lambda: window.job is None, timeout=30000)
+    timer.stop()
+    assert len(ticks) > 3                                   # the event loop kept running
+    assert window.undo_action.text() == "&Undo Solve constraints"
+    assert not window.errors
+    # cancel: nothing changes
+    count = doc.undo_stack.count()
+    window.solve()
+    window.cancel_job()
+    qtbot.waitUntil(lambda: window.job is None, timeout=30000)
+    assert doc.undo_stack.count() == count
+
+
+def test_autosave_is_offered_at_the_next_start(window, qtbot, tmp_path):
+    from app.gui.commands import push_pair
+    from app.gui.main_window import MainWindow
+    path = _demo_copy(tmp_path)
+    window.open_project(path)
+    push_pair(window.doc, "Head", None)
+    window.autosave()
+    second = MainWindow()
+    qtbot.addWidget(second)
+    second.ask_yes_no = lambda q: True
+    second.show_error = window.errors.append
+    assert second.offer_recovery(path)
+    assert "Head" not in second.doc.correspondence.pairs
+    assert second.doc.modified
+    second.doc.undo_stack.setClean()
+
+
+def test_the_command_line_opens_the_window(monkeypatch):
+    import app.cli
+    import app.gui.main
+    calls = []
+    monkeypatch.setattr(app.gui.main, "run", lambda *a, **k: calls.append((a, k)) or 0)
+    assert app.cli.main([]) == 0
+    assert app.cli.main(["some.mcp"]) == 0
+    assert app.cli.main(["--demo"]) == 0
+    assert calls[0][0] == (None,) and calls[1][0] == ("some.mcp",)
+    assert calls[2][1]["demo"] is True
+
+
+def test_screenshot_of_the_demo(window, qtbot):
+    """The picture in the README: the demo at frame 560 (drawn under Xvfb)."""
+    from gui_support import gl_available
+    window.resize(1400, 900)
+    window.show()
+    with qtbot.waitExposed(window):
+        pass
+    window.open_project(DEMO)
+    window.viewport.frame_all()
+    qtbot.wait(200)
+    image = window.grab()
+    assert image.width() >= 1000
+    if gl_available():
+        out = REPO / "docs" / "screenshots"
+        out.mkdir(parents=True, exist_ok=True)
+        image.save(str(out / "window-demo.png"))
