@@ -28,7 +28,6 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resize(1400, 900)
 
         self.viewport = Viewport(self.doc)
-        self.setCentralWidget(self.viewport)
         self._build_docks()
         self._build_menus()
         self._build_status()
@@ -46,23 +45,52 @@ class MainWindow(QtWidgets.QMainWindow):
     def _build_docks(self) -> None:
         from app.gui.binding_panel import BindingPanel
         from app.gui.correspondence_panel import CorrespondencePanel
+        from app.gui.curve_editor import CurveEditor
         from app.gui.playback import PlaybackBar
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
         self.binding_panel = BindingPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
-        for title, widget, area, name in (
-                ("Correspondence", self.correspondence_panel,
-                 QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
-                ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea,
-                 "binding"),
-                ("Playback", self.playback, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
-                 "playback")):
+        self.curve_editor = CurveEditor(self.doc)
+        docks = [
+            ("Correspondence", self.correspondence_panel,
+             QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
+            ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea,
+             "binding"),
+            ("Curves", self.curve_editor, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
+             "curves"),
+        ]
+        try:                                   # the constraint timeline and inspector
+            from app.gui.inspector import ConstraintInspector
+            from app.gui.timeline import ConstraintTimeline
+            self.timeline = ConstraintTimeline(self.doc)
+            self.inspector = ConstraintInspector(self.doc, self.timeline, window=self)
+            docks += [("Constraints", self.timeline,
+                       QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
+                      ("Constraint", self.inspector,
+                       QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, "inspector")]
+        except ImportError:
+            self.timeline = self.inspector = None
+        for title, widget, area, name in docks:
             dock = QtWidgets.QDockWidget(title, self)
             dock.setObjectName(name)
             dock.setWidget(widget)
             self.addDockWidget(area, dock)
             setattr(self, f"{name}_dock", dock)
+        if getattr(self, "timeline_dock", None) is not None:
+            self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
+            self.timeline_dock.raise_()
+        # the transport sits under the viewport it drives
+        central = QtWidgets.QWidget()
+        box = QtWidgets.QVBoxLayout(central)
+        box.setContentsMargins(0, 0, 0, 0)
+        box.setSpacing(2)
+        box.addWidget(self.viewport, 1)
+        box.addWidget(self.playback)
+        self.setCentralWidget(central)
+        if getattr(self, "inspector_dock", None) is not None:
+            self.tabifyDockWidget(self.binding_dock, self.inspector_dock)
+            self.binding_dock.raise_()
         self.playback.install_shortcuts(self)
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
