@@ -38,9 +38,48 @@ def _add_reader_options(parser: argparse.ArgumentParser) -> None:
                             "(relative)")
 
 
+GLTF_SUFFIXES = (".glb", ".gltf")
+
+
+def _is_gltf(path) -> bool:
+    import os
+    return os.path.splitext(str(path))[1].lower() in GLTF_SUFFIXES
+
+
+def _gltf_info(args):
+    """The character of a glTF file, its motion shown by ``info`` and the extra figures."""
+    from engine.gltf import read_gltf
+    given = [flag for flag, value in (("--units", args.units), ("--scale", args.scale),
+                                      ("--up-axis", args.up_axis),
+                                      ("--position-mode", args.position_mode))
+             if value is not None]
+    if given:
+        raise MotionComposerError(f"{args.file}: {', '.join(given)} apply to BVH files only; "
+                                  "glTF is metres and +Y up by definition")
+    character = read_gltf(args.file)
+    motion = character.motions[0] if character.motions else character.rest_motion()
+    extra = {
+        "character": character.name,
+        "motion_shown": motion.name if character.motions else "bind pose (no animation)",
+        "skins": list(character.skin_names),
+        "meshes": [{"name": m.name, "vertices": m.num_vertices, "triangles": m.num_triangles,
+                    "skin": m.skin, "influences": int(m.joints.shape[1])}
+                   for m in character.meshes],
+        "animations": [{"name": m.name, "frames": m.num_frames, "fps": m.fps,
+                        "duration": m.duration} for m in character.motions],
+        "notes": list(character.notes),
+    }
+    return motion, extra
+
+
 def cmd_info(args) -> int:
-    motion = read_bvh(args.file, **_reader_options(args))
+    if _is_gltf(args.file):
+        motion, extra = _gltf_info(args)
+    else:
+        motion, extra = read_bvh(args.file, **_reader_options(args)), None
     info = describe_motion(motion)
+    if extra is not None:
+        info.update(extra)
     if args.json:
         json.dump(info, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -49,6 +88,8 @@ def cmd_info(args) -> int:
     # the reader keeps one "detected" flag; say per figure whether the user gave it
     unit_note = "given" if args.units or args.scale is not None else "detected"
     up_note = "given" if args.up_axis else "detected"
+    if extra is not None:
+        unit_note = up_note = "the glTF convention"
     lines = [
         f"file:        {args.file}",
         f"frames:      {info['frames']}",
@@ -66,6 +107,21 @@ def cmd_info(args) -> int:
         f"rotation orders: {', '.join(info['rotation_orders']) or 'none'}",
         "joint tree:",
     ]
+    if extra is not None:
+        lines[1:1] = [f"character:   {extra['character']} (glTF), motion shown: "
+                      f"{extra['motion_shown']}"]
+        meshes = extra["meshes"]
+        rigid = sum(1 for m in meshes if m["skin"] is None)
+        lines.insert(-2, f"skins:       {len(extra['skins'])} ({', '.join(extra['skins'])})")
+        lines.insert(-2, f"meshes:      {len(meshes)} ({rigid} rigid parts), "
+                         f"{sum(m['vertices'] for m in meshes)} vertices, "
+                         f"{sum(m['triangles'] for m in meshes)} triangles")
+        anims = extra["animations"]
+        lines.insert(-2, f"animations:  {len(anims)}" + (": " + ", ".join(
+            f"{a['name']} ({a['frames']} frames, {a['duration']:.2f} s)" for a in anims)
+            if anims else ""))
+        for note in extra["notes"]:
+            lines.insert(-2, f"note:        {note}")
     lines += ["  " + line for line in joint_tree_lines(motion)]
     print("\n".join(lines))
     return 0
@@ -184,9 +240,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Retarget captured motion onto any character and correct it with IK.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     info = sub.add_parser("info", help="describe a motion file",
-                          description="Describe a BVH file: joint tree, frames, frame rate, "
-                                      "duration, units, up axis, stature, channel layout.")
-    info.add_argument("file", help="a .bvh file")
+                          description="Describe a BVH file or a glTF character (.glb, "
+                                      ".gltf): joint tree, frames, frame rate, duration, "
+                                      "units, up axis, stature, channel layout; for glTF also "
+                                      "skins, meshes and animations (the first animation is "
+                                      "the motion shown, or the bind pose when there is none).")
+    info.add_argument("file", help="a .bvh, .glb or .gltf file")
     info.add_argument("--json", action="store_true", help="print JSON for machines")
     _add_reader_options(info)
     info.set_defaults(func=cmd_info)
@@ -249,7 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _gui(argv: list[str]) -> int:
-    """``motion-composer [PROJECT] [--demo] [--frame N] [--screenshot PNG]``: the window."""
+    """``motion-composer [PROJECT] [--demo] [--frame N] [--screenshot PNG] [--self-test]``:
+    the window."""
     parser = argparse.ArgumentParser(prog="motion-composer",
                                      description="Open the composer window (or run a command: "
                                                  "motion-composer info|retarget|export ...).")
@@ -258,8 +318,14 @@ def _gui(argv: list[str]) -> int:
     parser.add_argument("--frame", type=int, help="go to this frame")
     parser.add_argument("--screenshot", metavar="PNG",
                         help="save a picture of the window once drawn, then quit")
+    parser.add_argument("--self-test", action="store_true",
+                        help="start the window, load the demo, step through frames, check "
+                             "that the viewport draws, then quit; prints 'self-test: ok (...)' "
+                             "(exit 0) or 'self-test: FAILED: reason' (exit 1)")
     args = parser.parse_args(argv)
     from app.gui.main import run
+    if args.self_test:
+        return run(self_test=True)
     return run(args.project, demo=args.demo, screenshot=args.screenshot, frame=args.frame)
 
 

@@ -13,6 +13,7 @@ __all__ = [
     "MotionComposerError",
     "FileFormatError",
     "BVHError",
+    "GLTFError",
     "ExportError",
     "SkeletonError",
     "MappingError",
@@ -45,6 +46,21 @@ class FileFormatError(MotionComposerError):
 
 class BVHError(FileFormatError):
     """A BVH file that is malformed or holds values that cannot be used."""
+
+
+class GLTFError(FileFormatError):
+    """A glTF 2.0 file (``.glb`` or ``.gltf``) that is malformed or uses what the reader cannot.
+
+    Attributes:
+        where: the JSON path of the offending value (``"accessors[12].count"``), or a part of
+            the binary container (``"GLB header"``), or ``None``.
+    """
+
+    def __init__(self, problem: str, path: str | os.PathLike | None = None,
+                 where: str | None = None):
+        self.where = where
+        super().__init__(f"{where}: {problem}" if where else problem, path)
+        self.problem = problem
 
 
 class ExportError(MotionComposerError):
