@@ -345,6 +345,12 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                     np.linalg.norm(t) > _MIN_BONE * t_height:
                 usable.append((c, v, t))
         usable.sort(key=lambda item: -subtree[item[0]])
+        # the primary bone is the one towards the largest subtree (the spine from the hips);
+        # when that one has no direction (CMU's LowerBack sits on its hips), aligning a leg in
+        # its place would roll the pelvis: the joint follows its performer joint instead
+        main = max(children, key=lambda c: subtree[c]) if children else None
+        if usable and main is not None and usable[0][0] != main:
+            usable = []
         if not usable:
             bones[j] = _Bones([], [], np.zeros((0, 3)), np.zeros((0, 3)), False)
             continue
