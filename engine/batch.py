@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Recipe", "process_clip", "run_batch"]
+__all__ = ["Recipe", "recipe_from_project", "process_clip", "run_batch"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,23 @@ class Recipe:
     floor: float | None = None
     suffix: str = ""
     target_reader: dict = field(default_factory=dict)
+
+
+def recipe_from_project(project, *, suffix: str = "") -> Recipe:
+    """The rules of a saved project, for other clips: its target, mapping, binding, root
+    options, automatic contacts and floor. (Its own constraints name frames of its own clip,
+    so they do not carry over; automatic contacts are detected again on each clip.)"""
+    import dataclasses
+    src = project.target
+    if src.path is None:
+        from .errors import MotionComposerError
+        raise MotionComposerError("the project's target is only embedded; batch needs the "
+                                  "target as a file")
+    bind = dataclasses.asdict(project.bind_options)
+    root = dataclasses.asdict(project.root)
+    return Recipe(target_path=str(src.path), pairs=dict(project.correspondence.pairs),
+                  bind=bind, root=root, auto_contacts=bool(project.auto_contacts),
+                  floor=project.floor, suffix=suffix, target_reader=src.reader_options())
 
 
 def _read_character(path: str, options: dict):

@@ -283,6 +283,16 @@ def _read_source(source: Source, role: str, path) -> Motion:
         present = False
     if not present:
         raise MissingSourceError(role, os.path.abspath(source.path), path)
+    if Path(source.path).suffix.lower() in (".glb", ".gltf"):
+        # a glTF character (the file's suffix says which reader; no format change needed):
+        # its bind pose is the target, its skinned mesh is drawn by the window
+        from .gltf import read_gltf
+        from .errors import GLTFError
+        try:
+            return read_gltf(source.path).rest_motion()
+        except GLTFError as exc:
+            raise ProjectError(f"the {role} character cannot be read: {exc}", path,
+                               f"{role}.path") from None
     try:
         return read_bvh(source.path, **options)
     except BVHError as exc:

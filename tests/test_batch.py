@@ -71,3 +71,26 @@ def test_on_a_local_dask_cluster(tmp_path):
     local = process_clip(Recipe(TPOSE, auto_contacts=True), _clips()[0], str(tmp_path / "l"))
     assert np.allclose(read_bvh(summary[0]["output"]).rotations,
                        read_bvh(local["output"]).rotations)
+
+
+def test_the_batch_command_applies_a_project(tmp_path, capsys):
+    import json
+    from app.cli import main
+    from conftest import REPO
+    demo = REPO / "resources" / "demo" / "demo.mcp"
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    summary = tmp_path / "summary.json"
+    code = main(["batch", str(demo), _clips()[0], str(bad), "-o", str(tmp_path / "out"),
+                 "--workers", "2", "--summary", str(summary), "--suffix", "_child"])
+    out, err = capsys.readouterr()
+    assert code == 1                                        # one clip failed
+    assert "1 of 2 clips written" in out and "failed   bad.bvh: " in out
+    assert "2/2" in err                                     # the progress bar reached the end
+    data = json.loads(summary.read_text())
+    assert [s["status"] for s in data] == ["written", "failed"]
+    written = read_bvh(data[0]["output"])
+    assert data[0]["output"].endswith("cmu_131_01_walk_child.bvh")
+    assert written.skeleton.names == read_bvh(clip_path("fair1_child8_jumping.bvh")).skeleton.names
+    # the project's automatic contacts were applied to the new clip
+    assert data[0]["contact_drift"]["count"] > 5
