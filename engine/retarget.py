@@ -340,10 +340,18 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
             if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving):
                 continue
             v = p_pos[mapped[c]] - p_pos[mapped[j]]
-            t = qrot(qconj(t_world_ref[j]), t_pos_ref[c] - t_pos_ref[j])
-            if np.linalg.norm(v) > _MIN_BONE * scale_len and \
-                    np.linalg.norm(t) > _MIN_BONE * t_height:
-                usable.append((c, v, t))
+            world_t = t_pos_ref[c] - t_pos_ref[j]
+            t = qrot(qconj(t_world_ref[j]), world_t)
+            if not (np.linalg.norm(v) > _MIN_BONE * scale_len and
+                    np.linalg.norm(t) > _MIN_BONE * t_height):
+                continue
+            # a short target bone pointing against its virtual bone is a rig's helper offset
+            # (the robot's "Hips" sits 10 cm below its pelvis, the capture's spine goes up):
+            # turning it over would fold the body, so it gives no direction
+            cos = np.dot(v, world_t) / (np.linalg.norm(v) * np.linalg.norm(world_t))
+            if cos < -0.5 and np.linalg.norm(world_t) < 0.1 * t_height:
+                continue
+            usable.append((c, v, t))
         usable.sort(key=lambda item: -subtree[item[0]])
         # the primary bone is the one towards the largest subtree (the spine from the hips);
         # when that one has no direction (CMU's LowerBack sits on its hips), aligning a leg in

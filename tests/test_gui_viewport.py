@@ -115,3 +115,27 @@ def test_constraint_goals_are_drawn(view):
     assert v.goals.visible() and v.planes.visible()
     doc.undo_stack.undo()
     assert not v.goals.visible()
+
+
+def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot):
+    require_gl()
+    from conftest import clip_path, shared_path
+    from app.gui.main_window import MainWindow
+    robot = shared_path("target_robot_expressive.glb")
+    w = MainWindow()
+    qtbot.addWidget(w)
+    w.show_error = lambda message: pytest.fail(message)
+    w.resize(1200, 800)
+    w.show()
+    assert w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
+    assert w.import_file("target", robot)
+    doc, v = w.doc, w.viewport
+    assert doc.ready and doc.character is not None
+    assert v.skin is not None and v.skin.visible()
+    doc.set_frame(100)
+    first = v.skin.opts["meshdata"].vertexes().copy()
+    doc.set_frame(400)
+    second = v.skin.opts["meshdata"].vertexes()
+    assert first.shape == second.shape and first.shape[0] > 1000
+    assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
+    doc.undo_stack.setClean()

@@ -102,6 +102,22 @@ class Document(QtCore.QObject):
         return f"{name}{'*' if self.modified else ''} - Motion Composer"
 
     @property
+    def character(self):
+        """The target's glTF character (mesh and skin), or None for a BVH target."""
+        path = self.target_path
+        if path is None or Path(path).suffix.lower() not in (".glb", ".gltf"):
+            return None
+        cached = getattr(self, "_character", None)
+        if cached is None or cached[0] != str(path):
+            from engine.gltf import read_gltf
+            try:
+                self._character = (str(path), read_gltf(path))
+            except MotionComposerError as exc:
+                self.errorRaised.emit(str(exc))
+                self._character = (str(path), None)
+        return self._character[1]
+
+    @property
     def num_frames(self) -> int:
         return self.performer.num_frames if self.performer is not None else 0
 

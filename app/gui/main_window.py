@@ -271,7 +271,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.statusBar().showMessage(f"Autosave failed: {exc}", 10000)
 
     def import_dialog(self, side: str) -> None:
-        path = self.ask_open_path(f"Import {side}", "Motion files (*.bvh);;All (*)")
+        path = self.ask_open_path(f"Import {side}",
+                                  "Motion files (*.bvh *.glb *.gltf);;All (*)")
         if path:
             self.import_file(side, path)
 
@@ -279,7 +280,15 @@ class MainWindow(QtWidgets.QMainWindow):
         from engine.bvh import read_bvh
 
         def load():
-            motion = read_bvh(path)
+            if Path(path).suffix.lower() in (".glb", ".gltf"):
+                if side != "target":
+                    from engine.errors import MotionComposerError
+                    raise MotionComposerError(f"{path}: a glTF file is a character; import it "
+                                              "as the target")
+                from engine.gltf import read_gltf
+                motion = read_gltf(path).rest_motion()
+            else:
+                motion = read_bvh(path)
             if side == "performer":
                 push_sources(self.doc, performer=motion, performer_path=Path(path),
                              text=f"Import performer {Path(path).name}")

@@ -133,6 +133,8 @@ class Viewport(gl.GLViewWidget):
                                     smooth=False)
         self.planes.setVisible(False)
         self.addItem(self.planes)
+        self.skin = None                  # the target character's skinned mesh, when it has one
+        self._skin_key = None
         self._press = None
         self._framed = False
         self.setCameraPosition(distance=5.0, elevation=15, azimuth=-90)
@@ -222,8 +224,35 @@ class Viewport(gl.GLViewWidget):
                 "performer" if which == "performer" else "target") else -1
             fig.update(data[0], data[1], layout[which], width, sel)
             fig.offset = layout[which]
+        self._refresh_skin(layout)
         self._refresh_virtual(layout)
         self._refresh_goals(layout)
+
+    def _refresh_skin(self, layout) -> None:
+        """The target character's mesh, deformed by the motion at the current frame."""
+        doc = self.doc
+        character = doc.character if "target" in layout else None
+        motion = doc.motion if doc.motion is not None else doc.target
+        if character is None or motion is None or not character.meshes:
+            if self.skin is not None:
+                self.skin.setVisible(False)
+            return
+        from engine.skinning import skin_character
+        f = min(doc.viewer.current_frame, motion.num_frames - 1)
+        parts = skin_character(character, motion, frames=[f])
+        verts = np.concatenate([p[0] for p in parts])
+        offsets = np.cumsum([0] + [len(m.positions) for m in character.meshes[:-1]])
+        faces = np.concatenate([m.triangles + o for m, o in zip(character.meshes, offsets)])
+        verts = to_view(verts) + layout["target"]
+        if self.skin is None:
+            self.skin = gl.GLMeshItem(vertexes=verts, faces=faces,
+                                      color=(0.85, 0.80, 0.72, 0.55), shader="shaded",
+                                      smooth=True, glOptions="translucent")
+            self.addItem(self.skin)
+        else:
+            self.skin.setMeshData(vertexes=verts, faces=faces,
+                                  color=(0.85, 0.80, 0.72, 0.55), shader="shaded", smooth=True)
+        self.skin.setVisible(True)
 
     def _refresh_virtual(self, layout) -> None:
         """Highlight the virtual bones of the selected mapping on the performer."""
