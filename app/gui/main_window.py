@@ -63,7 +63,7 @@ class MainWindow(QtWidgets.QMainWindow):
         try:                                   # the constraint timeline and inspector
             from app.gui.inspector import ConstraintInspector
             from app.gui.timeline import ConstraintTimeline
-            self.timeline = ConstraintTimeline(self.doc)
+            self.timeline = ConstraintTimeline(self.doc, window=self)
             self.inspector = ConstraintInspector(self.doc, self.timeline, window=self)
             docks += [("Constraints", self.timeline,
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
