@@ -1,28 +1,63 @@
-"""Start the composer window: ``motion-composer [PROJECT] [--demo]``."""
+"""Start the composer window: ``motion-composer [PROJECT] [--demo] [--self-test]``."""
 from __future__ import annotations
 
+import os
+import sys
+import time
 from pathlib import Path
 
-REPO_RESOURCES = Path(__file__).resolve().parent.parent.parent / "resources"
-DEMO_PROJECT = REPO_RESOURCES / "demo" / "demo.mcp"
+from app.resources import resource_path
+
+REPO_RESOURCES = resource_path("")           # the source tree's resources/, or the bundle's
+DEMO_PROJECT = resource_path("demo/demo.mcp")
+ICON = resource_path("icons/motion-composer.png")
+
+#: frames the self-test steps through, at least
+SELF_TEST_FRAMES = 60
+#: the self-test gives up after this long (a dialog left open, a hung driver...)
+SELF_TEST_TIMEOUT_S = 120
+#: the target skeleton's colour in the viewport (COLORS["target"] in 8-bit), and how many
+#: pixels of it the self-test wants to see
+TARGET_RGB = (242, 153, 64)
+MIN_TARGET_PIXELS = 100
+
+
+def demo_project() -> Path:
+    """The demo project: ``$MC_DEMO_PROJECT`` when set (for tests of the self-test), else the
+    bundled ``resources/demo/demo.mcp``."""
+    override = os.environ.get("MC_DEMO_PROJECT")
+    return Path(override) if override else DEMO_PROJECT
+
+
+def _set_icon(app, window) -> None:
+    from app.gui.qt import QtGui
+    app.setDesktopFileName("motion-composer")       # matches packaging/motion-composer.desktop
+    if ICON.is_file():
+        icon = QtGui.QIcon(str(ICON))
+        app.setWindowIcon(icon)
+        window.setWindowIcon(icon)
 
 
 def run(project: str | None = None, *, demo: bool = False, screenshot: str | None = None,
-        frame: int | None = None, quit_after_ms: int | None = None) -> int:
+        frame: int | None = None, quit_after_ms: int | None = None,
+        self_test: bool = False) -> int:
     """Open the window (on ``project`` or the demo) and run the event loop.
 
     ``screenshot``: save a PNG of the window once it is drawn, then quit (for documentation
-    and self-tests); ``frame``: go to that frame first.
+    and self-tests); ``frame``: go to that frame first; ``self_test``: see :func:`self_test`.
     """
     from app.gui.qt import QtCore, application
     from app.runtime import tune_allocator
 
     tune_allocator()
+    if self_test:
+        return _run_self_test()
     app = application()
     from app.gui.main_window import MainWindow
     window = MainWindow()
+    _set_icon(app, window)
     window.show()
-    path = DEMO_PROJECT if demo else project
+    path = demo_project() if demo else project
     if path is not None:
         window.open_project(path)
     else:
@@ -39,3 +74,164 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     elif quit_after_ms is not None:
         QtCore.QTimer.singleShot(quit_after_ms, app.quit)
     return app.exec()
+
+
+# ---------------------------------------------------------------------------- self-test
+class SelfTestFailure(Exception):
+    """A check of the self-test did not hold; the message says which."""
+
+
+def _gl_expected(app) -> bool:
+    """Whether this platform can give the viewport an OpenGL context at all ('offscreen' and
+    'minimal' cannot; X11, Wayland, Windows and macOS can, so there it must work)."""
+    return app.platformName() not in ("offscreen", "minimal")
+
+
+def _count_pixels(image, rgb, tol: int = 40) -> int:
+    import numpy as np
+    from app.gui.qt import QtGui
+    image = image.convertToFormat(QtGui.QImage.Format.Format_RGB32)
+    arr = np.frombuffer(image.constBits(), dtype=np.uint8).reshape(
+        image.height(), image.bytesPerLine() // 4, 4)[:, :image.width(), :3][..., ::-1]
+    return int(np.sum(np.all(np.abs(arr.astype(int) - rgb) < tol, axis=-1)))
+
+
+def _wait(app, seconds: float, until=None) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        app.processEvents()
+        if until is not None and until():
+            return
+        time.sleep(0.005)
+
+
+def self_test(app, window) -> str:
+    """Load the demo into ``window``, step through frames, check that the viewport drew.
+    Returns the figures for the report; raises :class:`SelfTestFailure`."""
+    import numpy as np
+
+    started = time.perf_counter()
+    window.resize(1280, 800)
+    window.show()
+    _wait(app, 5.0, until=lambda: window.windowHandle() is not None and
+          window.windowHandle().isExposed())
+    path = demo_project()
+    if not path.is_file():
+        raise SelfTestFailure(f"the demo project is missing: {path}")
+    errors = window.errors
+    t0 = time.perf_counter()
+    if not window.open_project(path):
+        raise SelfTestFailure(f"the demo project did not open: "
+                              f"{' '.join((errors[-1] if errors else 'no reason given').split())}")
+    load_s = time.perf_counter() - t0
+    doc = window.doc
+    if not doc.ready:
+        raise SelfTestFailure("the demo opened but is not ready (sources or map missing)")
+    if doc.num_frames <= 0 or doc.motion is None:
+        raise SelfTestFailure(f"the demo has no motion ({doc.num_frames} frames)")
+    if doc.evaluation_error:
+        raise SelfTestFailure(f"the demo did not evaluate: {doc.evaluation_error}")
+
+    figure = window.viewport.figures.get("target")
+    steps = min(SELF_TEST_FRAMES, doc.num_frames)
+    first = max(0, min(doc.viewer.current_frame, doc.num_frames - steps))
+    before = None if figure is None else np.array(figure.points, copy=True)
+    t0 = time.perf_counter()
+    for f in range(first, first + steps):
+        doc.set_frame(f)
+        app.processEvents()
+        if doc.viewer.current_frame != f:
+            raise SelfTestFailure(f"set_frame({f}) left the document at frame "
+                                  f"{doc.viewer.current_frame}")
+    step_s = time.perf_counter() - t0
+    if errors:
+        raise SelfTestFailure(f"an error was shown: {' '.join(errors[-1].split())}")
+    if figure is not None and steps > 1 and np.allclose(figure.points, before):
+        raise SelfTestFailure("the target skeleton did not move while stepping frames")
+
+    if _gl_expected(app):
+        window.viewport.frame_all()
+        _wait(app, 0.3)
+        viewport = window.viewport
+        image = viewport.grabFramebuffer()
+        if not viewport.isValid() or image.isNull():
+            raise SelfTestFailure(f"the viewport has no OpenGL context on the "
+                                  f"'{app.platformName()}' platform")
+        pixels = _count_pixels(image, TARGET_RGB)
+        if pixels < MIN_TARGET_PIXELS:
+            raise SelfTestFailure(f"the viewport did not draw the target skeleton "
+                                  f"({pixels} target-coloured pixels of "
+                                  f"{image.width()}x{image.height()})")
+        context = viewport.context()
+        gl = context.format() if context is not None else None
+        drew = (f"viewport {image.width()}x{image.height()} drew {pixels} target pixels"
+                + (f" (OpenGL {gl.majorVersion()}.{gl.minorVersion()})" if gl else ""))
+    else:
+        drew = f"viewport not checked (no OpenGL on the '{app.platformName()}' platform)"
+    return (f"demo {doc.num_frames} frames, {doc.target.skeleton.num_joints} target joints, "
+            f"loaded in {load_s:.2f} s; stepped {steps} frames ({first}-{first + steps - 1}) "
+            f"at {steps / max(step_s, 1e-9):.0f} fps; {drew}; "
+            f"{time.perf_counter() - started:.1f} s in all")
+
+
+def _run_self_test() -> int:
+    """``motion-composer --self-test``: start, load the demo, step frames, quit. Prints one
+    line, ``self-test: ok (...)`` with exit code 0 or ``self-test: FAILED: reason`` with 1."""
+    import tempfile
+    import threading
+
+    def report(ok: bool, text: str) -> None:
+        print(f"self-test: {'ok (' + text + ')' if ok else 'FAILED: ' + text}", flush=True)
+
+    def give_up() -> None:                 # a dialog left open, a hung driver...
+        report(False, f"no answer after {SELF_TEST_TIMEOUT_S} s")
+        os._exit(1)
+
+    watchdog = threading.Timer(SELF_TEST_TIMEOUT_S, give_up)
+    watchdog.daemon = True
+    watchdog.start()
+    saved_state_home = os.environ.get("XDG_STATE_HOME")
+    with tempfile.TemporaryDirectory(prefix="mc-self-test-") as scratch:
+        # no trace in the user's settings (recent files) or autosave folder
+        os.environ["XDG_STATE_HOME"] = os.path.join(scratch, "state")
+        try:
+            from app.gui.qt import QtCore, application
+            QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
+            QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
+                                     QtCore.QSettings.Scope.UserScope,
+                                     os.path.join(scratch, "settings"))
+            app = application()
+            from app.gui.main_window import MainWindow
+            window = MainWindow()
+            _set_icon(app, window)
+            window.errors = []
+            window.show_error = window.errors.append            # no modal dialogs
+            window.ask_yes_no = lambda question: False
+            window.ask_open_path = lambda caption, filters: ""
+            window.ask_unsaved = lambda: "discard"
+            try:
+                figures = self_test(app, window)
+            finally:
+                # hidden rather than closed: closing also discards the demo's autosave, which
+                # a self-test must not touch
+                window.autosave_timer.stop()
+                window.doc.undo_stack.setClean()
+                window.hide()
+                window.deleteLater()
+                app.processEvents()
+        except SelfTestFailure as exc:
+            report(False, str(exc))
+            return 1
+        except Exception as exc:          # noqa: BLE001 - any crash is a failed self-test
+            import traceback
+            traceback.print_exc(file=sys.stderr)
+            report(False, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+            return 1
+        finally:
+            watchdog.cancel()
+            if saved_state_home is None:
+                os.environ.pop("XDG_STATE_HOME", None)
+            else:
+                os.environ["XDG_STATE_HOME"] = saved_state_home
+    report(True, figures)
+    return 0

@@ -1,0 +1,9 @@
+"""Entry point of the desktop bundle: the same as the ``motion-composer`` console command."""
+import multiprocessing
+import sys
+
+from app.cli import main
+
+if __name__ == "__main__":
+    multiprocessing.freeze_support()
+    sys.exit(main())
