@@ -139,3 +139,33 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     assert first.shape == second.shape and first.shape[0] > 1000
     assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
     doc.undo_stack.setClean()
+
+
+def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
+    from app.gui.qt import QtCore
+    from app.gui.commands import push_constraints
+    from engine.constraints import Constraint
+    doc, v = view
+    hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
+    push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + [0.05, 0.1, 0]},
+                                      280, 290, 310, 320, name="reach")])
+    v.set_active_constraint(0)
+    count = doc.undo_stack.count()
+    start = np.array(doc.constraints[0].goal["point"])
+    x, y = v.project((v._active_goal()[2])[None])[0]
+    qtbot.mousePress(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(int(x), int(y)))
+    qtbot.mouseMove(v, QtCore.QPoint(int(x), int(y) - 15))
+    qtbot.wait(50)                                      # the live preview runs
+    assert doc.undo_stack.count() == count               # a preview, not yet a command
+    qtbot.mouseMove(v, QtCore.QPoint(int(x), int(y) - 30))
+    qtbot.mouseRelease(v, QtCore.Qt.MouseButton.LeftButton,
+                       pos=QtCore.QPoint(int(x), int(y) - 30))
+    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=20000)
+    assert doc.undo_stack.undoText() == "Move goal of reach"
+    goal = np.array(doc.constraints[0].goal["point"])
+    assert goal[1] > start[1] + 0.02                     # dragged up on screen: higher
+    # the camera looks along the view; the goal moved in the plane facing it
+    reached = doc.pose("target").positions[290:311, doc.target.skeleton.index["LeftHand"]]
+    assert np.linalg.norm(reached - goal, axis=1).max() < 2e-3
+    doc.undo_stack.undo()
+    np.testing.assert_allclose(doc.constraints[0].goal["point"], start)

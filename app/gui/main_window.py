@@ -65,6 +65,7 @@ class MainWindow(QtWidgets.QMainWindow):
             from app.gui.timeline import ConstraintTimeline
             self.timeline = ConstraintTimeline(self.doc, window=self)
             self.inspector = ConstraintInspector(self.doc, self.timeline, window=self)
+            self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
             docks += [("Constraints", self.timeline,
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
                       ("Constraint", self.inspector,

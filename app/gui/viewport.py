@@ -134,6 +134,8 @@ class Viewport(gl.GLViewWidget):
         self.planes.setVisible(False)
         self.addItem(self.planes)
         self.skin = None                  # the target character's skinned mesh, when it has one
+        self.active_constraint: int | None = None   # the constraint whose goal can be dragged
+        self._goal_drag = None
         self._skin_key = None
         self._press = None
         self._framed = False
@@ -315,8 +317,14 @@ class Viewport(gl.GLViewWidget):
                     points.append(path[f - c.start])
             elif c.kind == "plane" and c.smooth_in <= f <= c.smooth_out:
                 quads.append(self._plane_quad(c, off, size))
+        active = self._active_goal()
+        if active is not None:
+            points.append(active[2])                       # the draggable goal, always shown
         if points:
-            self.goals.setData(pos=np.array(points), color=(1, 0.3, 0.3, 1), size=0.03 * size)
+            sizes = np.full(len(points), 0.03 * size)
+            if active is not None:
+                sizes[-1] = 0.06 * size
+            self.goals.setData(pos=np.array(points), color=(1, 0.3, 0.3, 1), size=sizes)
         self.goals.setVisible(bool(points))
         if lines:
             seg = np.stack([np.concatenate(lines[0::2]), np.concatenate(lines[1::2])], axis=1)
@@ -403,11 +411,68 @@ class Viewport(gl.GLViewWidget):
         return None if best is None else (best[1], best[2])
 
     # ------------------------------------------------------------------ mouse and keys
+    def set_active_constraint(self, index) -> None:
+        """Which constraint's goal the gizmo drags (the timeline's selection)."""
+        self.active_constraint = None if index is None or index < 0 else int(index)
+        self.refresh()
+
+    def _active_goal(self):
+        """(index, constraint, goal in view space) of a draggable position goal, or None."""
+        i = self.active_constraint
+        cons = self.doc.constraints
+        if i is None or not 0 <= i < len(cons) or cons[i].kind != "position":
+            return None
+        off = self._layout().get("target")
+        if off is None:
+            return None
+        return i, cons[i], to_view(cons[i].goal["point"]) + off, off
+
+    def _unproject(self, x: float, y: float, through: np.ndarray) -> np.ndarray:
+        """The view-space point under pixel (x, y) on the plane through ``through`` facing
+        the camera."""
+        viewport = (0, 0, self.width(), self.height())
+        m = np.array(self.projectionMatrix(viewport, viewport).data()).reshape(4, 4).T @ \
+            np.array(self.viewMatrix().data()).reshape(4, 4).T
+        inv = np.linalg.inv(m)
+        ndc = np.array([2 * x / self.width() - 1, 1 - 2 * y / self.height()])
+        near = inv @ np.array([ndc[0], ndc[1], -1.0, 1.0])
+        far = inv @ np.array([ndc[0], ndc[1], 1.0, 1.0])
+        near, far = near[:3] / near[3], far[:3] / far[3]
+        direction = far - near
+        eye = np.array(self.cameraPosition())
+        normal = np.asarray(through) - eye
+        normal /= np.linalg.norm(normal)
+        t = np.dot(through - near, normal) / np.dot(direction, normal)
+        return near + t * direction
+
     def mousePressEvent(self, ev):
         self._press = ev.position()
         self.mousePos = ev.position()
+        goal = self._active_goal()
+        if goal is not None and ev.button() == QtCore.Qt.MouseButton.LeftButton:
+            i, c, point, off = goal
+            px = self.project(point[None])[0]
+            if np.hypot(px[0] - ev.position().x(), px[1] - ev.position().y()) <= 14:
+                from app.gui.live import live_solver
+                self._goal_drag = (i, c, off, live_solver(self.doc, self.window()))
+                self._goal_drag[3].begin()
+
+    def _dragged_goal(self, pos):
+        i, c, off, _solver = self._goal_drag
+        point = self._unproject(pos.x(), pos.y(), to_view(c.goal["point"]) + off) - off
+        engine = np.array([point[0], point[2], -point[1]])        # view (Z up) -> engine (Y up)
+        import dataclasses
+        moved = dataclasses.replace(c, goal={"point": engine})
+        constraints = list(self.doc.constraints)
+        constraints[i] = moved
+        return constraints, engine
 
     def mouseMoveEvent(self, ev):
+        if self._goal_drag is not None:
+            constraints, _ = self._dragged_goal(ev.position())
+            self._goal_drag[3].request(constraints)
+            self.mousePos = ev.position()
+            return
         pos = ev.position()
         diff = pos - self.mousePos
         self.mousePos = pos
@@ -424,6 +489,14 @@ class Viewport(gl.GLViewWidget):
         self.update()
 
     def mouseReleaseEvent(self, ev):
+        if self._goal_drag is not None:
+            constraints, point = self._dragged_goal(ev.position())
+            solver = self._goal_drag[3]
+            name = self._goal_drag[1].name or self._goal_drag[1].joint
+            self._goal_drag = None
+            self._press = None
+            solver.commit(constraints, f"Move goal of {name}")
+            return
         if self._press is not None and ev.button() == QtCore.Qt.MouseButton.LeftButton:
             moved = ev.position() - self._press
             if abs(moved.x()) + abs(moved.y()) < 4:
