@@ -64,7 +64,7 @@ from scipy.spatial.transform import Rotation
 from .errors import ExportError, GLTFError
 from .fileio import atomic_write
 from .motion import Motion
-from .quaternions import qconj, qmul, qrot
+from .quaternions import qconj, qmul, qrot, to_matrix
 from .skeleton import EndSite, Skeleton
 from .units import SourceFrame
 
@@ -226,19 +226,7 @@ def _rest_positions(sk: Skeleton) -> np.ndarray:
 def _quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """``(..., 4)`` x-y-z-w (any norm) -> ``(..., 3, 3)`` rotation matrices."""
     q = np.asarray(q, dtype=float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    return to_matrix(q / np.linalg.norm(q, axis=-1, keepdims=True))
 
 
 def _trs_matrix(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .quaternions import qconj, qmul, qnormalize, qrot
+from .quaternions import qconj, qmul, qnormalize, qrot, to_matrix
 from .skeleton import Skeleton
 
 __all__ = ["Task", "IKOptions", "solve_frames", "rotvec_to_quat", "quat_to_rotvec",
@@ -66,20 +66,6 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _matrices(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,7 +208,7 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
             if a not in parent_m:
                 p = int(skeleton.parents[a])
                 parent_m[a] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if p < 0
-                               else _matrices(wq[p]))
+                               else to_matrix(wq[p]))
             mats.append(parent_m[a])
         cols = np.concatenate([np.arange(structure.col[int(a)], structure.col[int(a)] + 3)
                                for a in chain]) if len(chain) else np.zeros(0, dtype=np.intp)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
-           "twist_about", "qpow", "about_axis"]
+           "twist_about", "qpow", "about_axis", "qpow_many", "to_matrix"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -205,4 +205,21 @@ def qpow_many(q: np.ndarray, fractions: np.ndarray) -> np.ndarray:
     out = np.empty(half.shape + (4,))
     out[..., :3] = axis * np.sin(half)[..., None]
     out[..., 3] = np.cos(half)
+    return out
+
+
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    out = np.empty(q.shape[:-1] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return out

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .quaternions import to_matrix
+
 from .kinematics import WorldPose, forward_kinematics
 from .motion import Motion
 
@@ -28,19 +30,7 @@ _BLOCK = 1_000_000
 
 def quat_matrices(q: np.ndarray) -> np.ndarray:
     """``(..., 4)`` unit quaternions x-y-z-w -> ``(..., 3, 3)`` rotation matrices."""
-    q = np.asarray(q, dtype=float)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    return to_matrix(q)
 
 
 def joint_matrices(rotations: np.ndarray, positions: np.ndarray,
