@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternions import to_matrix
-
 from .kinematics import WorldPose, forward_kinematics
 from .motion import Motion
+from .quaternions import to_matrix
 
 __all__ = ["joint_matrices", "skin_vertices", "skin_mesh", "skin_character",
            "quat_matrices"]
