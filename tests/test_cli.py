@@ -240,7 +240,7 @@ def _commands():
     yield pytest.param([script] if script else None, id="motion-composer script")
 
 
-@pytest.mark.parametrize("command", _commands())
+@pytest.mark.parametrize("command", list(_commands()))
 def test_subprocess_good_and_bad(command, tmp_path):
     if command is None:
         pytest.skip("the motion-composer console script is not installed on PATH")
