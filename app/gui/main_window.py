@@ -162,7 +162,6 @@ class MainWindow(QtWidgets.QMainWindow):
     # ------------------------------------------------------------------ state display
     def _update_title(self) -> None:
         self.setWindowTitle(self.doc.title)
-        self.setWindowModified(self.doc.modified)
 
     def _motion_changed(self) -> None:
         if self.doc.evaluation_error:
