@@ -41,16 +41,6 @@ from _common import (Row, environment, fmt_seconds, print_table, time_runs,  # n
 FPS_TARGET = 1000.0
 EDIT_TARGET = 0.1           # [s]
 
-#: used when engine.automap is not available
-MAX_TO_BANDAI = {
-    "Hips": "Hips", "Spine": "Chest", "Chest": "Chest2", "Neck": "Neck", "Head": "Head",
-    "Shoulder_L": "LeftCollar", "UpperArm_L": "LeftShoulder", "LowerArm_L": "LeftElbow",
-    "Hand_L": "LeftWrist", "Shoulder_R": "RightCollar", "UpperArm_R": "RightShoulder",
-    "LowerArm_R": "RightElbow", "Hand_R": "RightWrist", "UpperLeg_L": "LeftHip",
-    "LowerLeg_L": "LeftKnee", "Foot_L": "LeftAnkle", "Toes_L": "LeftToe",
-    "UpperLeg_R": "RightHip", "LowerLeg_R": "RightKnee", "Foot_R": "RightAnkle",
-    "Toes_R": "RightToe",
-}
 
 
 def main() -> None:
@@ -64,7 +54,6 @@ def main() -> None:
     from engine.constraints import Constraint
     from engine.contacts import contact_constraints, detect_contacts, horizontal_drift
     from engine.correct import enforce
-    from engine.correspondence import Correspondence
     from engine.retarget import retarget
 
     walk = SHARED_DATA / "cmu_max_131_01_walk.bvh"
@@ -72,13 +61,9 @@ def main() -> None:
     if not (walk.is_file() and bandai.is_file()):
         sys.exit(f"error: this benchmark needs {walk} and {bandai} (set MC_SHARED_DATA)")
     performer, target = read_bvh(walk), read_bvh(bandai)
-    try:
-        from engine.automap import automap
-        corr = automap(target.skeleton, performer.skeleton)
-        how = "automatic mapping"
-    except ImportError:
-        corr = Correspondence(MAX_TO_BANDAI)
-        how = "fixed mapping (engine.automap not available)"
+    from engine.automap import automap
+    corr = automap(target.skeleton, performer.skeleton)
+    how = "automatic mapping"
     composed = retarget(performer, target, corr)
     F = composed.num_frames
 

@@ -12,7 +12,7 @@ runs (9) after a warm-up:
 * the one-off Anatomic Binding (``bind``) that precedes it, for information;
 * the whole ``retarget`` call (bind + convert + compose).
 
-The mapping is the automatic one when ``engine.automap`` exists, else a fixed table.
+The mapping is the automatic one (``engine.automap``).
 BLAS threads are pinned to 1. This is a report, not a test.
 """
 from __future__ import annotations
@@ -36,28 +36,6 @@ from _common import (Row, SHARED_DATA, environment, fmt_seconds, print_table,  #
 
 FPS_TARGET = 100_000.0
 
-CMU_TO_BANDAI = {
-    "Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",
-    "Shoulder_L": "LeftShoulder", "UpperArm_L": "LeftArm", "LowerArm_L": "LeftForeArm",
-    "Hand_L": "LeftHand", "Shoulder_R": "RightShoulder", "UpperArm_R": "RightArm",
-    "LowerArm_R": "RightForeArm", "Hand_R": "RightHand", "UpperLeg_L": "LeftUpLeg",
-    "LowerLeg_L": "LeftLeg", "Foot_L": "LeftFoot", "Toes_L": "LeftToeBase",
-    "UpperLeg_R": "RightUpLeg", "LowerLeg_R": "RightLeg", "Foot_R": "RightFoot",
-    "Toes_R": "RightToeBase",
-}
-CMU_TO_CC3 = {
-    "CC_Base_Hip": "Hips", "CC_Base_Waist": "LowerBack", "CC_Base_Spine01": "Spine",
-    "CC_Base_Spine02": "Spine1", "CC_Base_NeckTwist01": "Neck", "CC_Base_NeckTwist02": "Neck1",
-    "CC_Base_Head": "Head",
-    "CC_Base_L_Clavicle": "LeftShoulder", "CC_Base_L_Upperarm": "LeftArm",
-    "CC_Base_L_Forearm": "LeftForeArm", "CC_Base_L_Hand": "LeftHand",
-    "CC_Base_R_Clavicle": "RightShoulder", "CC_Base_R_Upperarm": "RightArm",
-    "CC_Base_R_Forearm": "RightForeArm", "CC_Base_R_Hand": "RightHand",
-    "CC_Base_L_Thigh": "LeftUpLeg", "CC_Base_L_Calf": "LeftLeg", "CC_Base_L_Foot": "LeftFoot",
-    "CC_Base_L_ToeBase": "LeftToeBase", "CC_Base_R_Thigh": "RightUpLeg",
-    "CC_Base_R_Calf": "RightLeg", "CC_Base_R_Foot": "RightFoot",
-    "CC_Base_R_ToeBase": "RightToeBase",
-}
 
 
 def main() -> None:
@@ -66,28 +44,20 @@ def main() -> None:
     args = parser.parse_args()
 
     from engine import read_bvh
-    from engine.correspondence import Correspondence
     from engine.retarget import bind, compose, convert, retarget
 
     clip = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
-    targets = {"Bandai": ("bandai1_walk_normal_001.bvh", CMU_TO_BANDAI),
-               "CC3": ("cc3_cmu_02_06_pickup.bvh", CMU_TO_CC3)}
+    targets = {"Bandai": "bandai1_walk_normal_001.bvh", "CC3": "cc3_cmu_02_06_pickup.bvh"}
     if not clip.is_file():
         sys.exit(f"error: this benchmark needs {clip} (set MC_SHARED_DATA)")
     performer = read_bvh(clip)
     F = performer.num_frames
-    try:
-        from engine.automap import automap
-    except ImportError:
-        automap = None
+    from engine.automap import automap
     print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
     print(f"{clip.name}: {F} frames, {performer.skeleton.num_joints} joints\n")
-    for label, (name, table) in targets.items():
+    for label, name in targets.items():
         target = read_bvh(SHARED_DATA / name)
-        if automap is not None:
-            corr, how = automap(target.skeleton, performer.skeleton), "automatic mapping"
-        else:
-            corr, how = Correspondence(table), "fixed mapping"
+        corr, how = automap(target.skeleton, performer.skeleton), "automatic mapping"
         binding = bind(performer, target, corr)
 
         def conversion():
