@@ -151,7 +151,13 @@ def cmd_retarget(args) -> int:
 
     started = time.perf_counter()
     performer = read_bvh(args.performer)
-    target = read_bvh(args.target)
+    character = None
+    if Path(args.target).suffix.lower() in (".glb", ".gltf"):
+        from engine.gltf import read_gltf
+        character = read_gltf(args.target)           # its bind pose is the target
+        target = character.rest_motion()
+    else:
+        target = read_bvh(args.target)
     if args.map:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
@@ -176,7 +182,11 @@ def cmd_retarget(args) -> int:
                                scale=tuple(args.root_scale) if args.root_scale else None),
               constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
     result = run_job(job)
-    write_bvh(result.motion, args.output)
+    if Path(args.output).suffix.lower() in (".glb", ".gltf"):
+        from engine.gltf import write_gltf
+        write_gltf(result.motion, character, args.output)   # mesh and skin when the target has
+    else:
+        write_bvh(result.motion, args.output)
     if args.save_map:
         correspondence.save(args.save_map)
     if args.save_project:
@@ -297,8 +307,11 @@ def build_parser() -> argparse.ArgumentParser:
                                     "through an intermediate skeleton (no IK correction).")
     rt.add_argument("performer", help="the capture (.bvh)")
     rt.add_argument("--target", required=True,
-                    help="the character (.bvh whose rest pose or first frame gives it)")
-    rt.add_argument("-o", "--output", required=True, help="the .bvh to write")
+                    help="the character: a .bvh whose rest pose or first frame gives it, or a "
+                         "glTF character (.glb/.gltf, its bind pose)")
+    rt.add_argument("-o", "--output", required=True,
+                    help="the file to write: .bvh, or .glb/.gltf (with the character's mesh "
+                         "and skin when the target is glTF)")
     rt.add_argument("--map", help="a mapping file (JSON with a \"pairs\" object); "
                                   "automatic mapping when not given")
     rt.add_argument("--save-map", help="write the mapping actually used to this JSON file")

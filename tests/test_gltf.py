@@ -970,3 +970,23 @@ def test_blender_reads_what_we_read_and_write(tmp_path, robot, fox, retargeted):
                 theirs = np.stack([theirs[:, 0], theirs[:, 2], -theirs[:, 1]], axis=1)
             err = np.abs(theirs - ours[f]).max()
             assert err < 1e-4 * height, (key, f, err, height)
+
+
+def test_the_retarget_command_takes_a_gltf_character_and_writes_glb(tmp_path, capsys):
+    from app.cli import main
+    from engine.gltf import read_gltf
+    robot = shared_path("target_robot_expressive.glb")
+    out = tmp_path / "walk_on_robot.glb"
+    code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(robot),
+                 "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    back = read_gltf(out)
+    assert back.skeleton.names == read_gltf(robot).skeleton.names
+    assert back.meshes and sum(m.num_vertices for m in back.meshes) > 1000
+    walk = back.motions[0]
+    assert walk.num_frames > 200                    # resampled from 994 frames at 120 fps
+    bvh = tmp_path / "walk_on_robot.bvh"
+    assert main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(robot),
+                 "-o", str(bvh)]) == 0
+    from engine import read_bvh
+    assert read_bvh(bvh).num_frames == 994

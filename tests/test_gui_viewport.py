@@ -117,7 +117,7 @@ def test_constraint_goals_are_drawn(view):
     assert not v.goals.visible()
 
 
-def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot):
+def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot, tmp_path):
     require_gl()
     from conftest import clip_path, shared_path
     from app.gui.main_window import MainWindow
@@ -138,6 +138,11 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     second = v.skin.opts["meshdata"].vertexes()
     assert first.shape == second.shape and first.shape[0] > 1000
     assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
+    # exported onto the character as glTF, with its mesh
+    from engine.gltf import read_gltf
+    assert w.export_bvh(tmp_path / "out.glb")
+    back = read_gltf(tmp_path / "out.glb")
+    assert back.skeleton.names == doc.target.skeleton.names and back.meshes
     doc.undo_stack.setClean()
 
 

@@ -118,7 +118,7 @@ class MainWindow(QtWidgets.QMainWindow):
         file.addSeparator()
         self._action(file, "Import &Performer...", lambda: self.import_dialog("performer"))
         self._action(file, "Import &Target...", lambda: self.import_dialog("target"))
-        self._action(file, "&Export BVH...", self.export_dialog, "Ctrl+E")
+        self._action(file, "&Export BVH or glTF...", self.export_dialog, "Ctrl+E")
         file.addSeparator()
         self._action(file, "&Quit", self.close, QtGui.QKeySequence.StandardKey.Quit)
         self._refresh_recent()
@@ -310,13 +310,22 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_error("Nothing to export yet: import a performer and a target and map "
                             "them first.")
             return
-        path = self.ask_save_path("Export BVH", "BVH (*.bvh)")
+        filters = "BVH (*.bvh);;glTF binary (*.glb);;glTF (*.gltf)"
+        path = self.ask_save_path("Export", filters)
         if path:
-            self.export_bvh(path if path.endswith(".bvh") else path + ".bvh")
+            if not path.lower().endswith((".bvh", ".glb", ".gltf")):
+                path += ".bvh"
+            self.export_bvh(path)
 
     def export_bvh(self, path) -> bool:
+        """Write the final motion: BVH, or glTF (.glb/.gltf) with the character's mesh and
+        skin when the target is a glTF character."""
         from engine.bvh import write_bvh
-        ok = self._guard(write_bvh, self.doc.motion, path)
+        if str(path).lower().endswith((".glb", ".gltf")):
+            from engine.gltf import write_gltf
+            ok = self._guard(write_gltf, self.doc.motion, self.doc.character, path)
+        else:
+            ok = self._guard(write_bvh, self.doc.motion, path)
         if ok:
             self.statusBar().showMessage(f"Exported {path}", 5000)
         return ok
