@@ -17,6 +17,19 @@ from pathlib import Path
 from typing import Callable
 
 REPO = Path(__file__).resolve().parent.parent
+
+
+def prepare(*, one_core: bool = False) -> bool:
+    """Set the process up as the application does, before numpy loads: keep freed memory for
+    reuse (app/runtime.py) and, with ``one_core``, pin BLAS to one thread. Returns whether the
+    allocator setting applied (the scripts print it)."""
+    if one_core:
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[var] = "1"
+    if str(REPO) not in sys.path:
+        sys.path.insert(0, str(REPO))
+    from app.runtime import tune_allocator
+    return tune_allocator()
 CLIPS = REPO / "resources" / "clips"
 #: ``../shared/data`` beside the repository, or ``$MC_SHARED_DATA`` (as in tests/conftest.py)
 SHARED_DATA = Path(os.environ.get("MC_SHARED_DATA", REPO.parent / "shared" / "data"))

@@ -20,17 +20,18 @@ targets are met.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from app.runtime import tune_allocator  # noqa: E402
+from _common import prepare  # noqa: E402
 
-ALLOCATOR = tune_allocator()         # as motion-composer does at start-up (app/runtime.py)
+ALLOCATOR = prepare(one_core=False)    # as motion-composer sets itself up
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import tempfile  # noqa: E402
+
 from _common import (Row, data_file, environment, fmt_seconds, max_rss_mib,  # noqa: E402
                      print_table, proc_status_mib, run_child, time_interleaved, time_runs)
 

@@ -17,20 +17,16 @@ BLAS threads are pinned to 1. This is a report, not a test.
 """
 from __future__ import annotations
 
-import os
-
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_var] = "1"
-
-import argparse  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
+import sys
+from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from app.runtime import tune_allocator  # noqa: E402
+from _common import prepare  # noqa: E402
 
-ALLOCATOR = tune_allocator()         # as motion-composer does at start-up (app/runtime.py)
+ALLOCATOR = prepare(one_core=True)    # as motion-composer sets itself up
+
+import argparse  # noqa: E402
+
 from _common import (Row, SHARED_DATA, environment, fmt_seconds, print_table,  # noqa: E402
                      time_runs)
 
