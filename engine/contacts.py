@@ -53,45 +53,18 @@ class Contact:
     end: int
 
 
-_FOOT_WORDS = ("foot", "ankle")
-_TOE_WORDS = ("toe", "ball")
-
-
 def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
-    """``(ankle, toe)`` joint names of each foot, from names and structure: the two deepest
-    leaf-ward chains below the root whose names say foot or ankle (toe: the ankle's child)."""
+    """``(ankle, toe)`` joint names of each foot (toe ``None`` where there is none), from the
+    humanoid roles :func:`engine.automap.identify` finds; none for a skeleton that is not a
+    humanoid."""
+    from .automap import identify
+    from .errors import MappingError
     try:
-        from .automap import identify        # the full humanoid identification, when present
         roles = identify(skeleton)
-        out = []
-        for side in ("l", "r"):
-            foot = _role(roles, "foot", side)
-            if foot:
-                out.append((foot, _role(roles, "toe", side)))
-        if out:
-            return out
-    except Exception:                                            # noqa: BLE001 - fall back
-        pass
-    out = []
-    for j, name in enumerate(skeleton.names):
-        low = name.lower()
-        if any(w in low for w in _FOOT_WORDS) and not any(w in low for w in _TOE_WORDS) \
-                and "twist" not in low and "pole" not in low:
-            toes = [skeleton.names[c] for c in skeleton.children[j]
-                    if any(w in skeleton.names[c].lower() for w in _TOE_WORDS)]
-            out.append((name, toes[0] if toes else None))
-    return out
-
-
-def _role(roles, role: str, side: str):
-    for key in (f"{side}_{role}", f"{role}_{side}", (side, role), (role, side)):
-        try:
-            value = roles[key] if isinstance(roles, dict) else getattr(roles, "get")(key)
-        except (KeyError, TypeError, AttributeError):
-            value = None
-        if value:
-            return value
-    return None
+    except MappingError:
+        return []
+    return [(roles.get(f"foot_{side}"), roles.get(f"toe_{side}")) for side in ("l", "r")
+            if roles.get(f"foot_{side}")]
 
 
 def estimate_floor(heights: np.ndarray) -> float:
