@@ -121,10 +121,10 @@ def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarr
     ext = pts.max(axis=0) - pts.min(axis=0)
     if ext[1] < 0.7 * max(ext[0], ext[2]):
         return False
+    from .automap import identify
     try:
-        from .automap import identify
         roles = identify(skeleton)
-    except Exception:                         # noqa: BLE001 - names say nothing: extents
+    except MappingError:                      # not a humanoid: the extents decide
         return True
     y = pose.positions[0, :, 1]
     idx = skeleton.index
