@@ -49,7 +49,7 @@ def _is_gltf(path) -> bool:
 
 def _gltf_info(args):
     """The character of a glTF file, its motion shown by ``info`` and the extra figures."""
-    from engine.gltf import read_gltf
+    from engine.formats.gltf import read_gltf
     given = [flag for flag, value in (("--units", args.units), ("--scale", args.scale),
                                       ("--up-axis", args.up_axis),
                                       ("--position-mode", args.position_mode))
@@ -141,19 +141,20 @@ def _reference(text: str):
 def cmd_retarget(args) -> int:
     import time
 
-    from engine.bvh import write_bvh
-    from engine.constraints import constraints_from_json
-    from engine.correspondence import Correspondence
+    from engine.formats.bvh import write_bvh
+    from engine.correction.constraints import constraints_from_json
+    from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
     from engine.fileio import atomic_write
-    from engine.pipeline import Job, run_job
-    from engine.retarget import BindOptions, RootOptions
+    from engine.scene import Job, run_job
+    from engine.conversion import BindOptions
+    from engine.conversion import RootOptions
 
     started = time.perf_counter()
     performer = read_bvh(args.performer)
     character = None
     if Path(args.target).suffix.lower() in (".glb", ".gltf"):
-        from engine.gltf import read_gltf
+        from engine.formats.gltf import read_gltf
         character = read_gltf(args.target)           # its bind pose is the target
         target = character.rest_motion()
     else:
@@ -162,7 +163,7 @@ def cmd_retarget(args) -> int:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
     else:
-        from engine.automap import automap
+        from engine.conversion.automap import automap
         correspondence = automap(target.skeleton, performer.skeleton)
     constraints = ()
     if args.constraints:
@@ -183,7 +184,7 @@ def cmd_retarget(args) -> int:
               constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
     result = run_job(job)
     if Path(args.output).suffix.lower() in (".glb", ".gltf"):
-        from engine.gltf import write_gltf
+        from engine.formats.gltf import write_gltf
         write_gltf(result.motion, character, args.output)   # mesh and skin when the target has
     else:
         write_bvh(result.motion, args.output)
@@ -229,7 +230,7 @@ def cmd_export(args) -> int:
     """``export P.mcp -o OUT.bvh``: evaluate a saved project headless and write its motion."""
     import time
 
-    from engine.bvh import write_bvh
+    from engine.formats.bvh import write_bvh
     from engine.project import evaluate_project, open_project, solve_project
 
     started = time.perf_counter()

@@ -9,7 +9,7 @@ or the file given with ``--file``:
 * ours: ``engine.read_bvh(path)`` then ``engine.forward_kinematics(motion)`` (world rotations
   and positions of every joint and End Site, every frame), median of ``--repeat`` runs (9);
 * the ratio of the two medians (target >= 30x);
-* ``engine.bvh.write_bvh`` of the motion to a temporary folder, median (target < 0.2 s);
+* ``engine.formats.bvh.write_bvh`` of the motion to a temporary folder, median (target < 0.2 s);
 * peak memory of one read plus FK in a fresh interpreter (target < 200 MB): the peak RSS minus
   the RSS after imports, and tracemalloc's peak (numpy reports its array buffers to tracemalloc,
   so this counts numpy data and Python objects, not the interpreter or the libraries).
@@ -110,7 +110,7 @@ def main(argv=None) -> int:
     rss = run_child(script, ["--file", str(path), "--child-memory", "rss"])
     traced = run_child(script, ["--file", str(path), "--child-memory", "tracemalloc"])
 
-    from engine.bvh import write_bvh
+    from engine.formats.bvh import write_bvh
 
     motion, pose = read_and_fk(path)                 # also the warm-up run
     sk = motion.skeleton

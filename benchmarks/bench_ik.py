@@ -46,17 +46,17 @@ def main() -> None:
     args = parser.parse_args()
 
     from engine import forward_kinematics, read_bvh
-    from engine.constraints import Constraint
-    from engine.contacts import contact_constraints, detect_contacts, horizontal_drift
-    from engine.correct import enforce
-    from engine.retarget import retarget
+    from engine.correction.constraints import Constraint
+    from engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
+    from engine.correction.enforcement import enforce
+    from engine.conversion import retarget
 
     walk = SHARED_DATA / "cmu_max_131_01_walk.bvh"
     bandai = SHARED_DATA / "bandai1_walk_normal_001.bvh"
     if not (walk.is_file() and bandai.is_file()):
         sys.exit(f"error: this benchmark needs {walk} and {bandai} (set MC_SHARED_DATA)")
     performer, target = read_bvh(walk), read_bvh(bandai)
-    from engine.automap import automap
+    from engine.conversion.automap import automap
     corr = automap(target.skeleton, performer.skeleton)
     how = "automatic mapping"
     composed = retarget(performer, target, corr)

@@ -50,8 +50,8 @@ def main() -> None:
     app = application([])
     from app.gui.commands import push_constraints
     from app.gui.live import LiveSolver, changed_window, window_problem
-    from engine.constraints import Constraint
-    from engine.contacts import contact_constraints, detect_contacts, find_feet
+    from engine.correction.constraints import Constraint
+    from engine.correction.contacts import contact_constraints, detect_contacts, find_feet
     from engine.kinematics import forward_kinematics
     from gui_support import demo_document
 

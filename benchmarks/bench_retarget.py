@@ -12,7 +12,7 @@ runs (9) after a warm-up:
 * the one-off Anatomic Binding (``bind``) that precedes it, for information;
 * the whole ``retarget`` call (bind + convert + compose).
 
-The mapping is the automatic one (``engine.automap``).
+The mapping is the automatic one (``engine.conversion.automap``).
 BLAS threads are pinned to 1. This is a report, not a test.
 """
 from __future__ import annotations
@@ -40,7 +40,9 @@ def main() -> None:
     args = parser.parse_args()
 
     from engine import read_bvh
-    from engine.retarget import bind, compose, convert, retarget
+    from engine.conversion import bind
+    from engine.conversion import compose, retarget
+    from engine.conversion import convert
 
     clip = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
     targets = {"Bandai": "bandai1_walk_normal_001.bvh", "CC3": "cc3_cmu_02_06_pickup.bvh"}
@@ -48,7 +50,7 @@ def main() -> None:
         sys.exit(f"error: this benchmark needs {clip} (set MC_SHARED_DATA)")
     performer = read_bvh(clip)
     F = performer.num_frames
-    from engine.automap import automap
+    from engine.conversion.automap import automap
     print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
     print(f"{clip.name}: {F} frames, {performer.skeleton.num_joints} joints\n")
     for label, name in targets.items():

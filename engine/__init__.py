@@ -6,7 +6,7 @@ so it serves the desktop application, the command line and batch jobs alike.
 Internal convention, everywhere: metres, +Y up, right-handed; rotations as unit quaternions
 x, y, z, w; arrays ``(frames, joints, ...)``. See :mod:`engine.units`.
 """
-from .bvh import parse_bvh, read_bvh, write_bvh
+from .formats.bvh import parse_bvh, read_bvh, write_bvh
 from .errors import BVHError, ExportError, FileFormatError, MotionComposerError, SkeletonError
 from .kinematics import WorldPose, forward_kinematics
 from .motion import Motion

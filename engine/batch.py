@@ -23,7 +23,7 @@ class Recipe:
     """What to do to every clip.
 
     Attributes:
-        target_path: the character (.bvh, or .glb/.gltf when engine.gltf is present).
+        target_path: the character (.bvh, or .glb/.gltf when engine.formats.gltf is present).
         pairs: the correspondence, target joint -> performer joint; empty means automatic
             mapping for each clip (clips from different skeletons then work too).
         bind: BindOptions fields; root: RootOptions fields.
@@ -61,9 +61,9 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
 
 
 def _read_character(path: str, options: dict):
-    from .bvh import read_bvh
+    from .formats.bvh import read_bvh
     if Path(path).suffix.lower() in (".glb", ".gltf"):
-        from .gltf import read_gltf           # noqa: PLC0415 - optional until present
+        from .formats.gltf import read_gltf  # noqa: PLC0415 - optional until present
         return read_gltf(path).rest_motion()
     return read_bvh(path, **options)
 
@@ -73,11 +73,12 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
 
     Never raises: a failure is reported in the summary with its reason.
     """
-    from .bvh import read_bvh, write_bvh
-    from .correspondence import Correspondence
+    from .formats.bvh import read_bvh, write_bvh
+    from .conversion.correspondence import Correspondence
     from .errors import MotionComposerError
-    from .pipeline import Job, run_job
-    from .retarget import BindOptions, RootOptions
+    from .scene import Job, run_job
+    from .conversion.binding import BindOptions
+    from .conversion.converter import RootOptions
 
     started = time.perf_counter()
     summary = {"clip": str(clip), "status": "failed", "output": None, "reason": ""}
@@ -88,7 +89,7 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
             corr = Correspondence(recipe.pairs)
             corr.validate(target.skeleton, performer.skeleton)
         else:
-            from .automap import automap
+            from .conversion.automap import automap
             corr = automap(target.skeleton, performer.skeleton)
         job = Job(performer=performer, target=target, correspondence=corr,
                   bind_options=BindOptions(**recipe.bind), root=RootOptions(**recipe.root),

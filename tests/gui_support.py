@@ -35,7 +35,7 @@ def demo_document():
     from app.gui.document import Document
     from conftest import clip_path
     from engine import read_bvh
-    from engine.correspondence import Correspondence
+    from engine.conversion.correspondence import Correspondence
     from ik_fixtures import MAX_TO_HOLDEN
 
     doc = Document()

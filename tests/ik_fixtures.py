@@ -4,8 +4,8 @@ from __future__ import annotations
 from functools import lru_cache
 
 from engine import read_bvh
-from engine.correspondence import Correspondence
-from engine.retarget import retarget
+from engine.conversion.correspondence import Correspondence
+from engine.conversion import retarget
 
 from conftest import clip_path, shared_path
 

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from engine.automap import Roles, automap, identify, parse_name
-from engine.bvh import read_bvh
-from engine.correspondence import Correspondence
+from engine.conversion.automap import Roles, automap, identify, parse_name
+from engine.formats.bvh import read_bvh
+from engine.conversion.correspondence import Correspondence
 from engine.errors import MappingError
 from engine.kinematics import forward_kinematics
 from engine.skeleton import EndSite, Skeleton
@@ -444,7 +444,7 @@ def test_a_skeleton_that_is_not_humanoid_is_refused_with_a_reason():
 
 
 def test_roles_read_as_a_mapping_and_serve_foot_detection():
-    from engine.contacts import find_feet
+    from engine.correction.contacts import find_feet
     skeleton = load("bundled-CMU-rest")[0]
     roles = identify(skeleton)
     assert roles.get("foot_l") == "LeftFoot" and roles["toe_r"] == "RightToeBase"
@@ -601,7 +601,7 @@ def test_automap_is_quick():
 
 def test_the_engine_module_imports_only_stdlib_numpy_and_scipy():
     import sys
-    tree = ast.parse((REPO / "engine" / "automap.py").read_text(encoding="utf-8"))
+    tree = ast.parse((REPO / "engine" / "conversion" / "automap.py").read_text(encoding="utf-8"))
     roots = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

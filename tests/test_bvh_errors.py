@@ -5,7 +5,7 @@ import pytest
 
 from bvh_cases import CASES, WALK, find, walk_lines
 from engine import MotionComposerError
-from engine.bvh import parse_bvh_text, read_bvh
+from engine.formats.bvh import parse_bvh_text, read_bvh
 from engine.errors import BVHError, FileFormatError
 
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from conftest import clip_path
 from engine import MotionComposerError
-from engine.bvh import read_bvh
+from engine.formats.bvh import read_bvh
 from engine.describe import describe_motion
 
 

@@ -18,8 +18,8 @@ from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from conftest import BUNDLED_BVH, SHARED_BVH, clip_path, shared_path
-from engine._numparse import parse_number_rows
-from engine.bvh import detect_position_modes, parse_bvh, parse_bvh_text, read_bvh
+from engine.formats._numparse import parse_number_rows
+from engine.formats.bvh import detect_position_modes, parse_bvh, parse_bvh_text, read_bvh
 from engine.describe import stature
 from engine.errors import BVHError
 from engine.kinematics import forward_kinematics

@@ -1,4 +1,4 @@
-"""BVH round trips: read -> write (engine.bvh.format_bvh / write_bvh) -> read gives the same file.
+"""BVH round trips: read -> write (engine.formats.bvh.format_bvh / write_bvh) -> read gives the same file.
 
 Checked for every BVH we have (bundled clips always, ../shared/data when present): hierarchy,
 channel layout, End Sites, frame time (exactly), units / up axis / position modes as detected
@@ -17,8 +17,8 @@ from scipy.spatial.transform import Rotation
 
 import engine.fileio
 from conftest import all_bvh_params, resolve
-from engine.bvh import (BVHRecord, format_bvh, parse_bvh_text, read_bvh, record_to_motion,
-                        write_bvh)
+from engine.formats.bvh import (BVHRecord, format_bvh, parse_bvh_text, read_bvh, record_to_motion,
+                                write_bvh)
 from engine.errors import ExportError
 from engine.kinematics import forward_kinematics
 from engine.motion import Motion

@@ -13,7 +13,7 @@ import pytest
 from app.cli import main
 from bvh_cases import CASES, WALK
 from conftest import REPO, clip_path, shared_path
-from engine.bvh import read_bvh
+from engine.formats.bvh import read_bvh
 from engine.describe import describe_motion
 
 FAIR = clip_path("fair1_child8_jumping.bvh")

@@ -15,7 +15,7 @@ import pytest
 from app.cli import main
 from conftest import REPO, clip_path
 from engine import forward_kinematics, read_bvh
-from engine.bvh import format_bvh
+from engine.formats.bvh import format_bvh
 from engine.project import (MissingSourceError, ProjectError, evaluate_project, load_project,
                             open_project)
 from ik_fixtures import MAX_TO_HOLDEN

@@ -1,7 +1,7 @@
 """`motion-composer retarget`: the written file, the options, bad input, and Blender playing it.
 
 The command's output is read back with the engine's reader and compared with
-``engine.retarget.retarget`` called directly with the same options; each option is checked for
+``engine.conversion.retarget`` called directly with the same options; each option is checked for
 the effect it promises on real clips (the bundled CMU walk onto the bundled CMU T-pose
 character, and where ``../shared/data`` is present CMU onto Bandai and FAIR1 onto CC3). Bad input
 must give exit code 2 and one line on stderr. The Blender test imports the command's output
@@ -26,9 +26,11 @@ from app.cli import main
 from blender_util import blender_or_skip, run_blender_import
 from conftest import REPO, SHARED_DATA, clip_path, resolve, shared_path
 from engine import forward_kinematics, read_bvh
-from engine.correspondence import Correspondence
+from engine.conversion.correspondence import Correspondence
 from engine.describe import stature
-from engine.retarget import BindOptions, RootOptions, bind, retarget
+from engine.conversion import BindOptions, bind
+from engine.conversion import RootOptions
+from engine.conversion import retarget
 from engine.rotations import angle_between
 from test_retarget import CMU_TO_BANDAI, bone_deviation
 
@@ -401,7 +403,6 @@ def _mismatches(pairs: dict, expected: dict) -> dict:
 
 
 def test_automatic_mapping_walk_onto_tpose(capsys, tmp_path, walk, tpose):
-    pytest.importorskip("engine.automap", reason="engine/automap.py is not written yet")
     output, used = tmp_path / "auto.bvh", tmp_path / "auto.json"
     code, out, err = cli(capsys, "retarget", WALK, "--target", TPOSE, "-o", output,
                          "--save-map", used)
@@ -421,7 +422,6 @@ def test_automatic_mapping_walk_onto_tpose(capsys, tmp_path, walk, tpose):
 
 
 def test_automatic_mapping_cmu_onto_bandai(capsys, tmp_path):
-    pytest.importorskip("engine.automap", reason="engine/automap.py is not written yet")
     perf_path = shared_path("cmu_mb_01_01_jumps.bvh")
     targ_path = shared_path("bandai1_walk_normal_001.bvh")
     output, used = tmp_path / "auto.bvh", tmp_path / "auto.json"

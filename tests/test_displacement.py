@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.correct import enforce
-from engine.constraints import Constraint
-from engine.displacement import ROOT, Curve, DisplacementMap, reduce_keys
+from engine.correction.enforcement import enforce
+from engine.correction.constraints import Constraint
+from engine.correction.displacement import ROOT, Curve, DisplacementMap, reduce_keys
 from engine.errors import MotionComposerError
 from engine import forward_kinematics
 from engine.rotations import angle_between

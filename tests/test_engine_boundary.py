@@ -29,7 +29,7 @@ FORBIDDEN = ("PySide6", "shiboken6", "PyQt5", "PyQt6", "PySide2", "shiboken2", "
              "pyqtgraph", "OpenGL")
 
 #: submodules that must be found, so that an empty package walk cannot pass unnoticed
-KNOWN_SUBMODULES = {"engine.bvh", "engine.kinematics", "engine.quaternions", "engine.rotations",
+KNOWN_SUBMODULES = {"engine.formats.bvh", "engine.kinematics", "engine.quaternions", "engine.rotations",
                     "engine.skeleton", "engine.motion"}
 
 

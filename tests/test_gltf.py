@@ -28,12 +28,12 @@ from scipy.spatial.transform import Rotation
 
 from blender_util import blender_or_skip
 from conftest import clip_path, shared_path
-from engine.automap import automap
-from engine.bvh import read_bvh, write_bvh
+from engine.conversion.automap import automap
+from engine.formats.bvh import read_bvh, write_bvh
 from engine.errors import FileFormatError, GLTFError, MotionComposerError
-from engine.gltf import Character, read_gltf, write_gltf
+from engine.formats.gltf import Character, read_gltf, write_gltf
 from engine.kinematics import forward_kinematics
-from engine.retarget import retarget
+from engine.conversion import retarget
 from engine.skinning import joint_matrices, skin_character, skin_vertices
 
 ROBOT = "target_robot_expressive.glb"
@@ -974,7 +974,7 @@ def test_blender_reads_what_we_read_and_write(tmp_path, robot, fox, retargeted):
 
 def test_the_retarget_command_takes_a_gltf_character_and_writes_glb(tmp_path, capsys):
     from app.cli import main
-    from engine.gltf import read_gltf
+    from engine.formats.gltf import read_gltf
     robot = shared_path("target_robot_expressive.glb")
     out = tmp_path / "walk_on_robot.glb"
     code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(robot),

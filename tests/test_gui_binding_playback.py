@@ -22,8 +22,9 @@ from app.gui.commands import push_correspondence, push_options, push_sources  # 
 from app.gui.document import Document  # noqa: E402
 from app.gui.playback import PlaybackBar  # noqa: E402
 from engine import read_bvh  # noqa: E402
-from engine.correspondence import Correspondence  # noqa: E402
-from engine.retarget import BindOptions, RootOptions  # noqa: E402
+from engine.conversion.correspondence import Correspondence  # noqa: E402
+from engine.conversion import BindOptions  # noqa: E402
+from engine.conversion import RootOptions  # noqa: E402
 
 from conftest import REPO, clip_path  # noqa: E402
 from ik_fixtures import MAX_TO_HOLDEN  # noqa: E402

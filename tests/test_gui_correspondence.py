@@ -26,10 +26,10 @@ from app.gui.commands import push_correspondence, push_pair, push_sources  # noq
 from app.gui.correspondence_panel import (CorrespondencePanel, JointTree,  # noqa: E402
                                           required_joints)
 from app.gui.document import Document  # noqa: E402
-from engine.bvh import read_bvh  # noqa: E402
+from engine.formats.bvh import read_bvh  # noqa: E402
 from tests.conftest import REPO, clip_path, shared_path  # noqa: E402
 
-automap_module = pytest.importorskip("engine.automap")
+automap_module = pytest.importorskip("engine.conversion.automap")
 
 Qt = QtCore.Qt
 LEFT = Qt.MouseButton.LeftButton

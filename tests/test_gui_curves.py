@@ -1,7 +1,7 @@
 """The curve editor on a document of real clips with a real IK result on it.
 
 The bundled walk on the bundled T-pose skeleton, a left-hand position constraint solved by
-``engine.correct.enforce`` and pushed with its reduced keys (``push_constraints``); the editor
+``engine.correction.enforcement.enforce`` and pushed with its reduced keys (``push_constraints``); the editor
 shows LeftForeArm's offset curves. Keys are dragged with real mouse events sent to the plot's
 viewport at the key's pixel (mapped through the ViewBox), and checked against the document: the
 map, the undo stack, the previewed and the final motion. No OpenGL: runs under Xvfb and
@@ -28,9 +28,9 @@ if sys.version_info < (3, 12) and PySide6.__version__.startswith("6.12."):
 from app.gui.qt import QtCore, QtWidgets  # noqa: E402
 from app.gui.commands import push_constraints  # noqa: E402
 from app.gui.curve_editor import CurveEditor  # noqa: E402
-from engine.constraints import Constraint  # noqa: E402
-from engine.correct import enforce  # noqa: E402
-from engine.displacement import ROOT  # noqa: E402
+from engine.correction.constraints import Constraint  # noqa: E402
+from engine.correction.enforcement import enforce  # noqa: E402
+from engine.correction.displacement import ROOT  # noqa: E402
 
 from conftest import REPO  # noqa: E402
 from gui_support import demo_document  # noqa: E402

@@ -66,7 +66,7 @@ def test_edits_are_undoable_and_named_and_the_title_shows_them(window):
 
 def test_save_as_open_and_recent(window, tmp_path):
     from app.gui.commands import push_options
-    from engine.retarget import RootOptions
+    from engine.conversion import RootOptions
     path = _demo_copy(tmp_path)
     window.open_project(path)
     push_options(window.doc, root_options=RootOptions(mode="in-place"), text="In place")

@@ -1,7 +1,7 @@
 """The constraint timeline, the inspector and the live re-solve, on the bundled walk.
 
 The document is the bundled CMU walk on the bundled T-pose skeleton with the automatic foot
-contacts of ``engine.contacts`` (solved) and a manual hand constraint, all set through
+contacts of ``engine.correction.contacts`` (solved) and a manual hand constraint, all set through
 ``push_constraints``. Handles are dragged with real mouse events on the plot's viewport
 (frames mapped to pixels through the ViewBox): the handle moves and clamps, the motion is
 previewed during the drag with no undo step, release pushes one named command, undo restores,
@@ -25,9 +25,9 @@ from app.gui.live import (LiveSolver, affected_frames, changed_window,  # noqa: 
                           live_solver, overlapping, window_problem)
 from app.gui.timeline import (FIELDS, ConstraintTimeline, moved_range,  # noqa: E402
                               retimed)
-from engine.constraints import Constraint  # noqa: E402
-from engine.contacts import contact_constraints, detect_contacts, find_feet  # noqa: E402
-from engine.correct import enforce  # noqa: E402
+from engine.correction.constraints import Constraint  # noqa: E402
+from engine.correction.contacts import contact_constraints, detect_contacts, find_feet  # noqa: E402
+from engine.correction.enforcement import enforce  # noqa: E402
 from engine.kinematics import forward_kinematics  # noqa: E402
 
 from conftest import REPO  # noqa: E402

@@ -107,7 +107,7 @@ def test_hiding_and_overlaying(view):
 def test_constraint_goals_are_drawn(view):
     doc, v = view
     from app.gui.commands import push_constraints
-    from engine.constraints import Constraint, floor_constraint
+    from engine.correction.constraints import Constraint, floor_constraint
     hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + 0.1}, 280, 290,
                                       310, 320),
@@ -139,7 +139,7 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     assert first.shape == second.shape and first.shape[0] > 1000
     assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
     # exported onto the character as glTF, with its mesh
-    from engine.gltf import read_gltf
+    from engine.formats.gltf import read_gltf
     assert w.export_bvh(tmp_path / "out.glb")
     back = read_gltf(tmp_path / "out.glb")
     assert back.skeleton.names == doc.target.skeleton.names and back.meshes
@@ -149,7 +149,7 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
 def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     from app.gui.qt import QtCore
     from app.gui.commands import push_constraints
-    from engine.constraints import Constraint
+    from engine.correction.constraints import Constraint
     doc, v = view
     hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + [0.05, 0.1, 0]},

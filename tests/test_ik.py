@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from engine import forward_kinematics
-from engine.constraints import Constraint, ConstraintError, constraints_from_json, \
+from engine.correction.constraints import Constraint, ConstraintError, constraints_from_json, \
     constraints_to_json, floor_constraint
-from engine.contacts import contact_constraints, detect_contacts, horizontal_drift
-from engine.correct import enforce
-from engine.ik import IKOptions
+from engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
+from engine.correction.enforcement import enforce
+from engine.correction.ik import IKOptions
 from engine.quaternions import qconj, qmul
 from engine.rotations import angle_between
 from ik_fixtures import run_on_bandai, walk_on_bandai, walk_on_holden

@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
-                       solve_frames, task_error_and_jacobian)
+from engine.correction.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
+                                  solve_frames, task_error_and_jacobian)
 from engine.kinematics import fk_arrays
 from engine.quaternions import qmul
 from ik_fixtures import walk_on_holden

@@ -35,7 +35,7 @@ import pytest
 
 from blender_util import blender_or_skip, run_blender_import
 from conftest import BUNDLED_BVH, SHARED_BVH, SHARED_DATA, all_bvh_params, resolve
-from engine.bvh import read_bvh, write_bvh
+from engine.formats.bvh import read_bvh, write_bvh
 from engine.describe import stature
 from engine.kinematics import forward_kinematics
 from engine.motion import Motion

@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import all_bvh_params, resolve
-from engine.bvh import BVHRecord, detect_position_modes, parse_bvh_text, read_bvh
+from engine.formats.bvh import BVHRecord, detect_position_modes, parse_bvh_text, read_bvh
 from engine.describe import stature
 from engine.kinematics import fk_arrays, forward_kinematics
 

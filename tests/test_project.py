@@ -1,4 +1,4 @@
-"""Project files (engine/project.py): a whole session saved, loaded, migrated, recovered.
+"""Project files (engine/project/): a whole session saved, loaded, migrated, recovered.
 
 Real data throughout: the bundled CMU walk onto the bundled CMU T-pose character (always), and
 CMU onto Bandai where ../shared/data is present. A project carries user and automatic
@@ -28,10 +28,10 @@ from hypothesis import strategies as st
 
 from conftest import REPO, clip_path, shared_path
 from engine import read_bvh
-from engine.bvh import format_bvh
-from engine.constraints import Constraint
-from engine.correspondence import Correspondence
-from engine.displacement import Curve, DisplacementMap
+from engine.formats.bvh import format_bvh
+from engine.correction.constraints import Constraint
+from engine.conversion.correspondence import Correspondence
+from engine.correction.displacement import Curve, DisplacementMap
 from engine.errors import MotionComposerError
 from engine.kinematics import forward_kinematics
 from engine.project import (MIGRATIONS, VERSION, MissingSourceError, Project, ProjectError,
@@ -39,7 +39,8 @@ from engine.project import (MIGRATIONS, VERSION, MissingSourceError, Project, Pr
                             discard_autosave, embed_sources, evaluate_project, find_autosave,
                             load_project, open_project, project_from_json, project_to_json,
                             read_sources, save_project, solve_project, write_autosave)
-from engine.retarget import BindOptions, RootOptions
+from engine.conversion import BindOptions
+from engine.conversion import RootOptions
 from ik_fixtures import MAX_TO_BANDAI, MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")
@@ -186,7 +187,7 @@ def test_the_retargeted_motion_is_identical_after_load(tmp_path):
 
 def test_saved_correction_matches_the_solver(tmp_path):
     """The keys (0.01 degree, 0.05 mm) reproduce the IK result within a millimetre."""
-    from engine.pipeline import run_job
+    from engine.scene import run_job
     project = solve_project(session_in(tmp_path))            # hand edits replaced
     assert ("Head", "ry") not in project.displacement.curves
     performer, target = read_sources(project)

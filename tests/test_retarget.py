@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from engine import forward_kinematics, read_bvh
-from engine.bvh import format_bvh, parse_bvh
-from engine.correspondence import Correspondence
+from engine.formats.bvh import format_bvh, parse_bvh
+from engine.conversion.correspondence import Correspondence
 from engine.errors import MappingError, MotionComposerError
 from engine.quaternions import qconj, qmul, qrot
-from engine.retarget import BindOptions, RootOptions, bind, retarget
+from engine.conversion import BindOptions, bind
+from engine.conversion import RootOptions
+from engine.conversion import retarget
 from engine.rotations import angle_between
 from conftest import all_bvh_params, clip_path, resolve, shared_path
 

@@ -14,7 +14,8 @@ import dataclasses
 
 from app.gui.commands import push_options
 from app.gui.qt import QtCore, QtWidgets
-from engine.retarget import BindOptions, RootOptions
+from engine.conversion import BindOptions
+from engine.conversion import RootOptions
 
 __all__ = ["BindingPanel", "ReferenceChooser"]
 

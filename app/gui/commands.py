@@ -5,8 +5,9 @@ Widgets call the ``push_*`` helpers; nothing else changes the document.
 from __future__ import annotations
 
 from app.gui.qt import QtGui
-from engine.correspondence import Correspondence
-from engine.retarget import BindOptions, RootOptions
+from engine.conversion.correspondence import Correspondence
+from engine.conversion import BindOptions
+from engine.conversion import RootOptions
 
 __all__ = ["push_sources", "push_correspondence", "push_pair", "push_options",
            "push_constraints", "push_displacement"]

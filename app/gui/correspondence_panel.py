@@ -5,7 +5,7 @@ each mapped target joint to its performer joint; below them the mapping is a tab
 joint, performer joint, the auto-mapping note) whose performer cell is edited in place through
 a combo box. Joints are mapped by dragging a joint onto one of the other tree, or by selecting
 one in each tree and pressing *Map*; *Auto-map*, *Unmap*, *Clear* and mapping presets (JSON,
-:meth:`engine.correspondence.Correspondence.load`/``save``) complete it.
+:meth:`engine.conversion.correspondence.Correspondence.load`/``save``) complete it.
 
 The panel is built from a :class:`~app.gui.document.Document` and wired both ways (napari's
 rule): document signals update the widgets inside ``QSignalBlocker`` (no feedback loop), and
@@ -13,7 +13,7 @@ every user edit is one undoable command pushed through :mod:`app.gui.commands`. 
 mapping re-evaluates the document, which the viewport follows.
 
 Required target joints (hips, both spine ends, head, upper arms, elbows, wrists, thighs, knees
-and ankles, as :func:`engine.automap.identify` finds them) left unmapped are flagged in red, and
+and ankles, as :func:`engine.conversion.automap.identify` finds them) left unmapped are flagged in red, and
 the document's ``evaluation_error`` (an impossible mapping) is shown under the trees.
 
 File dialogs and message boxes go through :meth:`CorrespondencePanel.ask_load_path`,
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from app.gui.commands import push_correspondence
 from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.correspondence import Correspondence
+from engine.conversion.correspondence import Correspondence
 from engine.errors import MotionComposerError
 
 __all__ = ["CorrespondencePanel", "JointTree", "LinkView", "MappingModel", "MappingTable",
@@ -37,7 +37,7 @@ Qt = QtCore.Qt
 #: drag and drop payload: ``"<side>\n<joint name>"`` in UTF-8
 MIME_TYPE = "application/x-motion-composer-joint"
 
-#: the roles (keys of :class:`engine.automap.Roles`) a target must have mapped, with labels;
+#: the roles (keys of :class:`engine.conversion.automap.Roles`) a target must have mapped, with labels;
 #: the first spine joint (``spine0``) is added from ``Roles.spine``
 REQUIRED_ROLES = {
     "hips": "hips", "chest": "chest (top of the spine)", "head": "head",
@@ -63,14 +63,14 @@ _LINK_SELECTED = QtGui.QColor("#ef6c00")
 def required_joints(skeleton) -> dict[str, str]:
     """Target joint name -> what it is, for the joints a usable mapping should cover.
 
-    The roles come from :func:`engine.automap.identify`; where it is not available or finds no
+    The roles come from :func:`engine.conversion.automap.identify`; where it is not available or finds no
     humanoid, only the root is required.
     """
     if skeleton is None:
         return {}
     fallback = {skeleton.names[0]: "root"}
     try:
-        from engine.automap import identify
+        from engine.conversion.automap import identify
     except ImportError:
         return fallback
     try:
@@ -899,12 +899,12 @@ class CorrespondencePanel(QtWidgets.QWidget):
             push_correspondence(self.doc, Correspondence({}), "Clear mapping")
 
     def auto_map(self) -> None:
-        """Map by humanoid role (:func:`engine.automap.automap`): one command, "Auto-map"."""
+        """Map by humanoid role (:func:`engine.conversion.automap.automap`): one command, "Auto-map"."""
         doc = self.doc
         if doc.target is None or doc.performer is None:
             return
         try:
-            from engine.automap import automap
+            from engine.conversion.automap import automap
         except ImportError:
             self.show_error("Auto-map", "Automatic mapping is not available in this build; "
                             "map the joints by hand.")

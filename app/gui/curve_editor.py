@@ -43,7 +43,7 @@ from scipy.spatial.transform import Rotation
 
 from app.gui.commands import push_displacement
 from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.displacement import INTERPOLATIONS, ROOT, Curve, DisplacementMap
+from engine.correction.displacement import INTERPOLATIONS, ROOT, Curve, DisplacementMap
 
 __all__ = ["CurveEditor", "KeyGraph", "UNITS", "CHANNEL_COLORS"]
 

@@ -14,12 +14,14 @@ from pathlib import Path
 import numpy as np
 
 from app.gui.qt import QtCore, QtGui
-from engine.correspondence import Correspondence
-from engine.displacement import DisplacementMap
+from engine.conversion.correspondence import Correspondence
+from engine.correction.displacement import DisplacementMap
 from engine.errors import MotionComposerError
 from engine.kinematics import WorldPose, forward_kinematics
 from engine.motion import Motion
-from engine.retarget import BindOptions, RootOptions, bind, compose, convert
+from engine.conversion import BindOptions, bind
+from engine.conversion import RootOptions, convert
+from engine.conversion import compose
 
 __all__ = ["Document", "ViewerState"]
 
@@ -109,7 +111,7 @@ class Document(QtCore.QObject):
             return None
         cached = getattr(self, "_character", None)
         if cached is None or cached[0] != str(path):
-            from engine.gltf import read_gltf
+            from engine.formats.gltf import read_gltf
             try:
                 self._character = (str(path), read_gltf(path))
             except MotionComposerError as exc:

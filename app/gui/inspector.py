@@ -31,7 +31,7 @@ import numpy as np
 
 from app.gui.qt import QtCore, QtGui, QtWidgets
 from app.gui.live import live_solver
-from engine.constraints import Constraint, ConstraintError
+from engine.correction.constraints import Constraint, ConstraintError
 from engine.rotations import euler_to_quat, quat_to_euler
 
 __all__ = ["ConstraintInspector", "Vec3Edit", "KIND_CHOICES", "converted"]

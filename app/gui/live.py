@@ -41,7 +41,7 @@ import numpy as np
 
 from app.gui.commands import push_constraints
 from app.gui.qt import QtCore
-from engine.displacement import DisplacementMap
+from engine.correction.displacement import DisplacementMap
 from engine.errors import MotionComposerError
 
 __all__ = ["LiveSolver", "live_solver", "changed_window", "affected_frames", "overlapping",
@@ -278,7 +278,7 @@ class LiveSolver(QtCore.QObject):
     # ------------------------------------------------------------------ solving
     def _options(self, composed):
         from engine.describe import stature
-        from engine.ik import IKOptions
+        from engine.correction.ik import IKOptions
         if self._options_for[0] is not composed:
             self._options_for = (composed, IKOptions(scale=max(stature(composed), 0.1)))
         return self._options_for[1]
@@ -286,7 +286,7 @@ class LiveSolver(QtCore.QObject):
     def preview_motion(self, constraints: list):
         """``(motion, seconds, mode)``: the corrected motion for ``constraints``, solved whole
         or in the changed window (see the module doc)."""
-        from engine.correct import enforce
+        from engine.correction.enforcement import enforce
         doc = self.doc
         composed = doc.composed
         base_constraints = self._base_constraints if self.active else list(doc.constraints)
@@ -309,7 +309,7 @@ class LiveSolver(QtCore.QObject):
     def solve(self, constraints: list, progress=None, cancel=None) -> DisplacementMap:
         """The displacement map of the full solve of ``constraints`` (empty without enabled
         constraints). Raises :class:`~engine.errors.MotionComposerError`."""
-        from engine.correct import enforce
+        from engine.correction.enforcement import enforce
         composed = self.doc.composed
         if not any(c.enabled for c in constraints):
             return DisplacementMap()

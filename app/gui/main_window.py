@@ -277,7 +277,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.import_file(side, path)
 
     def import_file(self, side: str, path) -> bool:
-        from engine.bvh import read_bvh
+        from engine.formats.bvh import read_bvh
 
         def load():
             if Path(path).suffix.lower() in (".glb", ".gltf"):
@@ -285,7 +285,7 @@ class MainWindow(QtWidgets.QMainWindow):
                     from engine.errors import MotionComposerError
                     raise MotionComposerError(f"{path}: a glTF file is a character; import it "
                                               "as the target")
-                from engine.gltf import read_gltf
+                from engine.formats.gltf import read_gltf
                 motion = read_gltf(path).rest_motion()
             else:
                 motion = read_bvh(path)
@@ -298,7 +298,7 @@ class MainWindow(QtWidgets.QMainWindow):
             if self.doc.performer is not None and self.doc.target is not None and \
                     not len(self.doc.correspondence):
                 from app.gui.commands import push_correspondence
-                from engine.automap import automap
+                from engine.conversion.automap import automap
                 push_correspondence(self.doc, automap(self.doc.target.skeleton,
                                                       self.doc.performer.skeleton),
                                     "Auto-map")
@@ -320,9 +320,9 @@ class MainWindow(QtWidgets.QMainWindow):
     def export_bvh(self, path) -> bool:
         """Write the final motion: BVH, or glTF (.glb/.gltf) with the character's mesh and
         skin when the target is a glTF character."""
-        from engine.bvh import write_bvh
+        from engine.formats.bvh import write_bvh
         if str(path).lower().endswith((".glb", ".gltf")):
-            from engine.gltf import write_gltf
+            from engine.formats.gltf import write_gltf
             ok = self._guard(write_gltf, self.doc.motion, self.doc.character, path)
         else:
             ok = self._guard(write_bvh, self.doc.motion, path)
@@ -402,7 +402,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if not self.doc.ready:
             self.show_error("Nothing to solve yet: import a performer and a target first.")
             return
-        from engine.correct import enforce
+        from engine.correction.enforcement import enforce
         composed = self.doc.composed
         constraints = list(self.doc.constraints if constraints is None else constraints)
         if not constraints:
@@ -424,7 +424,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if not self.doc.ready:
             self.show_error("Nothing to solve yet: import a performer and a target first.")
             return
-        from engine.contacts import contact_constraints, detect_contacts, find_feet
+        from engine.correction.contacts import contact_constraints, detect_contacts, find_feet
         doc = self.doc
         mapped = set(doc.correspondence.pairs.values())
         feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.performer.skeleton)

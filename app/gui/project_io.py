@@ -4,12 +4,13 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from engine.correspondence import Correspondence
-from engine.displacement import DisplacementMap
-from engine.project import (MissingSourceError, Project, Source, ViewerState, discard_autosave
-                            as _discard, find_autosave, open_project, save_project,
-                            write_autosave)
-from engine.retarget import BindOptions, RootOptions
+from engine.conversion.correspondence import Correspondence
+from engine.correction.displacement import DisplacementMap
+from engine.project import (MissingSourceError, Project, Source, ViewerState,
+                            discard_autosave                             as _discard,
+                            find_autosave, open_project, save_project, write_autosave)
+from engine.conversion import BindOptions
+from engine.conversion import RootOptions
 
 __all__ = ["to_project", "load_into", "save_from", "reset", "autosave", "discard_autosave",
            "recovery_candidate"]

@@ -37,7 +37,7 @@ from app.gui.qt import QtCore, QtGui, QtWidgets  # noqa: F401  (Qt set up before
 import pyqtgraph as pg  # noqa: E402
 
 from app.gui.live import live_solver, retimed  # noqa: E402
-from engine.constraints import Constraint, ConstraintError  # noqa: E402
+from engine.correction.constraints import Constraint, ConstraintError  # noqa: E402
 
 __all__ = ["ConstraintTimeline", "ConstraintRow", "FIELDS", "moved_range", "retimed",
            "row_label", "COLORS"]

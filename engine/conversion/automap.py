@@ -3,8 +3,8 @@
 :func:`identify` finds the *roles* of a skeleton's joints (hips, spine, chest, neck, head, and
 per side clavicle, upper arm, forearm, hand, thigh, shin, foot, toe and finger joints);
 :func:`automap` identifies both skeletons and pairs the joints that play the same role, giving
-a :class:`~engine.correspondence.Correspondence` that passes
-:meth:`~engine.correspondence.Correspondence.validate`, with a note per pair saying how it
+a :class:`~engine.conversion.correspondence.Correspondence` that passes
+:meth:`~engine.conversion.correspondence.Correspondence.validate`, with a note per pair saying how it
 was decided.
 
 How roles are found
@@ -73,7 +73,7 @@ performer's middle joint nearest in normalised arc length (bone lengths from the
 chest), one target joint per performer joint, so ancestry is never inverted. The neck chain is
 mapped the same way (its first joints when either chain has only one). Fingers map by finger
 and number. A final pass drops any pair that would break
-:meth:`~engine.correspondence.Correspondence.validate` (none do on the conventions tested).
+:meth:`~engine.conversion.correspondence.Correspondence.validate` (none do on the conventions tested).
 
 Decision on ground roots: the target's **hips always map to the performer's hips** (the body
 root that carries the pelvis motion); joints between a ground root and the hips
@@ -88,7 +88,7 @@ travel the same way on both sides, as told by the position channels:
   target's hips cannot translate: CC3-RLROOT <- Bandai, whose ``joint_Root`` stands still) the
   target's ground root stays **unmapped** and ``notes[<ground root>]`` says why and that the
   hips carry the motion. :meth:`Correspondence.validate` accepts an unmapped root above a
-  mapped hips, and :func:`engine.retarget.retarget` then places the body from the hips.
+  mapped hips, and :func:`engine.conversion.retarget` then places the body from the hips.
 
 Mapping the target's ground root to the performer's hips instead would leave no performer
 joint for the target's hips (the map is one to one) and pin the body's root on the floor
@@ -105,8 +105,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .correspondence import Correspondence
-from .errors import MappingError
-from .skeleton import Skeleton
+from ..errors import MappingError
+from ..skeleton import Skeleton
 
 __all__ = ["Roles", "NameInfo", "identify", "automap", "parse_name", "ARM_ROLES", "LEG_ROLES",
            "FINGERS", "SIDES"]

@@ -24,13 +24,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ._numparse import parse_number_rows
-from .errors import BVHError, ExportError
-from .fileio import atomic_write
-from .kinematics import fk_arrays
-from .motion import Motion
-from .rotations import euler_to_quat, quat_to_euler
-from .skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
-from .units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
+from ..errors import BVHError, ExportError
+from ..fileio import atomic_write
+from ..kinematics import fk_arrays
+from ..motion import Motion
+from ..rotations import euler_to_quat, quat_to_euler
+from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
+from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
 
 __all__ = ["BVHRecord", "parse_bvh_text", "read_bvh", "parse_bvh", "record_to_motion",
            "format_bvh", "write_bvh", "detect_position_modes"]

@@ -10,14 +10,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constraints import Constraint, floor_constraint
-from .contacts import (ContactOptions, contact_constraints, detect_contacts, find_feet,
-                       horizontal_drift)
-from .correct import Correction, describe_residuals, enforce
-from .correspondence import Correspondence
-from .ik import IKOptions
+from .correction.constraints import Constraint, floor_constraint
+from .correction.contacts import (ContactOptions, contact_constraints, detect_contacts, find_feet,
+                                  horizontal_drift)
+from .correction.enforcement import Correction, describe_residuals, enforce
+from .conversion.correspondence import Correspondence
+from .correction.ik import IKOptions
 from .motion import Motion
-from .retarget import BindOptions, RootOptions, bind, compose, convert
+from .conversion.binding import BindOptions, bind
+from .conversion.converter import RootOptions, convert
+from .conversion.composer import compose
 
 __all__ = ["Job", "JobResult", "run_job"]
 

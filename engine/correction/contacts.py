@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constraints import Constraint
-from .kinematics import fk_arrays
-from .motion import Motion
-from .skeleton import Skeleton
+from ..kinematics import fk_arrays
+from ..motion import Motion
+from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "detect_contacts", "contact_constraints",
            "find_feet", "horizontal_drift", "estimate_floor"]
@@ -55,10 +55,10 @@ class Contact:
 
 def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
     """``(ankle, toe)`` joint names of each foot (toe ``None`` where there is none), from the
-    humanoid roles :func:`engine.automap.identify` finds; none for a skeleton that is not a
+    humanoid roles :func:`engine.conversion.automap.identify` finds; none for a skeleton that is not a
     humanoid."""
-    from .automap import identify
-    from .errors import MappingError
+    from ..conversion.automap import identify
+    from ..errors import MappingError
     try:
         roles = identify(skeleton)
     except MappingError:
@@ -82,7 +82,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = None,
                     options: ContactOptions | None = None) -> list[Contact]:
     """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted)."""
-    from .describe import stature
+    from ..describe import stature
     options = options or ContactOptions()
     sk = motion.skeleton
     feet = feet if feet is not None else find_feet(sk)
@@ -132,7 +132,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     above its planted height, scaled to the target. Where the toe is
     mapped, a plane constraint keeps it on or above the floor over the same range.
     """
-    from .describe import stature
+    from ..describe import stature
     options = options or ContactOptions()
     by_performer = {p: t for t, p in pairs.items()}
     sk = composed.skeleton

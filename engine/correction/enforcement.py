@@ -2,7 +2,7 @@
 displacement map.
 
 :func:`enforce` takes the composed (directly converted) motion, which is the attraction
-posture of every frame, and a list of :class:`~engine.constraints.Constraint`, and returns a
+posture of every frame, and a list of :class:`~engine.correction.constraints.Constraint`, and returns a
 :class:`Correction`: the dense displacement (per joint rotation vectors and the root's
 translation) that, added to the composed motion, meets the constraints, with residuals.
 
@@ -37,9 +37,9 @@ import numpy as np
 from .constraints import Constraint, ConstraintError
 from .displacement import DisplacementMap
 from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
-from .kinematics import fk_arrays
-from .motion import Motion
-from .quaternions import qconj, qmul, qnormalize, qpow, qpow_many
+from ..kinematics import fk_arrays
+from ..motion import Motion
+from ..quaternions import qconj, qmul, qnormalize, qpow, qpow_many
 
 __all__ = ["Correction", "enforce", "describe_residuals"]
 
@@ -159,8 +159,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         cancel: called between batches; returning True stops with
             :class:`~engine.errors.MotionComposerError`.
     """
-    from .describe import stature
-    from .errors import MotionComposerError
+    from ..describe import stature
+    from ..errors import MotionComposerError
 
     sk = composed.skeleton
     F = composed.num_frames

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .quaternions import qconj, qmul, qnormalize, qrot, to_matrix
-from .skeleton import Skeleton
+from ..quaternions import qconj, qmul, qnormalize, qrot, to_matrix
+from ..skeleton import Skeleton
 
 __all__ = ["Task", "IKOptions", "solve_frames", "rotvec_to_quat", "quat_to_rotvec",
            "task_error_and_jacobian"]

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import MotionComposerError
-from .motion import Motion
-from .quaternions import qmul
+from ..errors import MotionComposerError
+from ..motion import Motion
+from ..quaternions import qmul
 
 __all__ = ["Curve", "DisplacementMap", "reduce_keys", "INTERPOLATIONS", "ROOT"]
 

@@ -61,12 +61,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import ExportError, GLTFError
-from .fileio import atomic_write
-from .motion import Motion
-from .quaternions import qconj, qmul, qrot, to_matrix
-from .skeleton import EndSite, Skeleton
-from .units import SourceFrame
+from ..errors import ExportError, GLTFError
+from ..fileio import atomic_write
+from ..motion import Motion
+from ..quaternions import qconj, qmul, qrot, to_matrix
+from ..skeleton import EndSite, Skeleton
+from ..units import SourceFrame
 
 __all__ = ["Mesh", "Character", "read_gltf", "write_gltf", "format_gltf", "DEFAULT_FPS",
            "GLTF_SOURCE", "ROTATION_LAYOUT", "POSITION_LAYOUT"]

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import MotionComposerError
+from ..errors import MotionComposerError
 
 __all__ = ["Constraint", "ConstraintError", "KINDS", "PLANE_SIDES", "constraints_to_json",
            "constraints_from_json", "floor_constraint"]

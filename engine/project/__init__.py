@@ -59,20 +59,21 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from .bvh import _decode, parse_bvh, read_bvh
-from .constraints import KINDS, Constraint, ConstraintError
-from .contacts import ContactOptions
-from .correct import Correction
-from .correspondence import Correspondence
-from .displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
-                           DisplacementMap)
-from .errors import BVHError, MappingError, MotionComposerError
-from .fileio import FileWriteError, atomic_write
-from .ik import IKOptions
-from .motion import Motion
-from .pipeline import Job, run_job
-from .retarget import BindOptions, RootOptions
-from .units import AXES, UNITS
+from ..formats.bvh import _decode, parse_bvh, read_bvh
+from ..correction.constraints import KINDS, Constraint, ConstraintError
+from ..correction.contacts import ContactOptions
+from ..correction.enforcement import Correction
+from ..conversion.correspondence import Correspondence
+from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS,
+                                       TRANSLATION_CHANNELS, Curve, DisplacementMap)
+from ..errors import BVHError, MappingError, MotionComposerError
+from ..fileio import FileWriteError, atomic_write
+from ..correction.ik import IKOptions
+from ..motion import Motion
+from ..scene import Job, run_job
+from ..conversion.binding import BindOptions
+from ..conversion.converter import RootOptions
+from ..units import AXES, UNITS
 
 __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceError",
            "ProjectMotion", "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "MIGRATIONS",
@@ -158,7 +159,7 @@ class Source:
         embedded: the clip's BVH text, when embedded in the project (it then wins over
             ``path``).
         units, scale, up_axis, position_mode: the reader overrides used (``None``: detected);
-            see :func:`engine.bvh.record_to_motion`.
+            see :func:`engine.formats.bvh.record_to_motion`.
     """
 
     path: str | None = None
@@ -175,7 +176,7 @@ class Source:
             object.__setattr__(self, "position_mode", dict(self.position_mode))
 
     def reader_options(self) -> dict:
-        """The keyword arguments for :func:`engine.bvh.read_bvh`."""
+        """The keyword arguments for :func:`engine.formats.bvh.read_bvh`."""
         options = {"units": self.units, "scale": self.scale, "up_axis": self.up_axis,
                    "position_mode": self.position_mode}
         return {k: v for k, v in options.items() if v is not None}
@@ -286,8 +287,8 @@ def _read_source(source: Source, role: str, path) -> Motion:
     if Path(source.path).suffix.lower() in (".glb", ".gltf"):
         # a glTF character (the file's suffix says which reader; no format change needed):
         # its bind pose is the target, its skinned mesh is drawn by the window
-        from .gltf import read_gltf
-        from .errors import GLTFError
+        from ..formats.gltf import read_gltf
+        from ..errors import GLTFError
         try:
             return read_gltf(source.path).rest_motion()
         except GLTFError as exc:

@@ -12,9 +12,9 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import MappingError
-from .fileio import atomic_write
-from .skeleton import Skeleton
+from ..errors import MappingError
+from ..fileio import atomic_write
+from ..skeleton import Skeleton
 
 __all__ = ["Correspondence"]
 

@@ -1,0 +1,1 @@
+"""File formats: BVH (:mod:`.bvh`) and glTF 2.0 / GLB characters (:mod:`.gltf`)."""
