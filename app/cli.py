@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 import json
+import os
 import sys
 
 from engine import MotionComposerError, read_bvh
@@ -146,9 +147,9 @@ def cmd_retarget(args) -> int:
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
     from engine.fileio import atomic_write
-    from engine.scene import Job, run_job
-    from engine.conversion import BindOptions
-    from engine.conversion import RootOptions
+    from engine.conversion import BindOptions, RootOptions
+    from engine.project import Project, Source
+    from engine.scene import Scene
 
     started = time.perf_counter()
     performer = read_bvh(args.performer)
@@ -174,15 +175,18 @@ def cmd_retarget(args) -> int:
             raise MotionComposerError(f"{args.constraints}: cannot be read: "
                                       f"{exc.strerror or exc}") from None
         constraints = tuple(constraints_from_json(text, args.constraints))
-    job = Job(performer=performer, target=target, correspondence=correspondence,
-              bind_options=BindOptions(performer_reference=args.reference,
-                                       target_reference=args.target_reference,
-                                       rest_alignment=not args.keep_target_pose,
-                                       distribute=args.distribute),
-              root=RootOptions(mode=args.root,
-                               scale=tuple(args.root_scale) if args.root_scale else None),
-              constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
-    result = run_job(job)
+    project = Project(
+        performer=Source(os.path.abspath(args.performer)),
+        target=Source(os.path.abspath(args.target)),
+        correspondence=correspondence,
+        bind_options=BindOptions(performer_reference=args.reference,
+                                 target_reference=args.target_reference,
+                                 rest_alignment=not args.keep_target_pose,
+                                 distribute=args.distribute),
+        root=RootOptions(mode=args.root,
+                         scale=tuple(args.root_scale) if args.root_scale else None),
+        constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
+    result = Scene(project, performer, target).solve(regenerate=True)
     if Path(args.output).suffix.lower() in (".glb", ".gltf"):
         from engine.formats.gltf import write_gltf
         write_gltf(result.motion, character, args.output)   # mesh and skin when the target has
@@ -191,7 +195,11 @@ def cmd_retarget(args) -> int:
     if args.save_map:
         correspondence.save(args.save_map)
     if args.save_project:
-        _save_retarget_project(args, job, result)
+        # the session as a project, with every constraint enforced (the user's and the
+        # automatic ones) and the IK correction as displacement-map keys
+        from engine.project import embed_sources, save_project
+        saved = result.scene.project
+        save_project(embed_sources(saved) if args.embed_sources else saved, args.save_project)
     elapsed = time.perf_counter() - started
     if args.report:
         report = dict(result.report, output=str(args.output), total_s=elapsed)
@@ -208,40 +216,23 @@ def cmd_retarget(args) -> int:
     return 0
 
 
-def _save_retarget_project(args, job, result) -> None:
-    """``retarget --save-project``: the session as a project, with every constraint enforced
-    (the user's and the automatic ones) and the IK correction as displacement-map keys."""
-    import os
-
-    from engine.project import Project, Source, correction_keys, embed_sources, save_project
-
-    project = Project(
-        performer=Source(os.path.abspath(args.performer)),
-        target=Source(os.path.abspath(args.target)),
-        correspondence=job.correspondence, bind_options=job.bind_options, root=job.root,
-        auto_contacts=job.auto_contacts, contact_options=job.contact_options, floor=job.floor,
-        constraints=tuple(result.constraints), displacement=correction_keys(result.correction))
-    if args.embed_sources:
-        project = embed_sources(project)
-    save_project(project, args.save_project)
-
-
 def cmd_export(args) -> int:
     """``export P.mcp -o OUT.bvh``: evaluate a saved project headless and write its motion."""
     import time
 
     from engine.formats.bvh import write_bvh
-    from engine.project import evaluate_project, open_project, solve_project
+    from engine.scene import Scene
 
     started = time.perf_counter()
-    project, performer, target = open_project(args.project)
+    scene = Scene.open(args.project)
     if args.solve:
-        project = solve_project(project, performer, target)
-    motion = evaluate_project(project, performer, target).motion
+        scene = scene.solve().scene
+    scene.check()
+    motion = scene.motion
     write_bvh(motion, args.output)
     print(f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:.6g} fps onto "
-          f"{motion.skeleton.num_joints} joints ({len(project.constraints)} constraints, "
-          f"{len(project.displacement)} displacement curves) in "
+          f"{motion.skeleton.num_joints} joints ({len(scene.constraints)} constraints, "
+          f"{len(scene.displacement)} displacement curves) in "
           f"{time.perf_counter() - started:.2f} s")
     return 0
 

@@ -7,7 +7,7 @@ the bundled T-pose skeleton) with the automatic foot contacts (30 constraints: a
 a floor plane per contact) and a hand constraint, solved. For every position contact, the
 start handle is moved 4 frames earlier, as one step of a drag, and timed:
 
-* the preview solve in window mode (``app.gui.live.window_problem``: the frames the change
+* the preview solve in window mode (``engine.correction.preview.window_problem``: the frames the change
   reaches and what decides them, spliced into the shown motion): what a drag costs per step
   (target <= 50 ms);
 * the preview from the request to the motion shown (``LiveSolver.request`` -> the coalescing
@@ -49,26 +49,28 @@ def main() -> None:
     from app.gui.qt import QtCore, application
     app = application([])
     from app.gui.commands import push_constraints
-    from app.gui.live import LiveSolver, changed_window, window_problem
+    from app.gui.live import LiveSolver
+    from engine.correction.preview import changed_window, window_problem
     from engine.correction.constraints import Constraint
     from engine.correction.contacts import contact_constraints, detect_contacts, find_feet
     from engine.kinematics import forward_kinematics
     from gui_support import demo_document
 
     doc = demo_document()
-    mapped = set(doc.correspondence.pairs.values())
-    feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.performer.skeleton)
+    mapped = set(doc.scene.correspondence.pairs.values())
+    feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.scene.performer.skeleton)
             if a in mapped]
-    contacts = contact_constraints(detect_contacts(doc.performer, feet), doc.performer,
-                                   doc.composed, doc.correspondence.pairs)
-    j = doc.composed.skeleton.index["LeftHand"]
-    goal = forward_kinematics(doc.composed).positions[330, j] + [0.0, 0.12, 0.0]
+    contacts = contact_constraints(detect_contacts(doc.scene.performer, feet), doc.scene.performer,
+                                   doc.scene.composed, doc.scene.correspondence.pairs)
+    j = doc.scene.composed.skeleton.index["LeftHand"]
+    goal = forward_kinematics(doc.scene.composed).positions[330, j] + [0.0, 0.12, 0.0]
     hand = Constraint(joint="LeftHand", kind="position", goal={"point": goal},
                       smooth_in=300, start=320, end=340, smooth_out=360, name="reach LeftHand")
     constraints = contacts + [hand]
     live = LiveSolver(doc)
-    push_constraints(doc, constraints, live.solve(constraints), text="contacts")
-    F = doc.num_frames
+    push_constraints(doc, constraints, doc.scene.solve(constraints=constraints).scene.displacement,
+                     text="contacts")
+    F = doc.scene.num_frames
 
     def median_of(fn):
         fn()                                                    # warm-up
@@ -124,10 +126,10 @@ def main() -> None:
             live.preview_motion(after)
             live.cancel()
         goal_steps.append(median_of(preview))
-    full = median_of(lambda: live.solve(constraints))
+    full = median_of(lambda: doc.scene.solve(constraints=constraints))
 
     def release():
-        moved = list(doc.constraints)
+        moved = list(doc.scene.constraints)
         moved[2] = moved[2].with_range(18, 28, 91, 105)
         live.commit(moved, "move")
         doc.undo_stack.undo()

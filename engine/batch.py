@@ -76,9 +76,10 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     from .formats.bvh import read_bvh, write_bvh
     from .conversion.correspondence import Correspondence
     from .errors import MotionComposerError
-    from .scene import Job, run_job
     from .conversion.binding import BindOptions
     from .conversion.converter import RootOptions
+    from .project import Project, Source
+    from .scene import Scene
 
     started = time.perf_counter()
     summary = {"clip": str(clip), "status": "failed", "output": None, "reason": ""}
@@ -91,10 +92,12 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
         else:
             from .conversion.automap import automap
             corr = automap(target.skeleton, performer.skeleton)
-        job = Job(performer=performer, target=target, correspondence=corr,
-                  bind_options=BindOptions(**recipe.bind), root=RootOptions(**recipe.root),
-                  auto_contacts=recipe.auto_contacts, floor=recipe.floor)
-        result = run_job(job)
+        project = Project(performer=Source(os.path.abspath(clip)),
+                          target=Source(recipe.target_path, **recipe.target_reader),
+                          correspondence=corr, bind_options=BindOptions(**recipe.bind),
+                          root=RootOptions(**recipe.root), auto_contacts=recipe.auto_contacts,
+                          floor=recipe.floor)
+        result = Scene(project, performer, target).solve(regenerate=True)
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         out = Path(out_dir) / f"{Path(clip).stem}{recipe.suffix}.bvh"
         write_bvh(result.motion, out)

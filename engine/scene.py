@@ -1,125 +1,491 @@
-"""The whole retargeting job in one call: conversion, constraints, IK, report.
+"""The scene: one retargeting session's choices, its sources, and what is derived from them.
 
-The command line, the project files and (later) the window all run a :class:`Job` through
-:func:`run_job`, so a result never depends on which of them asked for it.
+A :class:`Scene` is immutable. It holds a :class:`~engine.project.Project` (the user's choices:
+sources, correspondence, binding, root, contact and IK options, floor, constraints,
+displacement map, viewer state) and the two source motions read from it. Everything else is
+derived on demand and cached by its inputs in a :class:`Derived` store shared by the scenes
+made from one another, so an edit recomputes only what it touches::
+
+    binding      <- performer, target, correspondence, bind options      (Anatomic Binding)
+    intermediate <- binding, root options                                (Motion Converter)
+    composed     <- intermediate                                         (Motion Composer)
+    motion       <- composed, displacement map                           (the final motion)
+
+A constraint edit therefore binds and converts nothing; a mapping edit re-binds. What was
+computed is counted in ``scene.derived.computed`` (a test reads it). IK never runs implicitly:
+:meth:`Scene.solve` runs the two passes of section 3.3 and returns a :class:`Solution` whose
+``scene`` carries the solved constraints and their correction as displacement keys.
+
+The command line (``retarget``, ``export``, ``batch``), project files and the window all go
+through a scene, so a result never depends on which of them asked for it.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
+from .conversion.automap import automap
+from .conversion.binding import bind
+from .conversion.composer import compose
+from .conversion.converter import convert
+from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, floor_constraint
-from .correction.contacts import (ContactOptions, contact_constraints, detect_contacts, find_feet,
+from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift)
 from .correction.enforcement import Correction, describe_residuals, enforce
-from .conversion.correspondence import Correspondence
-from .correction.ik import IKOptions
+from .correction import preview as _preview
+from .errors import MotionComposerError
 from .motion import Motion
-from .conversion.binding import BindOptions, bind
-from .conversion.converter import RootOptions, convert
-from .conversion.composer import compose
+from .project import (Project, Source, check_project, correction_keys, open_project,
+                      read_sources)
 
-__all__ = ["Job", "JobResult", "run_job"]
+__all__ = ["Scene", "Solution", "Derived", "remap", "ProjectMotion", "evaluate_project",
+           "solve_project"]
 
-
-@dataclass(frozen=True, eq=False)
-class Job:
-    """What to do: performer and target motions, the map, the binding and root choices, the
-    user's constraints, automatic contacts and a floor."""
-
-    performer: Motion
-    target: Motion
-    correspondence: Correspondence
-    bind_options: BindOptions = field(default_factory=BindOptions)
-    root: RootOptions = field(default_factory=RootOptions)
-    constraints: tuple = ()
-    auto_contacts: bool = False
-    contact_options: ContactOptions = field(default_factory=ContactOptions)
-    floor: float | None = None
-    ik_options: IKOptions | None = None
+#: results kept per derived stage (a few, so that undo and redo hit the cache without holding
+#: a motion per undo step)
+CACHE_SIZE = 4
 
 
-@dataclass(frozen=True, eq=False)
-class JobResult:
-    """What came out: the direct conversion, the corrected motion and a report.
+class Derived:
+    """Results computed from a scene's inputs, by stage and key, a few per stage (LRU).
 
     Attributes:
-        composed: the direct conversion (the attraction posture).
-        motion: the final motion (``composed`` when there is nothing to enforce).
-        constraints: every constraint enforced (the user's, then generated ones).
-        correction: the IK result, or None.
+        computed: how many times each stage ran (``"binding"``, ``"intermediate"``,
+            ``"composed"``, ``"motion"``).
+    """
+
+    def __init__(self, size: int = CACHE_SIZE):
+        self.size = size
+        self.computed: Counter = Counter()
+        self._stages: dict[str, OrderedDict] = {}
+
+    def get(self, stage: str, key, compute):
+        entries = self._stages.setdefault(stage, OrderedDict())
+        if key in entries:
+            entries.move_to_end(key)
+            return entries[key]
+        value = compute()
+        self.computed[stage] += 1
+        entries[key] = value
+        while len(entries) > self.size:
+            entries.popitem(last=False)
+        return value
+
+
+class _Failed:
+    """A derived stage that raised a user error (an impossible mapping while it is edited)."""
+
+    def __init__(self, error: MotionComposerError):
+        self.error = error
+        self.message = str(error)
+
+
+def _guarded(compute):
+    """``compute`` returning a :class:`_Failed` instead of raising a user error."""
+    def run():
+        try:
+            return compute()
+        except MotionComposerError as exc:
+            return _Failed(exc)
+    return run
+
+
+def _pairs_key(correspondence: Correspondence) -> tuple:
+    return tuple(correspondence.pairs.items())
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """What :meth:`Scene.solve` gives.
+
+    Attributes:
+        scene: the scene with the constraints solved and their correction as keys.
+        constraints: every constraint enforced.
+        correction: the dense IK result (``None`` without enabled constraints).
         report: JSON-ready figures (residuals, contact drift, timings).
     """
 
-    composed: Motion
-    motion: Motion
+    scene: "Scene"
     constraints: list
     correction: Correction | None
     report: dict
 
+    @property
+    def motion(self) -> Motion:
+        """The dense corrected motion (the IK result itself, before key reduction)."""
+        return self.correction.motion if self.correction is not None else self.scene.composed
 
-def run_job(job: Job, *, progress=None, cancel=None) -> JobResult:
-    timings = {}
-    t0 = time.perf_counter()
-    binding = bind(job.performer, job.target, job.correspondence, job.bind_options)
-    pose = convert(binding, job.performer, job.root)
-    name = (f"{job.performer.name}_on_{job.target.name}"
-            if job.performer.name and job.target.name else "")
-    composed = compose(binding, pose, job.performer.frame_time, name=name)
-    timings["conversion_s"] = time.perf_counter() - t0
 
-    constraints: list[Constraint] = list(job.constraints)
-    contacts = []
-    if job.auto_contacts:
-        t0 = time.perf_counter()
-        mapped = set(job.correspondence.pairs.values())
-        feet = [(a, t if t in mapped else None) for a, t in find_feet(job.performer.skeleton)
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A session: choices (``project``), the source motions, and derived results (cached).
+
+    Project fields read through the scene (``scene.constraints``, ``scene.correspondence``,
+    ``scene.viewer``...). Change it with :meth:`replace` (choices), :meth:`with_source`
+    (a new performer or target) or :meth:`solve`.
+    """
+
+    project: Project
+    performer: Motion | None = None
+    target: Motion | None = None
+    derived: Derived = field(default_factory=Derived, repr=False)
+
+    # ------------------------------------------------------------------ making scenes
+    @classmethod
+    def empty(cls) -> "Scene":
+        return cls(Project(performer=Source(), target=Source()))
+
+    @classmethod
+    def from_project(cls, project: Project, performer: Motion | None = None,
+                     target: Motion | None = None, *, path=None) -> "Scene":
+        """The scene of ``project``, reading its sources unless given; raises
+        :class:`~engine.project.ProjectError` naming the field when the project does not fit
+        its clips (``path``, the project file, is named in errors)."""
+        if performer is None or target is None:
+            performer, target = read_sources(project, path=path)
+        check_project(project, performer, target, path=path)
+        return cls(project, performer, target)
+
+    @classmethod
+    def open(cls, path) -> "Scene":
+        """The scene of the project file at ``path``."""
+        opened = open_project(path)
+        return cls(opened.project, opened.performer, opened.target)
+
+    def replace(self, **changes) -> "Scene":
+        """A scene with some project fields changed; it shares this one's derived results."""
+        return Scene(self.project.replace(**changes), self.performer, self.target, self.derived)
+
+    def with_source(self, role: str, motion: Motion, source: Source, *,
+                    remap_pairs: bool = True) -> "Scene":
+        """A scene whose performer or target (``role``) is ``motion`` read from ``source``,
+        re-mapped (:func:`remap`, unless ``remap_pairs`` is False): the pairs set by hand that still
+        name joints of both skeletons are kept, the rest auto-mapped. Constraints and curves
+        that name joints the new target does not have are dropped, and so are constraints
+        past a new performer's last frame."""
+        performer = motion if role == "performer" else self.performer
+        target = motion if role == "target" else self.target
+        changes = {role: source}
+        if remap_pairs and performer is not None and target is not None:
+            changes["correspondence"] = remap(self.correspondence, target.skeleton,
+                                              performer.skeleton)
+        project = self.project.replace(**changes)
+        scene = Scene(project, performer, target, self.derived)
+        return scene._fitted()
+
+    def _fitted(self) -> "Scene":
+        """Drop what no longer fits the sources (joints gone, frames past the end)."""
+        p = self.project
+        changes = {}
+        if self.target is not None:
+            names = self.target.skeleton.index
+            kept = tuple(c for c in p.constraints if c.joint in names)
+            if len(kept) != len(p.constraints):
+                changes["constraints"] = kept
+            curves = p.displacement.restricted_to(names)
+            if curves is not p.displacement:
+                changes["displacement"] = curves
+        if self.performer is not None:
+            last = self.performer.num_frames - 1
+            kept = tuple(c for c in changes.get("constraints", p.constraints)
+                         if c.smooth_out <= last)
+            if len(kept) != len(changes.get("constraints", p.constraints)):
+                changes["constraints"] = kept
+            v = p.viewer
+            frame = min(v.current_frame, max(last, 0))
+            play = v.play_range
+            if play is not None and play[1] > last:
+                play = None
+            if (frame, play) != (v.current_frame, v.play_range):
+                changes["viewer"] = dataclasses.replace(v, current_frame=frame, play_range=play)
+        return self.replace(**changes) if changes else self
+
+    def __getattr__(self, name):
+        # the project's fields read through the scene (scene.constraints, scene.viewer, ...)
+        if name.startswith("__") or name in ("project", "performer", "target", "derived"):
+            raise AttributeError(name)
+        project = object.__getattribute__(self, "project")
+        if name in _PROJECT_FIELDS:
+            return getattr(project, name)
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+
+    # ------------------------------------------------------------------ plain facts
+    @property
+    def num_frames(self) -> int:
+        """Frames of the result (the performer's)."""
+        return self.performer.num_frames if self.performer is not None else 0
+
+    @property
+    def performer_path(self) -> Path | None:
+        return Path(self.project.performer.path) if self.project.performer.path else None
+
+    @property
+    def target_path(self) -> Path | None:
+        return Path(self.project.target.path) if self.project.target.path else None
+
+    @property
+    def has_sources(self) -> bool:
+        return self.performer is not None and self.target is not None
+
+    # ------------------------------------------------------------------ derived
+    def _raw(self, stage: str):
+        """A stage's value: the result, a :class:`_Failed`, or None (nothing to compute)."""
+        if not self.has_sources or not len(self.correspondence):
+            return None
+        p = self.project
+        bkey = (self.performer, self.target, _pairs_key(p.correspondence), p.bind_options)
+        if stage == "binding":
+            return self.derived.get("binding", bkey, _guarded(
+                lambda: bind(self.performer, self.target, p.correspondence, p.bind_options)))
+        binding = self._raw("binding")
+        if isinstance(binding, _Failed):
+            return binding
+        key = (bkey, p.root)
+        if stage == "intermediate":
+            return self.derived.get("intermediate", key, _guarded(
+                lambda: convert(binding, self.performer, p.root)))
+        pose = self._raw("intermediate")
+        if isinstance(pose, _Failed):
+            return pose
+        if stage == "composed":
+            name = (f"{self.performer.name}_on_{self.target.name}"
+                    if self.performer.name and self.target.name else "")
+            return self.derived.get("composed", key, lambda: compose(
+                binding, pose, self.performer.frame_time, name=name))
+        composed = self._raw("composed")
+        return self.derived.get("motion", (key, p.displacement),
+                                lambda: p.displacement.apply(composed))
+
+    def _value(self, stage: str):
+        value = self._raw(stage)
+        return None if isinstance(value, _Failed) else value
+
+    @property
+    def binding(self):
+        """The Anatomic Binding (the Intermediate Skeleton), or None (no sources, no map, or
+        a map that cannot bind: see :attr:`evaluation_error`)."""
+        return self._value("binding")
+
+    @property
+    def intermediate(self):
+        """The Intermediate Skeleton over frames (Motion Converter), or None."""
+        return self._value("intermediate")
+
+    @property
+    def composed(self) -> Motion | None:
+        """The direct conversion (Motion Composer): the IK's attraction posture."""
+        return self._value("composed")
+
+    @property
+    def motion(self) -> Motion | None:
+        """The final motion: the direct conversion plus the displacement map (no IK runs)."""
+        return self._value("motion")
+
+    @property
+    def ready(self) -> bool:
+        """A final motion exists."""
+        return self.motion is not None
+
+    def check(self) -> None:
+        """Raise the error that stopped the conversion (an impossible map), if any."""
+        value = self._raw("motion")
+        if isinstance(value, _Failed):
+            raise value.error
+
+    @property
+    def evaluation_error(self) -> str:
+        """Why there is no motion although both sources and a map exist ("" otherwise)."""
+        value = self._raw("motion")
+        return value.message if isinstance(value, _Failed) else ""
+
+    def _ik_options(self, composed):
+        return getattr(self.project, "ik_options", None)
+
+    @property
+    def character(self):
+        """The target's character with its mesh and skin (glTF), or None."""
+        path = self.project.target.path
+        if path is None or self.project.target.embedded is not None:
+            return None
+        from .formats import read_character
+        return self.derived.get("character", path, lambda: read_character(path))
+
+    # ------------------------------------------------------------------ correction
+    def automatic_constraints(self) -> list[Constraint]:
+        """The constraints the project's settings generate: foot contacts found in the
+        performer (``auto_contacts``, with ``contact_options``) and keep-above-floor planes on
+        the target's feet (``floor``). Empty without a direct conversion."""
+        composed = self.composed
+        if composed is None:
+            return []
+        p = self.project
+        out: list[Constraint] = []
+        if p.auto_contacts:
+            out += contact_constraints(self.contacts(), self.performer, composed,
+                                       p.correspondence.pairs, p.contact_options,
+                                       floor=p.floor)
+        if p.floor is not None:
+            for ankle, toe in find_feet(self.target.skeleton):
+                for joint in (ankle, toe):
+                    if joint:
+                        out.append(floor_constraint(joint, composed.num_frames, p.floor))
+        return out
+
+    def contacts(self) -> list:
+        """The performer's foot contacts (on mapped feet) under the project's options."""
+        mapped = set(self.correspondence.pairs.values())
+        feet = [(a, t if t in mapped else None) for a, t in find_feet(self.performer.skeleton)
                 if a in mapped]
-        contacts = detect_contacts(job.performer, feet, job.contact_options)
-        constraints += contact_constraints(contacts, job.performer, composed,
-                                           job.correspondence.pairs, job.contact_options,
-                                           floor=job.floor)
-        timings["contact_detection_s"] = time.perf_counter() - t0
-    if job.floor is not None:
-        for ankle, toe in find_feet(job.target.skeleton):
-            for joint in (ankle, toe):
-                if joint:
-                    constraints.append(floor_constraint(joint, composed.num_frames, job.floor))
-    correction = None
-    motion = composed
-    if constraints:
+        return detect_contacts(self.performer, feet, self.project.contact_options)
+
+    def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,
+              progress=None, cancel=None, warm_start: bool = False) -> Solution:
+        """Run the IK's two passes and store the correction as displacement keys.
+
+        ``constraints``: the list to enforce (default: the scene's own). With
+        ``regenerate``, the automatic constraints are dropped and made again from the
+        project's settings (:meth:`automatic_constraints`) beside the user's. The solved
+        layer replaces the displacement map. ``ik_options`` overrides the project's. Raises
+        :class:`~engine.errors.MotionComposerError` (``cancel()`` returning True stops it).
+        """
+        timings = {}
         t0 = time.perf_counter()
-        correction = enforce(composed, constraints, options=job.ik_options, progress=progress,
-                             cancel=cancel)
-        timings["ik_s"] = time.perf_counter() - t0
-        timings.update({f"ik_{k.replace(' ', '_')}_s": v
-                        for k, v in correction.seconds.items()})
-        motion = correction.motion
+        self.check()
+        composed = self.composed
+        if composed is None:
+            raise MotionComposerError("nothing to solve: the scene has no direct conversion "
+                                      "(a performer, a target and a map are needed)")
+        timings["conversion_s"] = time.perf_counter() - t0
+        chosen = list(self.constraints if constraints is None else constraints)
+        if regenerate:
+            t0 = time.perf_counter()
+            chosen = [c for c in chosen if not c.auto] + self.automatic_constraints()
+            timings["contact_detection_s"] = time.perf_counter() - t0
+        correction = None
+        if any(c.enabled for c in chosen):
+            t0 = time.perf_counter()
+            options = ik_options if ik_options is not None else self._ik_options(composed)
+            correction = enforce(composed, chosen, options=options,
+                                 progress=progress, cancel=cancel, warm_start=warm_start)
+            timings["ik_s"] = time.perf_counter() - t0
+            timings.update({f"ik_{k.replace(' ', '_')}_s": v
+                            for k, v in correction.seconds.items()})
+        scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
+        report = _report(composed, correction, chosen, len(self.correspondence), timings)
+        return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
+
+    def preview(self, constraints: list, *, base_constraints: list | None = None,
+                base_motion: Motion | None = None, whole: bool = True) -> tuple[Motion, str]:
+        """The corrected motion for ``constraints`` without changing the scene, for a live
+        preview while a handle or goal is dragged: ``(motion, mode)``.
+
+        With ``whole`` (or when the change cannot be localised) the whole set is solved
+        (mode ``"full"``); otherwise only the frames the change from ``base_constraints`` can
+        reach are solved and spliced into ``base_motion`` (mode ``"window"``, see
+        :mod:`engine.correction.preview`)."""
+        composed = self.composed
+        if composed is None:
+            raise MotionComposerError("nothing to preview: the scene has no direct conversion")
+        options = self._ik_options(composed)
+        window = (None if base_constraints is None or base_motion is None
+                  else _preview.changed_window(base_constraints, constraints))
+        if whole or window is None:
+            return enforce(composed, constraints, options=options).motion, "full"
+        lo, hi = window
+        part = enforce(composed, _preview.window_problem(constraints, lo, hi),
+                       options=options).motion
+        return _preview.splice(base_motion, part, lo, hi), "window"
+
+
+_PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))
+
+
+class ProjectMotion(NamedTuple):
+    """``composed``: the direct conversion; ``motion``: with the displacement map applied."""
+
+    composed: Motion
+    motion: Motion
+
+
+def evaluate_project(project: Project, performer: Motion | None = None,
+                     target: Motion | None = None) -> ProjectMotion:
+    """The direct conversion and the final motion (the conversion plus the displacement map).
+
+    No IK runs: the result is a pure function of the project's data, so a saved and reloaded
+    project gives the same motion bit for bit. ``performer`` and ``target`` skip reading the
+    sources again when the caller has them."""
+    scene = Scene.from_project(project, performer, target)
+    scene.check()
+    return ProjectMotion(scene.composed, scene.motion)
+
+
+def solve_project(project: Project, performer: Motion | None = None,
+                  target: Motion | None = None, *, regenerate: bool = False,
+                  ik_options=None, progress=None, cancel=None) -> Project:
+    """A copy whose displacement map is the IK correction of its constraints, as keys.
+
+    With ``regenerate``, the automatic constraints are dropped and made again from the
+    project's settings (``auto_contacts``, ``floor``); otherwise the constraints are solved as
+    they are (automatic ones as edited). The map replaces the previous one, hand edits
+    included."""
+    scene = Scene.from_project(project, performer, target)
+    return scene.solve(regenerate=regenerate, ik_options=ik_options, progress=progress,
+                       cancel=cancel).scene.project
+
+
+def remap(correspondence: Correspondence, target, performer) -> Correspondence:
+    """The map for a new pair of skeletons: the pairs set by hand (those without an auto-map
+    note) that still name joints of both skeletons and keep the map one to one, then the
+    automatic map for the target joints left (:func:`~engine.conversion.automap.automap`)."""
+    kept = {t: p for t, p in correspondence.pairs.items()
+            if correspondence.set_by_hand(t) and t in target.index and p in performer.index}
+    auto = automap(target, performer)
+    used = set(kept.values())
+    pairs = dict(kept)
+    notes = {}
+    for t, p in auto.pairs.items():
+        if t in pairs or p in used:
+            continue
+        pairs[t] = p
+        used.add(p)
+        notes[t] = auto.notes.get(t) or "auto-mapped"
+    ordered = {t: pairs[t] for t in target.names if t in pairs}
+    notes.update({t: correspondence.notes[t] for t in kept if t in correspondence.notes})
+    return Correspondence(ordered, notes)
+
+
+def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:
     report = {
         "frames": composed.num_frames,
         "fps": composed.fps,
-        "mapped_joints": len(job.correspondence),
+        "mapped_joints": mapped,
         "constraints": describe_residuals(correction, constraints) if correction else [],
         "contacts": [],
         "timings": timings,
     }
-    if contacts:
-        pins = [c for c in constraints if c.auto and c.kind == "position"]
+    motion = correction.motion if correction is not None else composed
+    pins = [c for c in constraints if c.auto and c.meta.get("source") == "contact"
+            and c.kind == "position"]
+    if pins:
         for c in pins:
-            before = horizontal_drift(composed, c.joint, c.start, c.end)
-            after = horizontal_drift(motion, c.joint, c.start, c.end)
-            report["contacts"].append({"joint": c.joint, "start": c.start, "end": c.end,
-                                       "drift_direct_m": before, "drift_corrected_m": after})
+            report["contacts"].append({
+                "joint": c.joint, "start": c.start, "end": c.end,
+                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, c.end),
+                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, c.end)})
         drift_d = [x["drift_direct_m"] for x in report["contacts"]]
         drift_c = [x["drift_corrected_m"] for x in report["contacts"]]
         report["contact_drift"] = {
             "count": len(drift_d),
-            "direct_mean_m": float(np.mean(drift_d)) if drift_d else 0.0,
-            "direct_max_m": float(np.max(drift_d)) if drift_d else 0.0,
-            "corrected_mean_m": float(np.mean(drift_c)) if drift_c else 0.0,
-            "corrected_max_m": float(np.max(drift_c)) if drift_c else 0.0,
+            "direct_mean_m": float(np.mean(drift_d)),
+            "direct_max_m": float(np.max(drift_d)),
+            "corrected_mean_m": float(np.mean(drift_c)),
+            "corrected_max_m": float(np.max(drift_c)),
         }
-    return JobResult(composed=composed, motion=motion, constraints=constraints,
-                     correction=correction, report=report)
+    return report

@@ -31,17 +31,17 @@ def require_gl():
 
 def demo_document():
     """The bundled CMU walk on the bundled CMU T-pose skeleton, mapped, evaluated."""
-    from app.gui.commands import push_correspondence, push_sources
     from app.gui.document import Document
     from conftest import clip_path
     from engine import read_bvh
     from engine.conversion.correspondence import Correspondence
+    from engine.project import Project, Source
+    from engine.scene import Scene
     from ik_fixtures import MAX_TO_HOLDEN
 
+    performer, target = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
+    project = Project(performer=Source(path=str(performer)), target=Source(path=str(target)),
+                      correspondence=Correspondence(MAX_TO_HOLDEN))
     doc = Document()
-    push_sources(doc, read_bvh(clip_path("cmu_131_01_walk.bvh")),
-                 clip_path("cmu_131_01_walk.bvh"), read_bvh(clip_path("cmu_rest_tpose.bvh")),
-                 clip_path("cmu_rest_tpose.bvh"))
-    push_correspondence(doc, Correspondence(MAX_TO_HOLDEN), "Map")
-    doc.undo_stack.setClean()
+    doc.load_scene(Scene(project, read_bvh(performer), read_bvh(target)))
     return doc

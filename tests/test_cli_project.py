@@ -16,7 +16,8 @@ from app.cli import main
 from conftest import REPO, clip_path
 from engine import forward_kinematics, read_bvh
 from engine.formats.bvh import format_bvh
-from engine.project import (MissingSourceError, ProjectError, evaluate_project, load_project,
+from engine.scene import evaluate_project
+from engine.project import (MissingSourceError, ProjectError, load_project,
                             open_project)
 from ik_fixtures import MAX_TO_HOLDEN
 

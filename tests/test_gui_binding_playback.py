@@ -46,10 +46,10 @@ def doc(qtbot, clips):
     push_sources(d, performer=performer, performer_path=clip_path("cmu_131_01_walk.bvh"),
                  target=target, target_path=clip_path("cmu_rest_tpose.bvh"))
     push_correspondence(d, Correspondence(MAX_TO_HOLDEN), "Map CMU to Holden")
-    assert d.ready, d.evaluation_error
+    assert d.scene.ready, d.scene.evaluation_error
     d.undo_stack.setClean()
     yield d
-    d.deleteLater()
+    d.close()
 
 
 @pytest.fixture
@@ -81,18 +81,18 @@ def _root_xz(doc):
 def test_panel_shows_defaults_notes_and_ratio(panel, doc):
     assert panel.performer_reference.combo.currentData() == "auto"
     assert not panel.performer_reference.frame.isEnabled()
-    assert panel.performer_reference.frame.maximum() == doc.performer.num_frames - 1
-    assert panel.target_reference.frame.maximum() == doc.target.num_frames - 1 == 0
+    assert panel.performer_reference.frame.maximum() == doc.scene.performer.num_frames - 1
+    assert panel.target_reference.frame.maximum() == doc.scene.target.num_frames - 1 == 0
     assert panel.align_on.isChecked() and not panel.align_off.isChecked()
     assert panel.distribute.currentData() == "even"
     assert panel.root_mode.currentData() == "scaled"
     assert panel.auto_scale.isChecked()
     assert not panel.scale_h.isEnabled() and not panel.scale_v.isEnabled()
-    ratio = doc.binding.hip_height_ratio
+    ratio = doc.scene.binding.hip_height_ratio
     assert panel.ratio_label.text() == f"ratio {ratio:.3f}"
     assert panel.scale_h.value() == pytest.approx(ratio, abs=1e-3)
     # notes name the references used
-    for key, value in doc.binding.notes.items():
+    for key, value in doc.scene.binding.notes.items():
         assert str(value) in panel.notes.text()
     assert "rest pose" in panel.notes.text()
 
@@ -125,7 +125,7 @@ def test_model_changes_show_in_panel(panel, doc):
 def test_evaluation_error_shows_in_notes(panel, doc):
     # the target has one frame: frame 5 cannot be its reference
     push_options(doc, bind_options=BindOptions(target_reference=5), text="bad")
-    assert doc.binding is None and doc.evaluation_error
+    assert doc.scene.binding is None and doc.scene.evaluation_error
     assert "outside the clip" in panel.notes.text()
     assert panel.ratio_label.text() == "ratio -"
 
@@ -134,19 +134,19 @@ def test_evaluation_error_shows_in_notes(panel, doc):
 def test_rest_alignment_off_changes_first_frame_and_undoes(qtbot, panel, doc):
     before = doc.motion.rotations[0].copy()
     qtbot.mouseClick(panel.align_off, Qt.MouseButton.LeftButton)
-    assert doc.bind_options.rest_alignment is False
+    assert doc.scene.bind_options.rest_alignment is False
     assert not np.allclose(doc.motion.rotations[0], before, atol=1e-6)
     assert doc.undo_stack.count() == 3
     assert doc.undo_stack.undoText() == "Turn rest alignment off"
 
     doc.undo_stack.undo()
-    assert doc.bind_options.rest_alignment is True
+    assert doc.scene.bind_options.rest_alignment is True
     assert panel.align_on.isChecked()
     np.testing.assert_allclose(doc.motion.rotations[0], before, atol=1e-12)
     assert doc.undo_stack.redoText() == "Turn rest alignment off"
 
     doc.undo_stack.redo()
-    assert doc.bind_options.rest_alignment is False and panel.align_off.isChecked()
+    assert doc.scene.bind_options.rest_alignment is False and panel.align_off.isChecked()
     qtbot.mouseClick(panel.align_on, Qt.MouseButton.LeftButton)
     assert doc.undo_stack.undoText() == "Turn rest alignment on"
     assert doc.undo_stack.count() == 4
@@ -155,7 +155,7 @@ def test_rest_alignment_off_changes_first_frame_and_undoes(qtbot, panel, doc):
 def test_root_in_place_keeps_hips_horizontal(qtbot, panel, doc):
     assert np.ptp(_root_xz(doc), axis=0).max() > 1.0        # the walk travels metres
     panel.root_mode.setCurrentIndex(panel.root_mode.findData("in-place"))
-    assert doc.root_options.mode == "in-place"
+    assert doc.scene.root.mode == "in-place"
     assert np.ptp(_root_xz(doc), axis=0).max() < 1e-9
     assert doc.undo_stack.undoText() == "Keep the root in place"
     assert not panel.scale_h.isEnabled()
@@ -167,48 +167,48 @@ def test_root_in_place_keeps_hips_horizontal(qtbot, panel, doc):
 def test_reference_frame_choice(qtbot, panel, doc):
     chooser = panel.performer_reference
     chooser.combo.setCurrentIndex(chooser.combo.findData("frame"))
-    assert doc.bind_options.performer_reference == 0
+    assert doc.scene.bind_options.performer_reference == 0
     assert doc.undo_stack.undoText() == "Set performer reference pose to frame 0"
     # spin edits merge into one step named after the last value
     n = doc.undo_stack.count()
     for f in (10, 11, 12):
         chooser.frame.setValue(f)
-    assert doc.bind_options.performer_reference == 12
+    assert doc.scene.bind_options.performer_reference == 12
     assert doc.undo_stack.count() == n + 1
     assert doc.undo_stack.undoText() == "Set performer reference pose to frame 12"
     assert "frame 12" in panel.notes.text()
-    assert doc.binding.notes["performer reference"] == "frame 12"
+    assert doc.scene.binding.notes["performer reference"] == "frame 12"
     doc.undo_stack.undo()
-    assert doc.bind_options.performer_reference == 0
+    assert doc.scene.bind_options.performer_reference == 0
     assert chooser.frame.value() == 0 and chooser.combo.currentData() == "frame"
     doc.undo_stack.undo()
-    assert doc.bind_options.performer_reference == "auto"
+    assert doc.scene.bind_options.performer_reference == "auto"
     assert chooser.combo.currentData() == "auto" and not chooser.frame.isEnabled()
     # the spin box is limited to the clip
     chooser.combo.setCurrentIndex(chooser.combo.findData("frame"))
     chooser.frame.setValue(10 ** 6)
-    assert doc.bind_options.performer_reference == doc.performer.num_frames - 1
+    assert doc.scene.bind_options.performer_reference == doc.scene.performer.num_frames - 1
     chooser.combo.setCurrentIndex(chooser.combo.findData("rest"))
     assert doc.undo_stack.undoText() == "Set performer reference pose to rest pose"
-    assert doc.bind_options.performer_reference == "rest"
+    assert doc.scene.bind_options.performer_reference == "rest"
 
 
 def test_distribution_and_target_reference(panel, doc):
     panel.distribute.setCurrentIndex(panel.distribute.findData("first"))
-    assert doc.bind_options.distribute == "first"
+    assert doc.scene.bind_options.distribute == "first"
     assert doc.undo_stack.undoText() == "Turn only each chain's first joint"
     t = panel.target_reference
     t.combo.setCurrentIndex(t.combo.findData("frame"))
-    assert doc.bind_options.target_reference == 0
-    assert doc.binding.notes["target reference"] == "frame 0"
+    assert doc.scene.bind_options.target_reference == 0
+    assert doc.scene.binding.notes["target reference"] == "frame 0"
     assert doc.undo_stack.undoText() == "Set target reference pose to frame 0"
 
 
 def test_root_scale_by_hand_merges_and_scales(qtbot, panel, doc):
-    ratio = doc.binding.hip_height_ratio
+    ratio = doc.scene.binding.hip_height_ratio
     travel = np.ptp(_root_xz(doc)[:, 1])
     qtbot.mouseClick(panel.auto_scale, Qt.MouseButton.LeftButton)     # uncheck
-    assert doc.root_options.scale == pytest.approx((ratio, ratio))
+    assert doc.scene.root.scale == pytest.approx((ratio, ratio))
     assert doc.undo_stack.undoText() == "Set the root scale by hand"
     assert panel.scale_h.isEnabled() and panel.scale_v.isEnabled()
     n = doc.undo_stack.count()
@@ -217,13 +217,13 @@ def test_root_scale_by_hand_merges_and_scales(qtbot, panel, doc):
     panel.scale_v.setValue(0.5)
     # four spin-box changes (both root scales) are one undo step named after the last
     assert doc.undo_stack.count() == n + 1
-    assert doc.root_options.scale == pytest.approx((2.0 * ratio, 0.5), abs=1e-3)
+    assert doc.scene.root.scale == pytest.approx((2.0 * ratio, 0.5), abs=1e-3)
     assert doc.undo_stack.undoText().startswith("Set root scale to")
     assert "0.500 (vertical)" in doc.undo_stack.undoText()
     # the horizontal travel doubled (the hips' own sway is not scaled)
     assert np.ptp(_root_xz(doc)[:, 1]) == pytest.approx(2.0 * travel, rel=0.02)
     doc.undo_stack.undo()
-    assert doc.root_options.scale == pytest.approx((ratio, ratio))
+    assert doc.scene.root.scale == pytest.approx((ratio, ratio))
     assert panel.scale_h.value() == pytest.approx(ratio, abs=1e-3)
     assert np.ptp(_root_xz(doc)[:, 1]) == pytest.approx(travel, rel=1e-9)
     doc.undo_stack.redo()
@@ -234,7 +234,7 @@ def test_root_scale_by_hand_merges_and_scales(qtbot, panel, doc):
     panel.scale_v.setValue(0.6)
     assert doc.undo_stack.count() == n + 1
     qtbot.mouseClick(panel.auto_scale, Qt.MouseButton.LeftButton)     # check again
-    assert doc.root_options.scale is None
+    assert doc.scene.root.scale is None
     assert doc.undo_stack.undoText() == "Scale the root by hip heights"
     assert not panel.scale_h.isEnabled()
 
@@ -249,16 +249,16 @@ def test_spin_runs_do_not_merge_across_spin_boxes(panel, doc):
     assert doc.undo_stack.count() == n + 2
     doc.undo_stack.undo()
     # undoing the scale leaves the reference frame
-    assert doc.bind_options.performer_reference == 31
-    assert doc.root_options.scale[1] != pytest.approx(1.1)
+    assert doc.scene.bind_options.performer_reference == 31
+    assert doc.scene.root.scale[1] != pytest.approx(1.1)
 
 
 def test_new_sources_update_frame_limits(panel, doc):
-    short = doc.performer.frames(slice(0, 50))
+    short = doc.scene.performer.frames(slice(0, 50))
     push_sources(doc, performer=short, performer_path=Path("short.bvh"), text="Short")
     assert panel.performer_reference.frame.maximum() == 49
     doc.undo_stack.undo()
-    assert panel.performer_reference.frame.maximum() == doc.performer.num_frames - 1
+    assert panel.performer_reference.frame.maximum() == doc.scene.performer.num_frames - 1
 
 
 def test_binding_panel_screenshot(qtbot, panel, doc):
@@ -271,29 +271,29 @@ def test_binding_panel_screenshot(qtbot, panel, doc):
 
 # ====================================================================== playback
 def _fps(doc):
-    return 1.0 / doc.performer.frame_time
+    return 1.0 / doc.scene.performer.frame_time
 
 
 def _play_for(qtbot, bar, ms):
-    start_frame = bar.doc.viewer.current_frame
+    start_frame = bar.doc.scene.viewer.current_frame
     t0 = time.perf_counter()
     bar.play()
     qtbot.wait(ms)
-    frame = bar.doc.viewer.current_frame
+    frame = bar.doc.scene.viewer.current_frame
     elapsed = time.perf_counter() - t0
     bar.pause()
     return frame - start_frame, elapsed
 
 
 def test_plays_in_real_time(qtbot, bar, doc):
-    assert bar.slider.maximum() == bar.spin.maximum() == doc.num_frames - 1
+    assert bar.slider.maximum() == bar.spin.maximum() == doc.scene.num_frames - 1
     assert not bar.playing
     advanced, elapsed = _play_for(qtbot, bar, 300)
     assert advanced >= 5
     assert advanced <= elapsed * _fps(doc) * 1.5 + 2
     assert not bar.playing
     # the widgets followed
-    f = doc.viewer.current_frame
+    f = doc.scene.viewer.current_frame
     assert bar.slider.value() == bar.spin.value() == f
     # frame changes are not edits
     assert doc.undo_stack.count() == 2 and not doc.modified
@@ -316,7 +316,7 @@ def test_play_button_toggles(qtbot, bar):
 
 
 def test_loop_wraps_within_play_range(qtbot, bar, doc):
-    doc.viewer.play_range = (10, 20)
+    doc.set_viewer(play_range=(10, 20))
     doc.set_frame(18)
     seen = []
     doc.frameChanged.connect(seen.append)
@@ -330,48 +330,48 @@ def test_loop_wraps_within_play_range(qtbot, bar, doc):
 
 
 def test_loop_whole_clip_wraps(qtbot, bar, doc):
-    doc.set_frame(doc.num_frames - 3)
+    doc.set_frame(doc.scene.num_frames - 3)
     bar.set_loop(True)
     bar.play()
-    qtbot.waitUntil(lambda: doc.viewer.current_frame < 50, timeout=2000)
+    qtbot.waitUntil(lambda: doc.scene.viewer.current_frame < 50, timeout=2000)
     assert bar.playing
 
 
 def test_stops_at_end_without_loop(qtbot, bar, doc):
     bar.set_loop(False)
-    doc.set_frame(doc.num_frames - 5)
+    doc.set_frame(doc.scene.num_frames - 5)
     bar.play()
     qtbot.waitUntil(lambda: not bar.playing, timeout=2000)
-    assert doc.viewer.current_frame == doc.num_frames - 1
+    assert doc.scene.viewer.current_frame == doc.scene.num_frames - 1
     # play at the end starts again from the start
     bar.play()
-    assert doc.viewer.current_frame < 10
+    assert doc.scene.viewer.current_frame < 10
     bar.pause()
     # a play range ends playing at its last frame
-    doc.viewer.play_range = (10, 20)
+    doc.set_viewer(play_range=(10, 20))
     doc.set_frame(15)
     bar.play()
     qtbot.waitUntil(lambda: not bar.playing, timeout=2000)
-    assert doc.viewer.current_frame == 20
+    assert doc.scene.viewer.current_frame == 20
 
 
 def test_widgets_and_external_frame_changes(qtbot, bar, doc):
     bar.spin.setValue(120)
-    assert doc.viewer.current_frame == 120
+    assert doc.scene.viewer.current_frame == 120
     assert bar.slider.value() == 120
     assert bar.label.text().split()[0] == "120"
     assert "1.000 s" in bar.label.text()              # 120 x 0.0083333 s
     bar.slider.setValue(240)
-    assert doc.viewer.current_frame == 240 and bar.spin.value() == 240
+    assert doc.scene.viewer.current_frame == 240 and bar.spin.value() == 240
     doc.set_frame(600)                                  # from elsewhere (the timeline)
     assert bar.spin.value() == bar.slider.value() == 600
-    expected = f"{600 * doc.performer.frame_time:.3f} s"
+    expected = f"{600 * doc.scene.performer.frame_time:.3f} s"
     assert expected in bar.label.text()
     # while playing, a jump elsewhere plays on from there
     bar.play()
     doc.set_frame(300)
     qtbot.wait(100)
-    assert 300 <= doc.viewer.current_frame < 300 + 0.5 * _fps(doc)
+    assert 300 <= doc.scene.viewer.current_frame < 300 + 0.5 * _fps(doc)
     bar.pause()
 
 
@@ -391,34 +391,34 @@ def test_shortcuts_on_host_window(qtbot, doc):
     doc.set_frame(100)
     key = qtbot.keyClick
     key(host, Qt.Key.Key_Right)
-    assert doc.viewer.current_frame == 101
+    assert doc.scene.viewer.current_frame == 101
     key(host, Qt.Key.Key_Left)
     key(host, Qt.Key.Key_Left)
-    assert doc.viewer.current_frame == 99
+    assert doc.scene.viewer.current_frame == 99
     key(host, Qt.Key.Key_Right, Qt.KeyboardModifier.ShiftModifier)
-    assert doc.viewer.current_frame == 109
+    assert doc.scene.viewer.current_frame == 109
     key(host, Qt.Key.Key_End)
-    assert doc.viewer.current_frame == doc.num_frames - 1
+    assert doc.scene.viewer.current_frame == doc.scene.num_frames - 1
     key(host, Qt.Key.Key_Home)
-    assert doc.viewer.current_frame == 0
+    assert doc.scene.viewer.current_frame == 0
     key(host, Qt.Key.Key_Space)
     assert bar.playing
     qtbot.wait(100)
     key(host, Qt.Key.Key_Space)
     assert not bar.playing
-    assert doc.viewer.current_frame > 0
+    assert doc.scene.viewer.current_frame > 0
     # a step while playing stops playing
     bar.play()
     key(host, Qt.Key.Key_Right)
     assert not bar.playing
     # Home/End go to the play range first, then the clip
-    doc.viewer.play_range = (50, 80)
+    doc.set_viewer(play_range=(50, 80))
     key(host, Qt.Key.Key_Home)
-    assert doc.viewer.current_frame == 50
+    assert doc.scene.viewer.current_frame == 50
     key(host, Qt.Key.Key_Home)
-    assert doc.viewer.current_frame == 0
+    assert doc.scene.viewer.current_frame == 0
     key(host, Qt.Key.Key_End)
-    assert doc.viewer.current_frame == 80
+    assert doc.scene.viewer.current_frame == 80
     bar.pause()
 
 

@@ -49,7 +49,7 @@ def doc(clips):
     push_sources(document, performer=performer, performer_path=clip_path("cmu_131_01_walk.bvh"),
                  target=target, target_path=clip_path("cmu_rest_tpose.bvh"))
     yield document
-    document.deleteLater()
+    document.close()
 
 
 @pytest.fixture
@@ -63,7 +63,7 @@ def panel(qtbot, doc):
 
 
 def auto(doc):
-    return automap_module.automap(doc.target.skeleton, doc.performer.skeleton)
+    return automap_module.automap(doc.scene.target.skeleton, doc.scene.performer.skeleton)
 
 
 def click_joint(qtbot, tree: JointTree, name: str) -> None:
@@ -97,8 +97,8 @@ def pairs_drawn(panel) -> dict[str, str]:
 
 # ---------------------------------------------------------------------------- building
 def test_panel_builds_from_the_document(panel, doc):
-    assert list(panel.target_tree.items) == list(doc.target.skeleton.names)
-    assert list(panel.performer_tree.items) == list(doc.performer.skeleton.names)
+    assert list(panel.target_tree.items) == list(doc.scene.target.skeleton.names)
+    assert list(panel.performer_tree.items) == list(doc.scene.performer.skeleton.names)
     assert panel.target_tree.headerItem().text(0) == "Target: cmu_rest_tpose"
     assert panel.performer_tree.headerItem().text(0) == "Performer: cmu_131_01_walk"
     # hierarchy: LeftArm hangs from LeftShoulder
@@ -146,7 +146,7 @@ def test_pair_pushed_on_the_document_shows_everywhere(panel, doc):
 def test_lines_only_for_visible_rows(panel, doc, qtbot):
     push_correspondence(doc, auto(doc), "Auto-map")
     drawn = pairs_drawn(panel)
-    assert drawn and set(drawn.items()) <= set(doc.correspondence.pairs.items())
+    assert drawn and set(drawn.items()) <= set(doc.scene.correspondence.pairs.items())
     for target, performer, y0, y1, _sel in panel.links.segments():
         assert 0 <= y0 <= panel.links.height() and 0 <= y1 <= panel.links.height()
     # collapsing the target's root hides every line but the root's own
@@ -166,16 +166,16 @@ def test_lines_only_for_visible_rows(panel, doc, qtbot):
 def test_evaluation_error_is_shown(panel, doc):
     assert panel.error_label.isHidden()
     push_pair(doc, "LeftArm", "LeftShoulder")          # a limb alone cannot drive the body
-    assert doc.evaluation_error and doc.motion is None
+    assert doc.scene.evaluation_error and doc.motion is None
     assert not panel.error_label.isHidden()
-    assert doc.evaluation_error in panel.error_label.text()
+    assert doc.scene.evaluation_error in panel.error_label.text()
     push_correspondence(doc, auto(doc), "Auto-map")
     assert doc.motion is not None and panel.error_label.isHidden()
 
 
 # ---------------------------------------------------------------------------- required joints
 def test_required_joints_come_from_identify(doc):
-    required = required_joints(doc.target.skeleton)
+    required = required_joints(doc.scene.target.skeleton)
     assert set(required) == {"Hips", "LowerBack", "Spine1", "Head", "LeftArm", "RightArm",
                              "LeftForeArm", "RightForeArm", "LeftHand", "RightHand",
                              "LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg", "LeftFoot",
@@ -187,7 +187,7 @@ def test_required_fallback_is_the_root(monkeypatch, doc):
     def not_humanoid(_skeleton, positions=None):
         raise automap_module.MappingError("no humanoid")
     monkeypatch.setattr(automap_module, "identify", not_humanoid)
-    assert required_joints(doc.target.skeleton) == {"Hips": "root"}
+    assert required_joints(doc.scene.target.skeleton) == {"Hips": "root"}
 
 
 def test_required_unmapped_flags_come_and_go(panel, doc):
@@ -220,7 +220,7 @@ def test_select_and_map_button(panel, doc, qtbot):
     assert panel.map_action.isEnabled()
     before = doc.undo_stack.count()
     qtbot.mouseClick(panel.map_button, LEFT)
-    assert doc.correspondence.pairs == {"LeftArm": "LeftShoulder"}
+    assert doc.scene.correspondence.pairs == {"LeftArm": "LeftShoulder"}
     assert doc.undo_stack.count() == before + 1
     assert doc.undo_stack.undoText() == "Map LeftArm to LeftShoulder"
     assert doc.selection == ("target", "LeftArm")
@@ -231,7 +231,7 @@ def test_select_and_map_button(panel, doc, qtbot):
     redo = doc.undo_stack.createRedoAction(panel)
     assert undo.text() == "Undo Map LeftArm to LeftShoulder"
     doc.undo_stack.undo()
-    assert doc.correspondence.pairs == {} and panel.model.rowCount() == 0
+    assert doc.scene.correspondence.pairs == {} and panel.model.rowCount() == 0
     assert redo.text() == "Redo Map LeftArm to LeftShoulder"
     doc.undo_stack.redo()
     assert panel.model.rows[0][:2] == ("LeftArm", "LeftShoulder")
@@ -242,12 +242,12 @@ def test_drop_performer_on_target_and_back(panel, doc):
     before = doc.undo_stack.count()
     event = drop(panel.target_tree, "LeftForeArm", "performer", "LeftElbow")
     assert event.isAccepted()
-    assert doc.correspondence.pairs == {"LeftForeArm": "LeftElbow"}
+    assert doc.scene.correspondence.pairs == {"LeftForeArm": "LeftElbow"}
     assert doc.undo_stack.count() == before + 1
     assert doc.undo_stack.undoText() == "Map LeftForeArm to LeftElbow"
     # the other way: a target joint dropped on a performer joint
     drop(panel.performer_tree, "RightKnee", "target", "RightLeg")
-    assert doc.correspondence.pairs == {"LeftForeArm": "LeftElbow", "RightLeg": "RightKnee"}
+    assert doc.scene.correspondence.pairs == {"LeftForeArm": "LeftElbow", "RightLeg": "RightKnee"}
     assert doc.undo_stack.undoText() == "Map RightLeg to RightKnee"
     # a joint dropped on its own tree does nothing
     count = doc.undo_stack.count()
@@ -255,9 +255,9 @@ def test_drop_performer_on_target_and_back(panel, doc):
     assert not event.isAccepted() and doc.undo_stack.count() == count
     # taking a performer joint from another target joint is still one command
     drop(panel.target_tree, "RightForeArm", "performer", "LeftElbow")
-    assert doc.correspondence.pairs == {"RightLeg": "RightKnee", "RightForeArm": "LeftElbow"}
+    assert doc.scene.correspondence.pairs == {"RightLeg": "RightKnee", "RightForeArm": "LeftElbow"}
     doc.undo_stack.undo()
-    assert doc.correspondence.pairs == {"LeftForeArm": "LeftElbow", "RightLeg": "RightKnee"}
+    assert doc.scene.correspondence.pairs == {"LeftForeArm": "LeftElbow", "RightLeg": "RightKnee"}
 
 
 def test_drag_payload_round_trip():
@@ -270,16 +270,16 @@ def test_automap_button_is_one_command(panel, doc, qtbot):
     before = doc.undo_stack.count()
     qtbot.mouseClick(panel.automap_button, LEFT)
     expected = auto(doc)
-    assert doc.correspondence.pairs == expected.pairs
+    assert doc.scene.correspondence.pairs == expected.pairs
     assert doc.undo_stack.count() == before + 1
     assert doc.undo_stack.undoText() == "Auto-map"
     assert [r[0] for r in panel.model.rows] == list(expected.pairs)
     assert panel.model.rows[0][2] == expected.notes["Hips"]            # the automap note
-    assert doc.motion is not None and not doc.evaluation_error
+    assert doc.motion is not None and not doc.scene.evaluation_error
     qtbot.mouseClick(panel.automap_button, LEFT)       # already so: no empty step
     assert doc.undo_stack.count() == before + 1
     doc.undo_stack.undo()
-    assert len(doc.correspondence) == 0 and doc.motion is None
+    assert len(doc.scene.correspondence) == 0 and doc.motion is None
 
 
 def test_automap_failure_is_reported(panel, doc, monkeypatch):
@@ -292,16 +292,16 @@ def test_automap_failure_is_reported(panel, doc, monkeypatch):
     count = doc.undo_stack.count()
     panel.automap_action.trigger()
     assert errors and "do not branch" in errors[0]
-    assert doc.undo_stack.count() == count and len(doc.correspondence) == 0
+    assert doc.undo_stack.count() == count and len(doc.scene.correspondence) == 0
 
 
 def test_unmap_from_tree_selection_and_table(panel, doc, qtbot):
     push_correspondence(doc, auto(doc), "Auto-map")
-    n = len(doc.correspondence)
+    n = len(doc.scene.correspondence)
     click_joint(qtbot, panel.target_tree, "LeftHand")
     assert panel.table.selected_targets() == ["LeftHand"]
     qtbot.mouseClick(panel.unmap_button, LEFT)
-    assert "LeftHand" not in doc.correspondence.pairs and len(doc.correspondence) == n - 1
+    assert "LeftHand" not in doc.scene.correspondence.pairs and len(doc.scene.correspondence) == n - 1
     assert doc.undo_stack.undoText() == "Unmap LeftHand"
     assert not panel.unmap_action.isEnabled()
     # several table rows: one command
@@ -318,10 +318,10 @@ def test_unmap_from_tree_selection_and_table(panel, doc, qtbot):
     panel.unmap_action.trigger()
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.undoText() == "Unmap LThumb, RThumb"
-    assert len(doc.correspondence) == n - 3
+    assert len(doc.scene.correspondence) == n - 3
     doc.undo_stack.undo()
     doc.undo_stack.undo()
-    assert len(doc.correspondence) == n
+    assert len(doc.scene.correspondence) == n
 
 
 def test_delete_key_unmaps(panel, doc, qtbot):
@@ -331,18 +331,18 @@ def test_delete_key_unmaps(panel, doc, qtbot):
     click_joint(qtbot, panel.target_tree, "Head")
     panel.target_tree.setFocus()
     qtbot.keyClick(panel.target_tree, Qt.Key.Key_Delete)
-    assert "Head" not in doc.correspondence.pairs
+    assert "Head" not in doc.scene.correspondence.pairs
     assert doc.undo_stack.undoText() == "Unmap Head"
 
 
 def test_clear(panel, doc, qtbot):
     push_correspondence(doc, auto(doc), "Auto-map")
     qtbot.mouseClick(panel.clear_button, LEFT)
-    assert len(doc.correspondence) == 0 and panel.model.rowCount() == 0
+    assert len(doc.scene.correspondence) == 0 and panel.model.rowCount() == 0
     assert doc.undo_stack.undoText() == "Clear mapping"
     assert not panel.clear_action.isEnabled()
     doc.undo_stack.undo()
-    assert doc.correspondence.pairs == auto(doc).pairs
+    assert doc.scene.correspondence.pairs == auto(doc).pairs
 
 
 def test_table_combo_edits_the_performer(panel, doc, qtbot):
@@ -352,13 +352,13 @@ def test_table_combo_edits_the_performer(panel, doc, qtbot):
     panel.table.edit(index)
     combo = panel.table.findChild(QtWidgets.QComboBox)
     assert combo is not None and combo.currentData() == "LeftShoulder"
-    assert combo.count() == doc.performer.skeleton.num_joints + 1
+    assert combo.count() == doc.scene.performer.skeleton.num_joints + 1
     i = combo.findData("LeftCollar")
     assert "\u2190 LeftShoulder" in combo.itemText(i)             # shows what it drives now
     combo.setCurrentIndex(i)
     combo.activated.emit(i)
-    assert doc.correspondence.pairs["LeftArm"] == "LeftCollar"
-    assert "LeftShoulder" not in doc.correspondence.pairs          # taken from it: one to one
+    assert doc.scene.correspondence.pairs["LeftArm"] == "LeftCollar"
+    assert "LeftShoulder" not in doc.scene.correspondence.pairs          # taken from it: one to one
     assert doc.undo_stack.undoText() == "Map LeftArm to LeftCollar"
     qtbot.waitUntil(lambda: panel.table.findChild(QtWidgets.QComboBox) is None
                     or not panel.table.findChild(QtWidgets.QComboBox).isVisible())
@@ -368,11 +368,11 @@ def test_table_combo_edits_the_performer(panel, doc, qtbot):
     combo = [c for c in panel.table.findChildren(QtWidgets.QComboBox) if c.isVisible()][0]
     combo.setCurrentIndex(0)
     combo.activated.emit(0)
-    assert "Head" not in doc.correspondence.pairs
+    assert "Head" not in doc.scene.correspondence.pairs
     assert doc.undo_stack.undoText() == "Unmap Head"
     doc.undo_stack.undo()
     doc.undo_stack.undo()
-    assert doc.correspondence.pairs == auto(doc).pairs
+    assert doc.scene.correspondence.pairs == auto(doc).pairs
 
 
 # ---------------------------------------------------------------------------- filter
@@ -437,18 +437,18 @@ def test_widget_selection_sets_the_document_without_feedback(panel, doc, qtbot):
 # ---------------------------------------------------------------------------- presets
 def test_preset_round_trip(panel, doc, tmp_path, monkeypatch):
     push_correspondence(doc, auto(doc), "Auto-map")
-    expected = doc.correspondence
+    expected = doc.scene.correspondence
     monkeypatch.setattr(panel, "ask_save_path", lambda: str(tmp_path / "cmu"))
     panel.save_action.trigger()
     saved = tmp_path / "cmu.json"
     assert json.loads(saved.read_text())["pairs"] == expected.pairs
     panel.clear()
-    assert len(doc.correspondence) == 0
+    assert len(doc.scene.correspondence) == 0
     monkeypatch.setattr(panel, "ask_load_path", lambda: str(saved))
     count = doc.undo_stack.count()
     panel.load_button.click()
-    assert doc.correspondence.pairs == expected.pairs
-    assert doc.correspondence.notes == expected.notes
+    assert doc.scene.correspondence.pairs == expected.pairs
+    assert doc.scene.correspondence.notes == expected.notes
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.undoText() == "Load preset cmu.json"
     assert doc.motion is not None
@@ -468,13 +468,13 @@ def test_bad_preset_shows_an_error_and_changes_nothing(panel, doc, tmp_path, mon
     errors = []
     monkeypatch.setattr(panel, "show_error", lambda title, text: errors.append((title, text)))
     monkeypatch.setattr(panel, "ask_load_path", lambda: str(path))
-    count, pairs = doc.undo_stack.count(), dict(doc.correspondence.pairs)
+    count, pairs = doc.undo_stack.count(), dict(doc.scene.correspondence.pairs)
     panel.load_action.trigger()
     assert len(errors) == 1 and message in errors[0][1], errors
-    assert doc.undo_stack.count() == count and doc.correspondence.pairs == pairs
+    assert doc.undo_stack.count() == count and doc.scene.correspondence.pairs == pairs
     # the panel keeps working
     panel.auto_map()
-    assert len(doc.correspondence) > 1
+    assert len(doc.scene.correspondence) > 1
 
 
 def test_missing_preset_and_unwritable_folder(panel, doc, tmp_path, monkeypatch):
@@ -498,7 +498,7 @@ def test_changing_the_mapping_reconverts_the_motion(panel, doc, qtbot):
     qtbot.mouseClick(panel.automap_button, LEFT)
     first = doc.motion
     assert first is not None
-    j = doc.target.skeleton.index["LeftForeArm"]
+    j = doc.scene.target.skeleton.index["LeftForeArm"]
     with qtbot.waitSignal(doc.motionChanged, timeout=2000):
         drop(panel.target_tree, "LeftForeArm", "performer", "LeftShoulder")
     # LeftForeArm now follows the performer's upper arm; LeftArm lost it and follows its parent
@@ -530,7 +530,7 @@ def test_other_conventions_as_target(qtbot, clips, name):
     assert not [n for n in panel.target_tree.items if panel.target_tree.state(n) == "required"]
     assert doc.motion is not None and panel.error_label.isHidden()
     assert panel.links.segments()
-    doc.deleteLater()
+    doc.close()
 
 
 # ---------------------------------------------------------------------------- screenshot
@@ -565,4 +565,4 @@ def test_screenshot(qtbot, clips):
     old = QtGui.QImage(str(out)) if out.exists() else None
     if old is None or old.convertToFormat(image.format()) != image:
         assert image.save(str(out))
-    doc.deleteLater()
+    doc.close()

@@ -47,15 +47,15 @@ JOINT = "LeftForeArm"
 @pytest.fixture
 def doc(qtbot):
     d = demo_document()
-    sk = d.target.skeleton
+    sk = d.scene.target.skeleton
     hand = d.pose("target").positions[300, sk.index["LeftHand"]]
     c = Constraint("LeftHand", "position", {"point": hand + [0.10, 0.15, 0.10]},
                    270, 290, 310, 330, name="reach")
-    correction = enforce(d.composed, [c])
+    correction = enforce(d.scene.composed, [c])
     push_constraints(d, [c], displacement=correction.displacement_map(), text="Solve reach")
     d.undo_stack.setClean()
     yield d
-    d.deleteLater()
+    d.close()
 
 
 @pytest.fixture
@@ -139,12 +139,12 @@ def _graph(editor, channel):
 # ---------------------------------------------------------------------------- model -> widget
 def test_curves_and_keys_show_the_map_in_degrees_over_the_base_motion(editor, doc):
     assert editor.joint == JOINT and editor.channels == ("rx", "ry", "rz")
-    F = doc.num_frames
-    j = doc.target.skeleton.index[JOINT]
+    F = doc.scene.num_frames
+    j = doc.scene.target.skeleton.index[JOINT]
     from scipy.spatial.transform import Rotation
-    base = Rotation.from_quat(doc.composed.rotations[:, j]).as_rotvec() * DEG
+    base = Rotation.from_quat(doc.scene.composed.rotations[:, j]).as_rotvec() * DEG
     for axis, channel in enumerate(("rx", "ry", "rz")):
-        curve = doc.displacement.curves[(JOINT, channel)]
+        curve = doc.scene.displacement.curves[(JOINT, channel)]
         assert len(curve) > 3                              # real reduced keys
         graph = editor.key_graphs[axis]
         assert graph.channel == channel and graph.isVisible()
@@ -162,10 +162,10 @@ def test_curves_and_keys_show_the_map_in_degrees_over_the_base_motion(editor, do
     # the root's translation in centimetres
     editor.root_button.click()
     assert editor.joint == ROOT and editor.channels == ("tx", "ty", "tz")
-    curve = doc.displacement.curves[(ROOT, "ty")]
+    curve = doc.scene.displacement.curves[(ROOT, "ty")]
     np.testing.assert_allclose(_graph(editor, "ty").values, curve.values * 100.0, atol=1e-12)
     np.testing.assert_allclose(editor.bases[1].getData()[1],
-                               doc.composed.translations[:, 0, 1] * 100.0, atol=1e-12)
+                               doc.scene.composed.translations[:, 0, 1] * 100.0, atol=1e-12)
     assert "cm" in editor.plot.getAxis("left").labelText
     editor.root_button.click()
     assert editor.joint == JOINT
@@ -186,13 +186,13 @@ def test_selecting_another_joint_or_none_switches_curves(editor, doc):
     doc.select("target", "LeftArm")
     assert editor.joint == "LeftArm"
     np.testing.assert_array_equal(_graph(editor, "ry").frames,
-                                  doc.displacement.curves[("LeftArm", "ry")].frames)
+                                  doc.scene.displacement.curves[("LeftArm", "ry")].frames)
     doc.select("performer", "LeftArm")                 # performer joints have no offsets
     assert editor.joint == "LeftArm"
     doc.select("", "")
     assert editor.joint == ROOT and editor.root_button.isChecked()
     editor.root_button.click()                         # nothing selected: the root joint
-    assert editor.joint == doc.target.skeleton.names[0]
+    assert editor.joint == doc.scene.target.skeleton.names[0]
     # a joint without curves shows flat zero lines and no keys
     doc.select("target", "RightFoot")
     assert all(len(g.frames) == 0 for g in editor.key_graphs.values())
@@ -201,7 +201,7 @@ def test_selecting_another_joint_or_none_switches_curves(editor, doc):
 
 # ---------------------------------------------------------------------------- dragging keys
 def test_dragging_a_key_snaps_to_frames_previews_and_pushes_one_command(editor, doc, qtbot):
-    before_map = doc.displacement
+    before_map = doc.scene.displacement
     before_motion = doc.motion
     before_pose = doc.pose("target").positions.copy()
     count = doc.undo_stack.count()
@@ -217,20 +217,20 @@ def test_dragging_a_key_snaps_to_frames_previews_and_pushes_one_command(editor, 
         seen["count"] = doc.undo_stack.count()
         seen["previewed"] = doc.motion is not before_motion and not np.array_equal(
             doc.motion.rotations, before_motion.rotations)
-        seen["map"] = doc.displacement is before_map
+        seen["map"] = doc.scene.displacement is before_map
 
     _drag(qtbot, editor, start, end, during=during)
     assert seen == {"dragging": True, "count": count, "previewed": True, "map": True}
     # one command, named
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Move 1 key of {JOINT}.rx"
-    moved = doc.displacement.curves[(JOINT, "rx")]
+    moved = doc.scene.displacement.curves[(JOINT, "rx")]
     expected = round(f0 + _to_view(editor, end).x() - _to_view(editor, start).x())
     assert moved.frames[i] == expected != f0           # snapped to a whole frame
     assert abs(moved.values[i] - v0) < 1e-9            # a horizontal drag keeps the value
     np.testing.assert_array_equal(np.delete(moved.frames, i), np.delete(curve.frames, i))
     for channel in ("ry", "rz"):
-        assert doc.displacement.curves[(JOINT, channel)] is before_map.curves[(JOINT, channel)]
+        assert doc.scene.displacement.curves[(JOINT, channel)] is before_map.curves[(JOINT, channel)]
     # the widget shows the new key; it stays selected
     assert _graph(editor, "rx").frames[i] == expected
     assert editor.selected_keys() == [("rx", i)]
@@ -241,11 +241,11 @@ def test_dragging_a_key_snaps_to_frames_previews_and_pushes_one_command(editor, 
     np.testing.assert_array_equal(pose[:lo], before_pose[:lo])
     np.testing.assert_array_equal(pose[hi + 1:], before_pose[hi + 1:])
     # outside the keys' span of the IK result the motion is exactly the composed one
-    np.testing.assert_array_equal(doc.motion.rotations[:270], doc.composed.rotations[:270])
-    np.testing.assert_array_equal(doc.motion.rotations[331:], doc.composed.rotations[331:])
+    np.testing.assert_array_equal(doc.motion.rotations[:270], doc.scene.composed.rotations[:270])
+    np.testing.assert_array_equal(doc.motion.rotations[331:], doc.scene.composed.rotations[331:])
     # undo restores the exact map and motion, and the editor
     doc.undo_stack.undo()
-    assert doc.displacement is before_map
+    assert doc.scene.displacement is before_map
     np.testing.assert_array_equal(doc.motion.rotations, before_motion.rotations)
     np.testing.assert_array_equal(_graph(editor, "rx").frames, curve.frames)
     doc.undo_stack.redo()
@@ -254,15 +254,15 @@ def test_dragging_a_key_snaps_to_frames_previews_and_pushes_one_command(editor, 
 
 def test_several_selected_keys_move_together(editor, doc, qtbot):
     vp = editor.plot_widget.viewport()
-    rx = doc.displacement.curves[(JOINT, "rx")]
-    ry = doc.displacement.curves[(JOINT, "ry")]
+    rx = doc.scene.displacement.curves[(JOINT, "rx")]
+    ry = doc.scene.displacement.curves[(JOINT, "ry")]
     a = _roomy_key(rx)
     b = _roomy_key(ry)
     qtbot.mouseClick(vp, LEFT, NOMOD, _pixel(editor, "rx", a))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "rx", a + 1))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "ry", b))
     assert editor.selected_keys() == [("rx", a), ("rx", a + 1), ("ry", b)]
-    before = doc.displacement
+    before = doc.scene.displacement
     count = doc.undo_stack.count()
     start = _pixel(editor, "ry", b)
     end = start + QtCore.QPoint(0, -40)                # up: a larger value
@@ -271,8 +271,8 @@ def test_several_selected_keys_move_together(editor, doc, qtbot):
     assert doc.undo_stack.text(count) == f"Move 3 keys of {JOINT}.rx, ry"
     dv = (_to_view(editor, end).y() - _to_view(editor, start).y()) / DEG
     assert dv > 0
-    new_rx = doc.displacement.curves[(JOINT, "rx")]
-    new_ry = doc.displacement.curves[(JOINT, "ry")]
+    new_rx = doc.scene.displacement.curves[(JOINT, "rx")]
+    new_ry = doc.scene.displacement.curves[(JOINT, "ry")]
     np.testing.assert_array_equal(new_rx.frames, rx.frames)   # a vertical drag keeps times
     np.testing.assert_allclose(new_rx.values[[a, a + 1]] - rx.values[[a, a + 1]], dv,
                                atol=1e-12)
@@ -280,14 +280,14 @@ def test_several_selected_keys_move_together(editor, doc, qtbot):
     untouched = np.delete(np.arange(len(rx)), [a, a + 1])
     np.testing.assert_array_equal(new_rx.values[untouched], rx.values[untouched])
     doc.undo_stack.undo()
-    assert doc.displacement is before
+    assert doc.scene.displacement is before
 
 
 def test_root_translation_keys_move_in_centimetres(editor, doc, qtbot):
     editor.root_button.click()
     editor.view_box.setRange(xRange=(262, 338), padding=0)
     _settle(qtbot, editor)
-    before = doc.displacement
+    before = doc.scene.displacement
     curve = before.curves[(ROOT, "ty")]
     i = _roomy_key(curve)
     start = _pixel(editor, "ty", i)
@@ -295,17 +295,17 @@ def test_root_translation_keys_move_in_centimetres(editor, doc, qtbot):
     _drag(qtbot, editor, start, end)
     assert doc.undo_stack.text(doc.undo_stack.count() - 1) == "Move 1 key of root.ty"
     dcm = _to_view(editor, end).y() - _to_view(editor, start).y()
-    moved = doc.displacement.curves[(ROOT, "ty")]
+    moved = doc.scene.displacement.curves[(ROOT, "ty")]
     assert moved.values[i] - curve.values[i] == pytest.approx(dcm / 100.0, abs=1e-12)
     assert moved.frames[i] == curve.frames[i]
     # the root moves by as much at that frame
     f = int(curve.frames[i])
-    delta = doc.motion.translations[f, 0, 1] - before.apply(doc.composed).translations[f, 0, 1]
+    delta = doc.motion.translations[f, 0, 1] - before.apply(doc.scene.composed).translations[f, 0, 1]
     assert delta == pytest.approx(dcm / 100.0, abs=1e-12)
 
 
 def test_rubber_band_selects_the_keys_inside(editor, doc, qtbot):
-    rz = doc.displacement.curves[(JOINT, "rz")]
+    rz = doc.scene.displacement.curves[(JOINT, "rz")]
     inside = [i for i, f in enumerate(rz.frames) if 295 <= f <= 320]
     assert len(inside) >= 2
     # a band around those rz keys (in view coordinates, then pixels)
@@ -318,7 +318,7 @@ def test_rubber_band_selects_the_keys_inside(editor, doc, qtbot):
     band = QtCore.QRectF(_to_view(editor, start), _to_view(editor, end)).normalized()
     expected = []
     for channel in ("rx", "ry", "rz"):
-        c = doc.displacement.curves[(JOINT, channel)]
+        c = doc.scene.displacement.curves[(JOINT, channel)]
         v = c.values * DEG
         expected += [(channel, i) for i in range(len(c))
                      if band.left() <= c.frames[i] <= band.right()
@@ -327,7 +327,7 @@ def test_rubber_band_selects_the_keys_inside(editor, doc, qtbot):
     assert editor.selected_keys() == expected
     assert doc.undo_stack.count() == count             # selecting is not an edit
     # Shift adds to the selection; a click on the background clears it
-    k = _roomy_key(doc.displacement.curves[(JOINT, "rx")])
+    k = _roomy_key(doc.scene.displacement.curves[(JOINT, "rx")])
     qtbot.mouseClick(editor.plot_widget.viewport(), LEFT, SHIFT, _pixel(editor, "rx", k))
     assert editor.selected_keys() == sorted(expected + [("rx", k)])
     (_, _), (_, top) = editor.view_box.viewRange()
@@ -341,13 +341,13 @@ def test_snapping_to_5_frame_steps_and_value_steps(editor, doc, qtbot):
     editor.snap5_check.setChecked(True)
     editor.snap_value_check.setChecked(True)
     editor.value_step.setValue(0.25)
-    curve = doc.displacement.curves[(JOINT, "ry")]
+    curve = doc.scene.displacement.curves[(JOINT, "ry")]
     # a key with room to move by whole 5-frame steps
     i = _roomy_key(curve)
     start = _pixel(editor, "ry", i)
     end = start + QtCore.QPoint(3, 23)
     _drag(qtbot, editor, start, end)
-    moved = doc.displacement.curves[(JOINT, "ry")]
+    moved = doc.scene.displacement.curves[(JOINT, "ry")]
     lo, hi = curve.frames[i - 1] + 1, curve.frames[i + 1] - 1
     target = round((curve.frames[i] + _to_view(editor, end).x() - _to_view(editor, start).x())
                    / 5) * 5
@@ -358,17 +358,17 @@ def test_snapping_to_5_frame_steps_and_value_steps(editor, doc, qtbot):
 
 
 def test_keys_never_pass_their_neighbours(editor, doc, qtbot):
-    curve = doc.displacement.curves[(JOINT, "rx")]
+    curve = doc.scene.displacement.curves[(JOINT, "rx")]
     i = _roomy_key(curve)
     start = _pixel(editor, "rx", i)
     _drag(qtbot, editor, start, start + QtCore.QPoint(600, 0))
-    moved = doc.displacement.curves[(JOINT, "rx")]
+    moved = doc.scene.displacement.curves[(JOINT, "rx")]
     assert moved.frames[i] == curve.frames[i + 1] - 1
     assert np.all(np.diff(moved.frames) > 0)
 
 
 def test_escape_cancels_a_drag(editor, doc, qtbot):
-    before_map, before_motion = doc.displacement, doc.motion
+    before_map, before_motion = doc.scene.displacement, doc.motion
     count = doc.undo_stack.count()
     curve = before_map.curves[(JOINT, "rx")]
     i = _roomy_key(curve)
@@ -376,7 +376,7 @@ def test_escape_cancels_a_drag(editor, doc, qtbot):
     editor.plot_widget.setFocus()
     _drag(qtbot, editor, start, start + QtCore.QPoint(0, 40),
           during=lambda: qtbot.keyClick(editor.plot_widget, Qt.Key.Key_Escape))
-    assert doc.undo_stack.count() == count and doc.displacement is before_map
+    assert doc.undo_stack.count() == count and doc.scene.displacement is before_map
     np.testing.assert_array_equal(doc.motion.rotations, before_motion.rotations)
     np.testing.assert_array_equal(_graph(editor, "rx").values, curve.values * DEG)
 
@@ -385,7 +385,7 @@ def test_escape_cancels_a_drag(editor, doc, qtbot):
 def test_add_key_button_keys_visible_channels_at_the_current_frame(editor, doc, qtbot):
     doc.set_frame(301)
     editor.channel_buttons[2].click()                  # rz hidden: not keyed
-    before = doc.displacement
+    before = doc.scene.displacement
     count = doc.undo_stack.count()
     values = {c: before.curves[(JOINT, c)].evaluate(np.array([301.0]))[0]
               for c in ("rx", "ry")}
@@ -394,19 +394,19 @@ def test_add_key_button_keys_visible_channels_at_the_current_frame(editor, doc, 
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Add 2 keys of {JOINT}.rx, ry at frame 301"
     for c in ("rx", "ry"):
-        new = doc.displacement.curves[(JOINT, c)]
+        new = doc.scene.displacement.curves[(JOINT, c)]
         assert len(new) == len(before.curves[(JOINT, c)]) + 1
         k = int(np.flatnonzero(new.frames == 301.0)[0])
         assert new.values[k] == pytest.approx(values[c], abs=1e-15)
         assert new.interpolation[k] == "smooth"
-    assert doc.displacement.curves[(JOINT, "rz")] is before.curves[(JOINT, "rz")]
+    assert doc.scene.displacement.curves[(JOINT, "rz")] is before.curves[(JOINT, "rz")]
     assert {c for c, _ in editor.selected_keys()} == {"rx", "ry"}
     doc.undo_stack.undo()
-    assert doc.displacement is before
+    assert doc.scene.displacement is before
 
 
 def test_double_click_on_a_curve_adds_a_key_there(editor, doc, qtbot):
-    curve = doc.displacement.curves[(JOINT, "rz")]
+    curve = doc.scene.displacement.curves[(JOINT, "rz")]
     frame = next(f for f in range(285, 320) if f not in curve.frames)
     y = curve.evaluate(np.array([float(frame)]))[0] * DEG
     p = editor.plot_widget.mapFromScene(editor.view_box.mapViewToScene(
@@ -414,7 +414,7 @@ def test_double_click_on_a_curve_adds_a_key_there(editor, doc, qtbot):
     count = doc.undo_stack.count()
     _double_click(qtbot, editor, p)
     assert doc.undo_stack.count() == count + 1
-    new = doc.displacement.curves[(JOINT, "rz")]
+    new = doc.scene.displacement.curves[(JOINT, "rz")]
     clicked = round(_to_view(editor, p).x())
     assert len(new) == len(curve) + 1 and clicked in new.frames
     k = int(np.flatnonzero(new.frames == clicked)[0])
@@ -428,7 +428,7 @@ def test_double_click_on_a_curve_adds_a_key_there(editor, doc, qtbot):
 
 
 def test_delete_removes_the_selected_keys_in_one_command(editor, doc, qtbot):
-    before = doc.displacement
+    before = doc.scene.displacement
     rx = before.curves[(JOINT, "rx")]
     a = _roomy_key(rx)
     editor.set_selection([("rx", a), ("rx", a + 1), ("rz", 1)])
@@ -438,23 +438,23 @@ def test_delete_removes_the_selected_keys_in_one_command(editor, doc, qtbot):
     qtbot.keyClick(editor.plot_widget, Qt.Key.Key_Delete)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Delete 3 keys of {JOINT}.rx, rz"
-    new = doc.displacement.curves[(JOINT, "rx")]
+    new = doc.scene.displacement.curves[(JOINT, "rx")]
     np.testing.assert_array_equal(new.frames, np.delete(rx.frames, [a, a + 1]))
-    assert len(doc.displacement.curves[(JOINT, "rz")]) == len(before.curves[(JOINT, "rz")]) - 1
+    assert len(doc.scene.displacement.curves[(JOINT, "rz")]) == len(before.curves[(JOINT, "rz")]) - 1
     assert not np.array_equal(doc.motion.rotations, before_motion.rotations)
     assert editor.selected_keys() == []
     doc.undo_stack.undo()
-    assert doc.displacement is before
+    assert doc.scene.displacement is before
     # deleting every key of a channel removes its curve: the channel is zero again
     curve = before.curves[(JOINT, "ry")]
     editor.set_selection([("ry", i) for i in range(len(curve))])
     qtbot.mouseClick(editor.delete_button, LEFT)
-    assert (JOINT, "ry") not in doc.displacement.curves
+    assert (JOINT, "ry") not in doc.scene.displacement.curves
 
 
 # ---------------------------------------------------------------------------- interpolation
 def test_interpolation_change_alters_the_evaluated_curve(editor, doc, qtbot):
-    before = doc.displacement
+    before = doc.scene.displacement
     curve = before.curves[(JOINT, "rx")]
     i = _roomy_key(curve)
     editor.set_selection([("rx", i)])
@@ -466,17 +466,17 @@ def test_interpolation_change_alters_the_evaluated_curve(editor, doc, qtbot):
     assert editor.interp_combo.currentData() == "constant"
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Set 1 key of {JOINT}.rx to constant"
-    new = doc.displacement.curves[(JOINT, "rx")]
+    new = doc.scene.displacement.curves[(JOINT, "rx")]
     assert new.interpolation[i] == "constant"
     seg = np.arange(curve.frames[i], curve.frames[i + 1])
     np.testing.assert_array_equal(new.evaluate(seg), curve.values[i])   # a held step
     y = editor.curves[0].getData()[1]
     np.testing.assert_allclose(y[seg.astype(int)], curve.values[i] * DEG, atol=1e-12)
-    j = doc.target.skeleton.index[JOINT]
+    j = doc.scene.target.skeleton.index[JOINT]
     s = seg.astype(int)[1:]
     assert np.abs(doc.motion.rotations[s, j] - before_rot[s, j]).max() > 1e-6
     doc.undo_stack.undo()
-    assert doc.displacement is before
+    assert doc.scene.displacement is before
     assert editor.interp_combo.currentData() == "smooth"        # model -> widget
     # a right-click on a key opens its menu, which sets it too
     qtbot.mouseClick(editor.plot_widget.viewport(), Qt.MouseButton.RightButton, NOMOD,
@@ -486,21 +486,21 @@ def test_interpolation_change_alters_the_evaluated_curve(editor, doc, qtbot):
     assert [a.text() for a in menu.actions() if a.isChecked()] == ["Smooth"]
     next(a for a in menu.actions() if a.text() == "Linear").trigger()
     menu.close()
-    assert doc.displacement.curves[(JOINT, "rx")].interpolation[i] == "linear"
+    assert doc.scene.displacement.curves[(JOINT, "rx")].interpolation[i] == "linear"
     assert doc.undo_stack.text(doc.undo_stack.count() - 1) == f"Set 1 key of {JOINT}.rx to linear"
 
 
 def test_typed_frame_and_value_of_one_key(editor, doc):
-    curve = doc.displacement.curves[(JOINT, "rz")]
+    curve = doc.scene.displacement.curves[(JOINT, "rz")]
     i = _roomy_key(curve)
     editor.set_selection([("rz", i)])
     assert editor.frame_box.isEnabled() and editor.frame_box.value() == curve.frames[i]
     assert editor.value_box.value() == pytest.approx(curve.values[i] * DEG, abs=1e-3)
     count = doc.undo_stack.count()
     editor.value_box.setValue(2.5)
-    assert doc.displacement.curves[(JOINT, "rz")].values[i] == pytest.approx(2.5 / DEG)
+    assert doc.scene.displacement.curves[(JOINT, "rz")].values[i] == pytest.approx(2.5 / DEG)
     editor.frame_box.setValue(int(curve.frames[i]) + 1)
-    assert doc.displacement.curves[(JOINT, "rz")].frames[i] == curve.frames[i] + 1
+    assert doc.scene.displacement.curves[(JOINT, "rz")].frames[i] == curve.frames[i] + 1
     assert doc.undo_stack.count() == count + 2
     editor.frame_box.setValue(int(curve.frames[i + 1]) + 3)     # past a neighbour: refused
     assert doc.undo_stack.count() == count + 2
@@ -514,8 +514,8 @@ def test_frame_all_fits_the_visible_curves(editor, doc, qtbot):
     editor.view_box.setRange(xRange=(10, 20), yRange=(50, 60), padding=0)
     qtbot.mouseClick(editor.frame_all_button, LEFT)
     (x0, x1), (y0, y1) = editor.view_box.viewRange()
-    F = doc.num_frames
-    ys = np.concatenate([doc.displacement.curves[(JOINT, c)].evaluate(np.arange(F)) * DEG
+    F = doc.scene.num_frames
+    ys = np.concatenate([doc.scene.displacement.curves[(JOINT, c)].evaluate(np.arange(F)) * DEG
                          for c in ("rx", "ry", "rz")] + [np.zeros(1)])
     lo, hi = ys.min(), ys.max()
     pad_y, pad_x = 0.04 * (hi - lo), 0.04 * (F - 1)
@@ -527,7 +527,7 @@ def test_frame_all_fits_the_visible_curves(editor, doc, qtbot):
     editor.channel_buttons[0].click()
     editor.channel_buttons[1].click()
     editor.frame_all()
-    rz = doc.displacement.curves[(JOINT, "rz")].evaluate(np.arange(F)) * DEG
+    rz = doc.scene.displacement.curves[(JOINT, "rz")].evaluate(np.arange(F)) * DEG
     (_, _), (y0, y1) = editor.view_box.viewRange()
     assert y1 == pytest.approx(rz.max() + 0.04 * (rz.max() - min(rz.min(), 0)), rel=0.02)
 
@@ -536,7 +536,7 @@ def test_playhead_follows_the_frame_and_scrubs_it(editor, doc, qtbot):
     doc.set_frame(290)
     assert editor.playhead.value() == 290
     editor.playhead.setValue(311.4)                    # as a drag of the line does
-    assert doc.viewer.current_frame == 311
+    assert doc.scene.viewer.current_frame == 311
     editor.playhead.sigPositionChangeFinished.emit(editor.playhead)
     assert editor.playhead.value() == 311
 
@@ -552,7 +552,7 @@ def test_undo_of_a_new_ik_result_updates_the_editor(editor, doc):
 # ---------------------------------------------------------------------------- screenshot
 def test_screenshot(editor, doc, qtbot):
     editor.view_box.setRange(xRange=(258, 342), padding=0.02)
-    rx = doc.displacement.curves[(JOINT, "rx")]
+    rx = doc.scene.displacement.curves[(JOINT, "rx")]
     i = _roomy_key(rx)
     editor.set_selection([("rx", i), ("rx", i + 1)])
     qtbot.wait(30)

@@ -21,10 +21,10 @@ pytest.importorskip("pyqtgraph")
 from app.gui.qt import QtCore, QtGui  # noqa: E402
 from app.gui.commands import push_constraints  # noqa: E402
 from app.gui.inspector import ConstraintInspector  # noqa: E402
-from app.gui.live import (LiveSolver, affected_frames, changed_window,  # noqa: E402
-                          live_solver, overlapping, window_problem)
-from app.gui.timeline import (FIELDS, ConstraintTimeline, moved_range,  # noqa: E402
-                              retimed)
+from app.gui.live import LiveSolver, live_solver  # noqa: E402
+from app.gui.timeline import FIELDS, ConstraintTimeline, moved_range  # noqa: E402
+from engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
+                                       overlapping, retimed, window_problem)
 from engine.correction.constraints import Constraint  # noqa: E402
 from engine.correction.contacts import contact_constraints, detect_contacts, find_feet  # noqa: E402
 from engine.correction.enforcement import enforce  # noqa: E402
@@ -41,17 +41,17 @@ HAND = "reach LeftHand"
 
 # ====================================================================== fixtures
 def _contacts(doc) -> list:
-    mapped = set(doc.correspondence.pairs.values())
-    feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.performer.skeleton)
+    mapped = set(doc.scene.correspondence.pairs.values())
+    feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.scene.performer.skeleton)
             if a in mapped]
-    return contact_constraints(detect_contacts(doc.performer, feet), doc.performer,
-                               doc.composed, doc.correspondence.pairs)
+    return contact_constraints(detect_contacts(doc.scene.performer, feet), doc.scene.performer,
+                               doc.scene.composed, doc.scene.correspondence.pairs)
 
 
 def _hand(doc) -> Constraint:
     """A manual position constraint: the left hand 12 cm above where it is at frame 330."""
-    pose = forward_kinematics(doc.composed)
-    j = doc.composed.skeleton.index["LeftHand"]
+    pose = forward_kinematics(doc.scene.composed)
+    j = doc.scene.composed.skeleton.index["LeftHand"]
     return Constraint(joint="LeftHand", kind="position",
                       goal={"point": pose.positions[330, j] + [0.0, 0.12, 0.0]},
                       smooth_in=300, start=320, end=340, smooth_out=360, name=HAND)
@@ -62,8 +62,8 @@ def solved(qapp):
     """The contacts plus the hand constraint and their displacement map, solved once."""
     doc = demo_document()
     constraints = _contacts(doc) + [_hand(doc)]
-    displacement = LiveSolver(doc).solve(constraints)
-    doc.deleteLater()
+    displacement = doc.scene.solve(constraints=constraints).scene.displacement
+    doc.close()
     return constraints, displacement
 
 
@@ -72,10 +72,10 @@ def doc(qtbot, solved):
     d = demo_document()
     constraints, displacement = solved
     push_constraints(d, constraints, displacement, text="Add contacts and a hand")
-    assert d.ready, d.evaluation_error
+    assert d.scene.ready, d.scene.evaluation_error
     d.set_frame(60)
     yield d
-    d.deleteLater()
+    d.close()
 
 
 @pytest.fixture
@@ -91,7 +91,7 @@ def timeline(qtbot, doc):
 
 
 def _row_of(doc, name: str) -> int:
-    return next(i for i, c in enumerate(doc.constraints) if c.name == name)
+    return next(i for i, c in enumerate(doc.scene.constraints) if c.name == name)
 
 
 def _px(tl, frame, row) -> QtCore.QPoint:
@@ -182,7 +182,7 @@ def test_changed_window_and_overlap(solved):
 
 # ====================================================================== model -> widget
 def test_rows_and_handles_for_every_constraint(timeline, doc):
-    cons = doc.constraints
+    cons = doc.scene.constraints
     assert len(timeline.rows) == len(cons) == 31
     for i, (row, c) in enumerate(zip(timeline.rows, cons)):
         assert row.index == i and row.constraint is c
@@ -201,7 +201,7 @@ def test_rows_and_handles_for_every_constraint(timeline, doc):
     values = axis.tickValues(0, 5, 200)[0][1]
     assert axis.tickStrings(values, 1, 1)[:2] == [cons[0].name, cons[1].name]
     # seconds on the top axis from the exact frame time
-    ft = doc.performer.frame_time
+    ft = doc.scene.performer.frame_time
     spacing, ticks = timeline.seconds_axis.tickValues(0, 240, 900)[0]
     assert spacing * ft == pytest.approx(round(spacing * ft, 6))
     assert timeline.seconds_axis.tickStrings([120.0 / (ft * 120)], 1, 1 / ft)[0] == "1"
@@ -209,9 +209,9 @@ def test_rows_and_handles_for_every_constraint(timeline, doc):
 
 def test_model_changes_show_on_undo_redo(timeline, doc):
     i = _row_of(doc, HAND)
-    moved = list(doc.constraints)
-    moved[i] = doc.constraints[i].with_range(280, 300, 350, 380)
-    disabled = moved[0] = Constraint.from_dict({**doc.constraints[0].to_dict(),
+    moved = list(doc.scene.constraints)
+    moved[i] = doc.scene.constraints[i].with_range(280, 300, 350, 380)
+    disabled = moved[0] = Constraint.from_dict({**doc.scene.constraints[0].to_dict(),
                                                 "enabled": False})
     push_constraints(doc, moved, text="Move and disable")
     assert timeline.rows[i].range == (280, 300, 350, 380)
@@ -224,7 +224,7 @@ def test_model_changes_show_on_undo_redo(timeline, doc):
     assert timeline.rows[i].range == (280, 300, 350, 380)
     # fewer constraints: rows go, the selection clamps
     timeline.select(30)
-    push_constraints(doc, doc.constraints[:5], text="Keep five")
+    push_constraints(doc, doc.scene.constraints[:5], text="Keep five")
     assert len(timeline.rows) == 5 and timeline.selected_index == 4
     doc.undo_stack.undo()
     assert len(timeline.rows) == 31
@@ -233,7 +233,7 @@ def test_model_changes_show_on_undo_redo(timeline, doc):
 # ====================================================================== dragging
 def test_drag_start_handle_previews_then_pushes_one_command(qtbot, timeline, doc):
     row = 2
-    c = doc.constraints[row]
+    c = doc.scene.constraints[row]
     assert c.name == "contact LeftFoot 32-91" and c.range == (18, 32, 91, 105)
     count = doc.undo_stack.count()
     rot0, tra0 = _arrays(doc.motion)
@@ -248,7 +248,7 @@ def test_drag_start_handle_previews_then_pushes_one_command(qtbot, timeline, doc
     assert timeline.rows[row].range == (18, 28, 91, 105)
     assert timeline.live.previewing
     assert doc.undo_stack.count() == count
-    assert doc.constraints[row] is c
+    assert doc.scene.constraints[row] is c
     rot1, _ = _arrays(doc.motion)
     changed = np.flatnonzero(np.any(rot1 != rot0, axis=(1, 2)))
     assert len(changed) and changed.min() >= 18 and changed.max() <= 105   # only the window
@@ -257,13 +257,13 @@ def test_drag_start_handle_previews_then_pushes_one_command(qtbot, timeline, doc
     _release(qtbot, timeline, 28, row)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == "Move start of contact LeftFoot 32-91 to 28"
-    assert doc.constraints[row].range == (18, 28, 91, 105)
+    assert doc.scene.constraints[row].range == (18, 28, 91, 105)
     assert timeline.rows[row].range == (18, 28, 91, 105)
     assert not timeline.live.previewing
     assert not np.array_equal(np.array(doc.motion.rotations), rot0)
 
     doc.undo_stack.undo()
-    assert doc.constraints[row] is c
+    assert doc.scene.constraints[row] is c
     assert timeline.rows[row].range == c.range
     rot2, tra2 = _arrays(doc.motion)
     assert np.array_equal(rot2, rot0) and np.array_equal(tra2, tra0)
@@ -282,17 +282,17 @@ def test_drag_start_past_end_clamps(qtbot, timeline, doc):
     _release(qtbot, timeline, 380, i)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Move start of {HAND} to 340"
-    assert doc.constraints[i].range == (300, 340, 340, 360)
+    assert doc.scene.constraints[i].range == (300, 340, 340, 360)
     # the end handle now coincides with start: dragging right takes the end, left the start
     _press(qtbot, timeline, 340, i)
     _move(qtbot, timeline, 345, i)
     _move(qtbot, timeline, 350, i)
     _release(qtbot, timeline, 350, i)
-    assert doc.constraints[i].range == (300, 340, 350, 360)
+    assert doc.scene.constraints[i].range == (300, 340, 350, 360)
     assert doc.undo_stack.text(count + 1) == f"Move end of {HAND} to 350"
     doc.undo_stack.undo()
     doc.undo_stack.undo()
-    assert doc.constraints[i].range == (300, 320, 340, 360)
+    assert doc.scene.constraints[i].range == (300, 320, 340, 360)
 
 
 def test_drag_bar_moves_the_whole_range(qtbot, timeline, doc):
@@ -302,14 +302,14 @@ def test_drag_bar_moves_the_whole_range(qtbot, timeline, doc):
     for f in (64, 70, 75):
         _move(qtbot, timeline, f, row)
     _release(qtbot, timeline, 75, row)
-    assert doc.constraints[row].range == (33, 47, 106, 120)
+    assert doc.scene.constraints[row].range == (33, 47, 106, 120)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == "Move contact LeftFoot 32-91 to 47-106"
 
 
 def test_right_click_during_drag_cancels(qtbot, timeline, doc):
     row = 2
-    c = doc.constraints[row]
+    c = doc.scene.constraints[row]
     count = doc.undo_stack.count()
     rot0, _ = _arrays(doc.motion)
     _press(qtbot, timeline, 91, row)                  # the end handle
@@ -327,7 +327,7 @@ def test_right_click_during_drag_cancels(qtbot, timeline, doc):
     assert timeline.rows[row].range == c.range
     _release(qtbot, timeline, 110, row)
     assert doc.undo_stack.count() == count
-    assert doc.constraints[row] is c
+    assert doc.scene.constraints[row] is c
     assert not timeline.live.previewing
     assert np.array_equal(_arrays(doc.motion)[0], rot0)
 
@@ -338,29 +338,29 @@ def test_window_preview_matches_the_full_solve(doc):
     live = live_solver(doc)
     live.full_seconds = None                    # no measurement: window mode
     row = 2
-    after = list(doc.constraints)
-    after[row] = doc.constraints[row].with_range(10, 26, 91, 105)
+    after = list(doc.scene.constraints)
+    after[row] = doc.scene.constraints[row].with_range(10, 26, 91, 105)
     live.begin()
     motion, seconds, mode = live.preview_motion(after)
     live.cancel()
     assert mode == "window" and seconds > 0
-    full = enforce(doc.composed, after).motion
+    full = enforce(doc.scene.composed, after).motion
     a = forward_kinematics(motion).positions
     b = forward_kinematics(full).positions
-    lo, hi = changed_window(doc.constraints, after)
+    lo, hi = changed_window(doc.scene.constraints, after)
     assert (lo, hi) == (10, 32)
     assert np.abs(a - b)[lo:hi + 1].max() < 1e-4             # [m] the window: the full solve
     # beyond it the shown motion stays: the full solve's through the key-reduced map
     assert np.abs(a - b)[:200].max() < 1e-3
     # a new goal reaches the whole range: the window is all of it
-    goal = doc.constraints[row].goal["point"] + [0.05, 0.0, 0.03]
+    goal = doc.scene.constraints[row].goal["point"] + [0.05, 0.0, 0.03]
     after[row] = Constraint.from_dict({**after[row].to_dict(), "goal": {"point": goal}})
     live.begin()
     motion, _s, mode = live.preview_motion(after)
     live.cancel()
     a = forward_kinematics(motion).positions
-    b = forward_kinematics(enforce(doc.composed, after).motion).positions
-    assert changed_window(doc.constraints, after) == (10, 105)
+    b = forward_kinematics(enforce(doc.scene.composed, after).motion).positions
+    assert changed_window(doc.scene.constraints, after) == (10, 105)
     assert mode == "window" and np.abs(a - b)[10:106].max() < 1e-4
     live.budget = 1e9                                       # a generous budget: full mode
     live.full_seconds = 0.0
@@ -380,17 +380,17 @@ def test_playhead_follows_and_scrubs(qtbot, timeline, doc):
     _press(qtbot, timeline, 150, row)
     for f in (160, 180, 200):
         _move(qtbot, timeline, f, row)
-        assert abs(doc.viewer.current_frame - f) <= 1
+        assert abs(doc.scene.viewer.current_frame - f) <= 1
     _release(qtbot, timeline, 200, row)
-    assert abs(doc.viewer.current_frame - 200) <= 1
-    assert timeline.playhead.value() == doc.viewer.current_frame      # whole frames
+    assert abs(doc.scene.viewer.current_frame - 200) <= 1
+    assert timeline.playhead.value() == doc.scene.viewer.current_frame      # whole frames
     # the seconds ruler: a click moves the frame there
     axis = timeline.seconds_axis
     scene = QtCore.QPointF(timeline.view.mapViewToScene(QtCore.QPointF(90, 0)).x(),
                            axis.sceneBoundingRect().center().y())
     qtbot.mouseClick(timeline.plot.viewport(), LEFT, pos=timeline.plot.mapFromScene(scene))
-    assert abs(doc.viewer.current_frame - 90) <= 1
-    assert timeline.doc.undo_stack.count() == 3                  # viewer state, not an edit
+    assert abs(doc.scene.viewer.current_frame - 90) <= 1
+    assert timeline.doc.undo_stack.count() == 1                  # viewer state, not an edit
 
 
 def test_click_selects_row_and_joint(qtbot, timeline, doc):
@@ -399,10 +399,10 @@ def test_click_selects_row_and_joint(qtbot, timeline, doc):
     qtbot.mouseClick(timeline.plot.viewport(), LEFT, pos=_px(timeline, 200, 3))
     assert timeline.selected_index == 3 and seen == [3]
     assert timeline.rows[3].selected and not timeline.rows[2].selected
-    assert doc.selection == ("target", doc.constraints[3].joint)
+    assert doc.selection == ("target", doc.scene.constraints[3].joint)
     qtbot.mouseClick(timeline.plot.viewport(), LEFT, pos=_px(timeline, 200, 1))
     assert timeline.selected_index == 1 and seen == [3, 1]
-    assert doc.undo_stack.count() == 3
+    assert doc.undo_stack.count() == 1
 
 
 def test_wheel_zooms_time_only(qtbot, timeline):
@@ -430,15 +430,15 @@ def test_wheel_zooms_time_only(qtbot, timeline):
 
 # ====================================================================== add, delete, duplicate
 def test_add_delete_duplicate(qtbot, timeline, doc):
-    n = len(doc.constraints)
+    n = len(doc.scene.constraints)
     count = doc.undo_stack.count()
     doc.set_frame(200)
     doc.select("target", "RightHand")
     expected = doc.pose("target").positions[200, doc.motion.skeleton.index["RightHand"]].copy()
     assert timeline.add_button.isEnabled()
     qtbot.mouseClick(timeline.add_button, LEFT)
-    assert len(doc.constraints) == n + 1 == len(timeline.rows)
-    new = doc.constraints[-1]
+    assert len(doc.scene.constraints) == n + 1 == len(timeline.rows)
+    new = doc.scene.constraints[-1]
     assert (new.joint, new.kind, new.auto) == ("RightHand", "position", False)
     assert new.range == (190, 195, 205, 210)
     assert new.goal["point"] == pytest.approx(expected)
@@ -447,13 +447,13 @@ def test_add_delete_duplicate(qtbot, timeline, doc):
     # near the clip's start the range is clipped
     doc.set_frame(3)
     qtbot.mouseClick(timeline.add_button, LEFT)
-    assert doc.constraints[-1].range == (0, 0, 8, 13)
-    assert doc.constraints[-1].name == "position RightHand 2"
+    assert doc.scene.constraints[-1].range == (0, 0, 8, 13)
+    assert doc.scene.constraints[-1].name == "position RightHand 2"
 
     timeline.select(2)
-    original = doc.constraints[2]
+    original = doc.scene.constraints[2]
     qtbot.mouseClick(timeline.duplicate_button, LEFT)
-    copy = doc.constraints[3]
+    copy = doc.scene.constraints[3]
     assert copy.name == "contact LeftFoot 32-91 copy" and not copy.auto
     assert copy.range == original.range and copy.joint == original.joint
     assert "source" not in copy.meta
@@ -461,12 +461,12 @@ def test_add_delete_duplicate(qtbot, timeline, doc):
     assert doc.undo_stack.text(count + 2) == "Duplicate contact LeftFoot 32-91"
 
     qtbot.mouseClick(timeline.delete_button, LEFT)
-    assert doc.constraints[2] is original and len(doc.constraints) == n + 2
+    assert doc.scene.constraints[2] is original and len(doc.scene.constraints) == n + 2
     assert doc.undo_stack.text(count + 3) == "Delete contact LeftFoot 32-91 copy"
     assert doc.undo_stack.count() == count + 4
     for _ in range(4):
         doc.undo_stack.undo()
-    assert len(doc.constraints) == n == len(timeline.rows)
+    assert len(doc.scene.constraints) == n == len(timeline.rows)
     # nothing selected in the target: Add is off
     doc.select("performer", "LeftAnkle")
     assert not timeline.add_button.isEnabled()
@@ -493,7 +493,7 @@ def _type(qtbot, spin, text):
 
 def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
     i = _row_of(doc, HAND)
-    c = doc.constraints[i]
+    c = doc.scene.constraints[i]
     assert inspector.index == i and inspector.title.text() == HAND
     assert inspector.joint.currentText() == "LeftHand"
     assert inspector.kind.currentText() == "Position"
@@ -501,7 +501,7 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
     assert inspector.priority.value() == 1 and inspector.weight.value() == 1.0
     assert inspector.enabled.isChecked()
     timeline.select(0)
-    assert inspector.title.text() == doc.constraints[0].name
+    assert inspector.title.text() == doc.scene.constraints[0].name
     assert "automatic" in inspector.subtitle.text()
     timeline.select(1)
     assert inspector.kind.currentText() == "Plane: above"
@@ -512,17 +512,18 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
 
 def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     i = _row_of(doc, HAND)
-    c0 = doc.constraints[i]
+    c0 = doc.scene.constraints[i]
     count = doc.undo_stack.count()
 
     # goal typed: one command, re-solved
     _type(qtbot, inspector.point.spins[1], "0.25")
-    assert doc.constraints[i].goal["point"][1] == pytest.approx(0.25)
+    assert doc.scene.constraints[i].goal["point"][1] == pytest.approx(0.25)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Set point of {HAND}"
+    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)   # the solve lands in that step
     j = doc.motion.skeleton.index["LeftHand"]
     hand = doc.pose("target").positions[330, j]
-    assert np.linalg.norm(hand - doc.constraints[i].goal["point"]) < 0.01   # solved
+    assert np.linalg.norm(hand - doc.scene.constraints[i].goal["point"]) < 0.01   # solved
 
     # arrow steps preview and become one command after a pause
     spin = inspector.point.spins[0]
@@ -531,12 +532,12 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
         qtbot.keyClick(spin, Qt.Key.Key_Up)
     assert doc.undo_stack.count() == count + 1                # not yet
     qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 2, timeout=5000)
-    assert doc.constraints[i].goal["point"][0] == pytest.approx(x0 + 0.03)
+    assert doc.scene.constraints[i].goal["point"][0] == pytest.approx(x0 + 0.03)
 
     # kind, priority, weight, enabled
     inspector.kind.setCurrentIndex(3)
     inspector.kind.activated.emit(3)
-    c = doc.constraints[i]
+    c = doc.scene.constraints[i]
     assert (c.kind, c.goal["side"]) == ("plane", "on")
     # edits replace one component: the others keep their exact values (not the boxes' mm)
     assert c.goal["point"][2] == c0.goal["point"][2]
@@ -544,11 +545,11 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     assert doc.undo_stack.text(count + 2) == f"Make {HAND} a plane on constraint"
     assert inspector.goal_pages.currentIndex() == inspector._page["plane"]
     _type(qtbot, inspector.priority, "3")
-    assert doc.constraints[i].priority == 3
+    assert doc.scene.constraints[i].priority == 3
     _type(qtbot, inspector.weight, "0.5")
-    assert doc.constraints[i].weight == 0.5
+    assert doc.scene.constraints[i].weight == 0.5
     inspector.enabled.click()
-    assert not doc.constraints[i].enabled
+    assert not doc.scene.constraints[i].enabled
     assert doc.undo_stack.count() == count + 6
     assert [doc.undo_stack.text(count + k) for k in (3, 4, 5)] == [
         f"Set priority of {HAND} to 3", f"Set weight of {HAND} to 0.5", f"Disable {HAND}"]
@@ -557,16 +558,16 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     inspector.enabled.click()
     inspector.kind.setCurrentIndex(5)
     inspector.kind.activated.emit(5)
-    assert doc.constraints[i].kind == "orientation"
+    assert doc.scene.constraints[i].kind == "orientation"
     _type(qtbot, inspector.euler.spins[2], "30")
-    q = doc.constraints[i].goal["quaternion"]
+    q = doc.scene.constraints[i].goal["quaternion"]
     assert inspector.euler.value()[2] == pytest.approx(30.0, abs=0.05)
     assert np.linalg.norm(q) == pytest.approx(1.0)
 
     # every step undoes, the widgets follow
     while doc.undo_stack.count() > count and doc.undo_stack.index() > count:
         doc.undo_stack.undo()
-    assert doc.constraints[i] is c0
+    assert doc.scene.constraints[i] is c0
     assert inspector.kind.currentText() == "Position"
     assert inspector.point.value() == pytest.approx(np.round(c0.goal["point"], 3))
     assert inspector.priority.value() == 1 and inspector.enabled.isChecked()
@@ -580,7 +581,7 @@ def test_take_from_pose_and_pick(qtbot, inspector, doc):
     pose = doc.pose("target")
     expected = pose.positions[410, sk.index["LeftHand"]].copy()
     qtbot.mouseClick(inspector.take_button, LEFT)
-    assert doc.constraints[i].goal["point"] == pytest.approx(expected)
+    assert doc.scene.constraints[i].goal["point"] == pytest.approx(expected)
     assert doc.undo_stack.text(count) == f"Take goal of {HAND} from pose at frame 410"
     assert inspector.point.value() == pytest.approx(np.round(expected, 3))
 
@@ -592,12 +593,12 @@ def test_take_from_pose_and_pick(qtbot, inspector, doc):
     assert inspector.picking and doc.undo_stack.count() == count + 1
     doc.select("target", "RightHand")
     assert not inspector.picking
-    c = doc.constraints[i]
+    c = doc.scene.constraints[i]
     assert c.joint == "RightHand" and c.goal["point"] == pytest.approx(expected, abs=1e-6)
     assert doc.undo_stack.text(count + 1) == f"Pick RightHand for {HAND}"
     assert inspector.joint.currentText() == "RightHand"
     doc.undo_stack.undo()
-    assert doc.constraints[i].joint == "LeftHand"
+    assert doc.scene.constraints[i].joint == "LeftHand"
     assert inspector.joint.currentText() == "LeftHand"
 
 
@@ -629,7 +630,7 @@ def test_screenshots(qtbot, solved):
     SCREENSHOTS.mkdir(parents=True, exist_ok=True)
     assert tl.grab().save(str(SCREENSHOTS / "timeline.png"))
     assert insp.grab().save(str(SCREENSHOTS / "inspector.png"))
-    d.deleteLater()
+    d.close()
 
 
 def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, timeline, doc):
@@ -638,7 +639,7 @@ def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, ti
     i = _row_of(doc, HAND)
     count = doc.undo_stack.count()
     spin = inspector.point.spins[2]
-    z0 = doc.constraints[i].goal["point"][2]
+    z0 = doc.scene.constraints[i].goal["point"][2]
     qtbot.keyClick(spin, Qt.Key.Key_Up)
     qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
     assert doc.undo_stack.count() == count
@@ -646,8 +647,8 @@ def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, ti
     assert doc.undo_stack.count() == count + 2
     assert doc.undo_stack.text(count) == f"Set point of {HAND}"
     assert doc.undo_stack.text(count + 1) == f"Duplicate {HAND}"
-    assert doc.constraints[i].goal["point"][2] == pytest.approx(round(z0, 3) + 0.01)
-    assert doc.constraints[i + 1].name == f"{HAND} copy"
+    assert doc.scene.constraints[i].goal["point"][2] == pytest.approx(round(z0, 3) + 0.01)
+    assert doc.scene.constraints[i + 1].name == f"{HAND} copy"
     assert not timeline.live.active
 
 
@@ -666,41 +667,13 @@ def test_empty_document(qtbot):
     tl.add_constraint("LeftHand")                 # nothing to add on: no motion
     assert d.undo_stack.count() == 0
     assert insp.title.text() == "No constraint"
-    d.deleteLater()
+    d.close()
 
 
-class _Window(QtCore.QObject):
-    """The main window's long-work pathway (``run_job`` with a ``Job`` thread), without its
-    OpenGL viewport."""
-
-    def __init__(self):
-        super().__init__()
-        self.job = None
-        self.errors = []
-
-    def show_error(self, message):
-        self.errors.append(message)
-
-    def run_job(self, fn, on_success, label):
-        from app.gui.worker import Job
-        if self.job is not None:
-            self.show_error("Another computation is running; wait for it or cancel it.")
-            return
-        self.job = Job(fn, self)
-        self.job.succeeded.connect(on_success)
-        self.job.failed.connect(self.show_error)
-        self.job.done.connect(self._done)
-        self.job.start()
-
-    def _done(self):
-        self.job = None
-
-
-def test_release_solves_in_the_window_worker(qtbot, timeline, doc):
-    window = _Window()
-    assert live_solver(doc, window) is timeline.live and timeline.live.window is window
+def test_release_solves_in_the_document_job_runner(qtbot, timeline, doc):
+    assert live_solver(doc) is timeline.live
     row = 2
-    c = doc.constraints[row]
+    c = doc.scene.constraints[row]
     count = doc.undo_stack.count()
     _press(qtbot, timeline, 91, row)
     for f in (95, 100):
@@ -708,25 +681,39 @@ def test_release_solves_in_the_window_worker(qtbot, timeline, doc):
     qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
     preview = doc.motion
     _release(qtbot, timeline, 100, row)
-    assert window.job is not None                    # solving in the worker
-    assert doc.motion is preview                     # the preview stays up meanwhile
-    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=10000)
-    qtbot.waitUntil(lambda: window.job is None, timeout=5000)
+    # the edit is applied at once, as one command; the solve runs in the document's runner
+    assert doc.undo_stack.count() == count + 1 and doc.pending and doc.jobs.busy
     assert doc.undo_stack.text(count) == "Move end of contact LeftFoot 32-91 to 100"
-    assert doc.constraints[row].range == (18, 32, 100, 105) == timeline.rows[row].range
-    assert doc.motion is not preview and not window.errors
-
-    # a busy window refuses: the handle and the motion go back
-    window.job = object()
-    shown = _arrays(doc.motion)[0]
-    _press(qtbot, timeline, 100, row)
-    for f in (96, 92):
-        _move(qtbot, timeline, f, row)
-    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
-    _release(qtbot, timeline, 92, row)
-    assert window.errors and doc.undo_stack.count() == count + 1
-    assert timeline.rows[row].range == (18, 32, 100, 105)
-    assert np.array_equal(_arrays(doc.motion)[0], shown)
-    window.job = None
-    timeline.live.window = None
+    assert doc.scene.constraints[row].range == (18, 32, 100, 105) == timeline.rows[row].range
+    assert doc.motion is preview                     # the preview stays up meanwhile
+    qtbot.waitUntil(lambda: not doc.pending and not doc.jobs.busy, timeout=30000)
+    assert doc.undo_stack.count() == count + 1       # the solve landed in the same step
+    assert doc.motion is not preview and doc.motion is doc.scene.motion
     assert c.range == (18, 32, 91, 105)
+
+
+def test_an_edit_during_a_solve_is_applied_and_the_solve_restarts(qtbot, timeline, doc):
+    errors = []
+    doc.errorRaised.connect(errors.append)
+    row = 2
+    count = doc.undo_stack.count()
+    doc.solve()                                      # a long solve is running
+    assert doc.jobs.busy and doc.pending
+    _press(qtbot, timeline, 91, row)
+    for f in (95, 100):
+        _move(qtbot, timeline, f, row)
+    _release(qtbot, timeline, 100, row)
+    # applied at once, never refused, no dialog
+    assert doc.undo_stack.count() == count + 2 and not errors
+    assert doc.scene.constraints[row].range == (18, 32, 100, 105) == timeline.rows[row].range
+    assert doc.pending and doc.jobs.busy             # restarted for the edited constraints
+    qtbot.waitUntil(lambda: not doc.pending and not doc.jobs.busy, timeout=60000)
+    assert not errors and doc.undo_stack.count() == count + 2
+    # the landed correction is the one of the edited constraints
+    solved = doc.scene.solve().scene.motion
+    np.testing.assert_allclose(doc.motion.rotations, solved.rotations, atol=1e-9)
+    # undo comes back to the scene whose solve was dropped: it is solved again
+    doc.undo_stack.undo()
+    assert doc.scene.constraints[row].range == (18, 32, 91, 105)
+    qtbot.waitUntil(lambda: not doc.pending and not doc.jobs.busy, timeout=60000)
+    assert not errors

@@ -55,7 +55,7 @@ def test_the_view_follows_the_frame(view):
 def test_clicking_a_joint_selects_it_everywhere(view, qtbot):
     from app.gui.qt import QtCore
     doc, v = view
-    j = doc.target.skeleton.index["LeftHand"]
+    j = doc.scene.target.skeleton.index["LeftHand"]
     x, y = v.project(v.figures["target"].points[[j]])[0]
     got = []
     doc.selectionChanged.connect(lambda side, name: got.append((side, name)))
@@ -93,11 +93,11 @@ def test_orbit_pan_zoom_and_frame_all(view, qtbot):
 
 def test_hiding_and_overlaying(view):
     doc, v = view
-    doc.viewer.show_performer = False
+    doc.set_viewer(show_performer=False)
     v.refresh()
     assert not v.figures["performer"].mesh.visible()
-    doc.viewer.show_performer = True
-    doc.viewer.side_by_side = False
+    doc.set_viewer(show_performer=True)
+    doc.set_viewer(side_by_side=False)
     v.refresh()
     # overlaid: both start at the same place
     assert np.allclose(v.figures["performer"].offset[:2] + v._root_start("performer")[:2],
@@ -108,10 +108,10 @@ def test_constraint_goals_are_drawn(view):
     doc, v = view
     from app.gui.commands import push_constraints
     from engine.correction.constraints import Constraint, floor_constraint
-    hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
+    hand = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + 0.1}, 280, 290,
                                       310, 320),
-                           floor_constraint("LeftToeBase", doc.num_frames, -0.9)])
+                           floor_constraint("LeftToeBase", doc.scene.num_frames, -0.9)])
     assert v.goals.visible() and v.planes.visible()
     doc.undo_stack.undo()
     assert not v.goals.visible()
@@ -130,7 +130,7 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     assert w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
     assert w.import_file("target", robot)
     doc, v = w.doc, w.viewport
-    assert doc.ready and doc.character is not None
+    assert doc.scene.ready and doc.scene.character is not None
     assert v.skin is not None and v.skin.visible()
     doc.set_frame(100)
     first = v.skin.opts["meshdata"].vertexes().copy()
@@ -142,7 +142,7 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     from engine.formats.gltf import read_gltf
     assert w.export_bvh(tmp_path / "out.glb")
     back = read_gltf(tmp_path / "out.glb")
-    assert back.skeleton.names == doc.target.skeleton.names and back.meshes
+    assert back.skeleton.names == doc.scene.target.skeleton.names and back.meshes
     doc.undo_stack.setClean()
 
 
@@ -151,12 +151,12 @@ def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     from app.gui.commands import push_constraints
     from engine.correction.constraints import Constraint
     doc, v = view
-    hand = doc.pose("target").positions[300, doc.target.skeleton.index["LeftHand"]]
+    hand = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + [0.05, 0.1, 0]},
                                       280, 290, 310, 320, name="reach")])
     v.set_active_constraint(0)
     count = doc.undo_stack.count()
-    start = np.array(doc.constraints[0].goal["point"])
+    start = np.array(doc.scene.constraints[0].goal["point"])
     x, y = v.project((v._active_goal()[2])[None])[0]
     qtbot.mousePress(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(int(x), int(y)))
     qtbot.mouseMove(v, QtCore.QPoint(int(x), int(y) - 15))
@@ -166,11 +166,12 @@ def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     qtbot.mouseRelease(v, QtCore.Qt.MouseButton.LeftButton,
                        pos=QtCore.QPoint(int(x), int(y) - 30))
     qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=20000)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)     # the solve landed
     assert doc.undo_stack.undoText() == "Move goal of reach"
-    goal = np.array(doc.constraints[0].goal["point"])
+    goal = np.array(doc.scene.constraints[0].goal["point"])
     assert goal[1] > start[1] + 0.02                     # dragged up on screen: higher
     # the camera looks along the view; the goal moved in the plane facing it
-    reached = doc.pose("target").positions[290:311, doc.target.skeleton.index["LeftHand"]]
+    reached = doc.pose("target").positions[290:311, doc.scene.target.skeleton.index["LeftHand"]]
     assert np.linalg.norm(reached - goal, axis=1).max() < 2e-3
     doc.undo_stack.undo()
-    np.testing.assert_allclose(doc.constraints[0].goal["point"], start)
+    np.testing.assert_allclose(doc.scene.constraints[0].goal["point"], start)

@@ -34,11 +34,12 @@ from engine.conversion.correspondence import Correspondence
 from engine.correction.displacement import Curve, DisplacementMap
 from engine.errors import MotionComposerError
 from engine.kinematics import forward_kinematics
+from engine.scene import Scene, evaluate_project, solve_project
 from engine.project import (MIGRATIONS, VERSION, MissingSourceError, Project, ProjectError,
                             Source, ViewerState, autosave_path, backup_path, check_project,
-                            discard_autosave, embed_sources, evaluate_project, find_autosave,
+                            discard_autosave, embed_sources, find_autosave,
                             load_project, open_project, project_from_json, project_to_json,
-                            read_sources, save_project, solve_project, write_autosave)
+                            read_sources, save_project, write_autosave)
 from engine.conversion import BindOptions
 from engine.conversion import RootOptions
 from ik_fixtures import MAX_TO_BANDAI, MAX_TO_HOLDEN
@@ -187,12 +188,11 @@ def test_the_retargeted_motion_is_identical_after_load(tmp_path):
 
 def test_saved_correction_matches_the_solver(tmp_path):
     """The keys (0.01 degree, 0.05 mm) reproduce the IK result within a millimetre."""
-    from engine.scene import run_job
     project = solve_project(session_in(tmp_path))            # hand edits replaced
     assert ("Head", "ry") not in project.displacement.curves
     performer, target = read_sources(project)
     keyed = evaluate_project(project, performer, target).motion
-    dense = run_job(project.job(performer, target, constraints=project.constraints)).motion
+    dense = Scene.from_project(project, performer, target).solve().motion
     gap = forward_kinematics(keyed).positions - forward_kinematics(dense).positions
     assert np.abs(gap).max() < 1e-3
     # solving again gives the same keys: loading never needs IK, re-solving is repeatable

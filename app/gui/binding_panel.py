@@ -229,11 +229,11 @@ class BindingPanel(QtWidgets.QWidget):
     def refresh(self) -> None:
         """Show the document's options, the binding's notes and the hip-height ratio."""
         d = self.doc
-        b, r = d.bind_options, d.root_options
+        b, r = d.scene.bind_options, d.scene.root
         self.performer_reference.set_value(
-            b.performer_reference, d.performer.num_frames if d.performer is not None else 0)
+            b.performer_reference, d.scene.performer.num_frames if d.scene.performer is not None else 0)
         self.target_reference.set_value(
-            b.target_reference, d.target.num_frames if d.target is not None else 0)
+            b.target_reference, d.scene.target.num_frames if d.scene.target is not None else 0)
         with _Blocker(self.align_on), _Blocker(self.align_off):
             (self.align_on if b.rest_alignment else self.align_off).setChecked(True)
         with _Blocker(self.distribute):
@@ -256,17 +256,17 @@ class BindingPanel(QtWidgets.QWidget):
         self.notes.setText(self._notes_text())
 
     def _ratio(self) -> float | None:
-        b = self.doc.binding
+        b = self.doc.scene.binding
         return float(b.hip_height_ratio) if b is not None else None
 
     def _notes_text(self) -> str:
         d = self.doc
-        if d.evaluation_error:
-            return f"<span style='color:#c0392b'>{_escape(d.evaluation_error)}</span>"
-        if d.binding is None:
+        if d.scene.evaluation_error:
+            return f"<span style='color:#c0392b'>{_escape(d.scene.evaluation_error)}</span>"
+        if d.scene.binding is None:
             return "<i>Load a performer and a target and map their joints to bind them.</i>"
         lines = [f"{_escape(k[:1].upper() + k[1:])}: {_escape(str(v))}"
-                 for k, v in d.binding.notes.items()]
+                 for k, v in d.scene.binding.notes.items()]
         return "<br>".join(lines)
 
     # ------------------------------------------------------------------ widgets -> model
@@ -302,48 +302,48 @@ class BindingPanel(QtWidgets.QWidget):
         chooser = getattr(self, f"{side}_reference")
         value = chooser.value
         self._push(_reference_text(side, value),
-                   bind=dataclasses.replace(self.doc.bind_options,
+                   bind=dataclasses.replace(self.doc.scene.bind_options,
                                             **{f"{side}_reference": value}))
 
     def _reference_frame_edited(self, side: str, frame: int) -> None:
         if getattr(self, f"{side}_reference").combo.currentData() != "frame":
             return
         self._push(_reference_text(side, frame),
-                   bind=dataclasses.replace(self.doc.bind_options,
+                   bind=dataclasses.replace(self.doc.scene.bind_options,
                                             **{f"{side}_reference": int(frame)}),
                    merge_key=f"{side} frame")
 
     def _alignment_toggled(self, on: bool) -> None:
         self._push(f"Turn rest alignment {'on' if on else 'off'}",
-                   bind=dataclasses.replace(self.doc.bind_options, rest_alignment=bool(on)))
+                   bind=dataclasses.replace(self.doc.scene.bind_options, rest_alignment=bool(on)))
 
     def _distribute_changed(self, index: int) -> None:
         key, _text, undo = DISTRIBUTIONS[index]
-        self._push(undo, bind=dataclasses.replace(self.doc.bind_options, distribute=key))
+        self._push(undo, bind=dataclasses.replace(self.doc.scene.bind_options, distribute=key))
 
     def _root_mode_changed(self, index: int) -> None:
         key, _text, undo = ROOT_MODES[index]
-        self._push(undo, root=dataclasses.replace(self.doc.root_options, mode=key))
+        self._push(undo, root=dataclasses.replace(self.doc.scene.root, mode=key))
 
     def _auto_scale_toggled(self, auto: bool) -> None:
         if auto:
             self._push("Scale the root by hip heights",
-                       root=dataclasses.replace(self.doc.root_options, scale=None))
+                       root=dataclasses.replace(self.doc.scene.root, scale=None))
         else:
             ratio = self._ratio()
             start = (ratio, ratio) if ratio is not None else (1.0, 1.0)
             self._push("Set the root scale by hand",
-                       root=dataclasses.replace(self.doc.root_options, scale=start))
+                       root=dataclasses.replace(self.doc.scene.root, scale=start))
 
     def _scale_edited(self, h: float | None = None, v: float | None = None) -> None:
-        scale = self.doc.root_options.scale
+        scale = self.doc.scene.root.scale
         if self.auto_scale.isChecked() or scale is None:
             return
         # the other factor comes from the model, not from its rounded spin box
         h = scale[0] if h is None else h
         v = scale[1] if v is None else v
         self._push(f"Set root scale to {h:.3f} (horizontal), {v:.3f} (vertical)",
-                   root=dataclasses.replace(self.doc.root_options, scale=(h, v)),
+                   root=dataclasses.replace(self.doc.scene.root, scale=(h, v)),
                    merge_key="root scale")
 
 

@@ -90,7 +90,7 @@ def _map_command(doc, target: str, performer: str | None) -> bool:
     """Push "Map <target> to <performer>" (or "Unmap <target>"): one undoable command. A
     performer joint already driving another target joint is taken from it. The pair's note
     says it was set by hand (``with_pair`` would keep a stale auto-mapping note)."""
-    corr = doc.correspondence
+    corr = doc.scene.correspondence
     if corr.performer_of(target) == performer:
         return False
     new = corr.with_pair(target, performer)
@@ -371,7 +371,7 @@ class LinkView(QtWidgets.QWidget):
         panel = self.panel
         selected = set(panel.table.selected_targets())
         out = []
-        for target, performer in panel.doc.correspondence.pairs.items():
+        for target, performer in panel.doc.scene.correspondence.pairs.items():
             y0 = self._y(panel.target_tree, target)
             y1 = self._y(panel.performer_tree, performer)
             if y0 is None or y1 is None:
@@ -415,8 +415,8 @@ class MappingModel(QtCore.QAbstractTableModel):
         self.rows: list[tuple[str, str, str]] = []
 
     def reload(self) -> None:
-        corr = self.doc.correspondence
-        order = self.doc.target.skeleton.index if self.doc.target is not None else {}
+        corr = self.doc.scene.correspondence
+        order = self.doc.scene.target.skeleton.index if self.doc.scene.target is not None else {}
         targets = sorted(corr.pairs, key=lambda t: order.get(t, len(order)))
         self.beginResetModel()
         self.rows = [(t, corr.pairs[t], corr.notes.get(t, "")) for t in targets]
@@ -463,8 +463,8 @@ class MappingModel(QtCore.QAbstractTableModel):
             return False
         target = self.rows[index.row()][0]
         performer = str(value) if value else None
-        if performer is not None and (self.doc.performer is None or
-                                      performer not in self.doc.performer.skeleton.index):
+        if performer is not None and (self.doc.scene.performer is None or
+                                      performer not in self.doc.scene.performer.skeleton.index):
             return False
         # the command re-evaluates and the panel reloads this model (an open editor is
         # released by the reset; Qt then skips closing it again)
@@ -484,9 +484,9 @@ class PerformerDelegate(QtWidgets.QStyledItemDelegate):
     def createEditor(self, parent, option, index):       # noqa: N802
         combo = QtWidgets.QComboBox(parent)
         combo.addItem(self.UNMAPPED, "")
-        if self.doc.performer is not None:
-            sk = self.doc.performer.skeleton
-            driven = {p: t for t, p in self.doc.correspondence.pairs.items()}
+        if self.doc.scene.performer is not None:
+            sk = self.doc.scene.performer.skeleton
+            driven = {p: t for t, p in self.doc.scene.correspondence.pairs.items()}
             for j, name in enumerate(sk.names):
                 text = "  " * int(sk.depth[j]) + name
                 if name in driven:
@@ -710,11 +710,11 @@ class CorrespondencePanel(QtWidgets.QWidget):
     # ------------------------------------------------------------------ document -> widgets
     def _sources_changed(self) -> None:
         doc = self.doc
-        self.required = required_joints(doc.target.skeleton if doc.target is not None else None)
-        self.target_tree.build(doc.target.skeleton if doc.target is not None else None,
-                               self._title("Target", doc.target, doc.target_path))
-        self.performer_tree.build(doc.performer.skeleton if doc.performer is not None else None,
-                                  self._title("Performer", doc.performer, doc.performer_path))
+        self.required = required_joints(doc.scene.target.skeleton if doc.scene.target is not None else None)
+        self.target_tree.build(doc.scene.target.skeleton if doc.scene.target is not None else None,
+                               self._title("Target", doc.scene.target, doc.scene.target_path))
+        self.performer_tree.build(doc.scene.performer.skeleton if doc.scene.performer is not None else None,
+                                  self._title("Performer", doc.scene.performer, doc.scene.performer_path))
         self.target_tree.apply_filter(self.filter_edit.text())
         self.performer_tree.apply_filter(self.filter_edit.text())
         self._mapping_changed()
@@ -735,7 +735,7 @@ class CorrespondencePanel(QtWidgets.QWidget):
         self.links.update()
 
     def _refresh_marks(self) -> None:
-        corr = self.doc.correspondence
+        corr = self.doc.scene.correspondence
         driven = {p: t for t, p in corr.pairs.items()}
         with QtCore.QSignalBlocker(self.target_tree):
             for name in self.target_tree.items:
@@ -781,11 +781,11 @@ class CorrespondencePanel(QtWidgets.QWidget):
 
     def unmapped_required(self) -> list[str]:
         """Required target joints that are unmapped, in joint order."""
-        pairs = self.doc.correspondence.pairs
+        pairs = self.doc.scene.correspondence.pairs
         return [t for t in self.target_tree.items if t in self.required and t not in pairs]
 
     def _motion_changed(self) -> None:
-        error = self.doc.evaluation_error
+        error = self.doc.scene.evaluation_error
         self.error_label.setText(f"The mapping cannot drive the target: {error}" if error
                                  else "")
         self.error_label.setVisible(bool(error))
@@ -793,7 +793,7 @@ class CorrespondencePanel(QtWidgets.QWidget):
     def _selection_changed(self, side: str, joint: str) -> None:
         """Show the document's selection: the joint in its tree; for a target joint its
         performer joint too; the pair's table row and line highlighted."""
-        corr = self.doc.correspondence
+        corr = self.doc.scene.correspondence
         pair = None
         if side == "target" and joint:
             pair = joint if joint in corr.pairs else None
@@ -821,16 +821,16 @@ class CorrespondencePanel(QtWidgets.QWidget):
 
     def _update_actions(self) -> None:
         doc = self.doc
-        both = doc.target is not None and doc.performer is not None
+        both = doc.scene.target is not None and doc.scene.performer is not None
         target = self.target_tree.selected_joint()
         performer = self.performer_tree.selected_joint()
         self.automap_action.setEnabled(both)
         self.map_action.setEnabled(
             both and target is not None and performer is not None and
-            doc.correspondence.performer_of(target) != performer)
+            doc.scene.correspondence.performer_of(target) != performer)
         self.unmap_action.setEnabled(bool(self.table.selected_targets()))
-        self.clear_action.setEnabled(len(doc.correspondence) > 0)
-        self.save_action.setEnabled(len(doc.correspondence) > 0)
+        self.clear_action.setEnabled(len(doc.scene.correspondence) > 0)
+        self.save_action.setEnabled(len(doc.scene.correspondence) > 0)
 
     # ------------------------------------------------------------------ widgets -> document
     def _tree_selection_changed(self, tree: JointTree) -> None:
@@ -864,9 +864,9 @@ class CorrespondencePanel(QtWidgets.QWidget):
     def map_pair(self, target: str, performer: str) -> bool:
         """Map ``target`` to ``performer`` (one command) and select the pair."""
         doc = self.doc
-        if doc.target is None or doc.performer is None or \
-                target not in doc.target.skeleton.index or \
-                performer not in doc.performer.skeleton.index:
+        if doc.scene.target is None or doc.scene.performer is None or \
+                target not in doc.scene.target.skeleton.index or \
+                performer not in doc.scene.performer.skeleton.index:
             return False
         changed = _map_command(doc, target, performer)
         doc.select("target", target)
@@ -881,13 +881,13 @@ class CorrespondencePanel(QtWidgets.QWidget):
     def unmap_selected(self) -> None:
         """Unmap the selected pairs (table rows; they follow the selected joint): one
         command."""
-        targets = [t for t in self.table.selected_targets() if t in self.doc.correspondence.pairs]
+        targets = [t for t in self.table.selected_targets() if t in self.doc.scene.correspondence.pairs]
         if not targets:
             return
         if len(targets) == 1:
             _map_command(self.doc, targets[0], None)
             return
-        corr = self.doc.correspondence
+        corr = self.doc.scene.correspondence
         pairs = {t: p for t, p in corr.pairs.items() if t not in targets}
         notes = {t: n for t, n in corr.notes.items() if t in pairs}
         label = ", ".join(targets[:3]) + (f" and {len(targets) - 3} more"
@@ -895,13 +895,13 @@ class CorrespondencePanel(QtWidgets.QWidget):
         push_correspondence(self.doc, Correspondence(pairs, notes), f"Unmap {label}")
 
     def clear(self) -> None:
-        if len(self.doc.correspondence):
+        if len(self.doc.scene.correspondence):
             push_correspondence(self.doc, Correspondence({}), "Clear mapping")
 
     def auto_map(self) -> None:
         """Map by humanoid role (:func:`engine.conversion.automap.automap`): one command, "Auto-map"."""
         doc = self.doc
-        if doc.target is None or doc.performer is None:
+        if doc.scene.target is None or doc.scene.performer is None:
             return
         try:
             from engine.conversion.automap import automap
@@ -910,11 +910,11 @@ class CorrespondencePanel(QtWidgets.QWidget):
                             "map the joints by hand.")
             return
         try:
-            corr = automap(doc.target.skeleton, doc.performer.skeleton)
+            corr = automap(doc.scene.target.skeleton, doc.scene.performer.skeleton)
         except MotionComposerError as exc:
             self.show_error("Auto-map", f"Automatic mapping failed: {exc}")
             return
-        if corr.pairs == doc.correspondence.pairs and corr.notes == doc.correspondence.notes:
+        if corr.pairs == doc.scene.correspondence.pairs and corr.notes == doc.scene.correspondence.notes:
             return
         push_correspondence(doc, corr, "Auto-map")
 
@@ -937,8 +937,8 @@ class CorrespondencePanel(QtWidgets.QWidget):
     def _preset_problem(self, corr: Correspondence) -> str:
         """Why ``corr`` cannot be used with the loaded skeletons ("" when it can)."""
         doc = self.doc
-        for side, motion, names in (("target", doc.target, list(corr.pairs)),
-                                    ("performer", doc.performer, list(corr.pairs.values()))):
+        for side, motion, names in (("target", doc.scene.target, list(corr.pairs)),
+                                    ("performer", doc.scene.performer, list(corr.pairs.values()))):
             if motion is None:
                 continue
             unknown = [n for n in names if n not in motion.skeleton.index]
@@ -958,13 +958,13 @@ class CorrespondencePanel(QtWidgets.QWidget):
         if not path.suffix:
             path = path.with_suffix(".json")
         try:
-            self.doc.correspondence.save(path)
+            self.doc.scene.correspondence.save(path)
         except (MotionComposerError, OSError) as exc:
             self.show_error("Save preset", f"Cannot save the mapping preset: {exc}")
 
     # ------------------------------------------------------------------ dialogs (overridable)
     def _preset_dir(self) -> str:
-        path = self.doc.target_path or self.doc.path
+        path = self.doc.scene.target_path or self.doc.path
         return str(Path(path).parent) if path else ""
 
     def ask_load_path(self) -> str | None:

@@ -461,7 +461,7 @@ class CurveEditor(QtWidgets.QWidget):
 
     def curve(self, channel: str) -> Curve | None:
         """The shown map's curve of ``channel`` of the shown joint (None if it has none)."""
-        shown = self._shown_map if self._shown_map is not None else self.doc.displacement
+        shown = self._shown_map if self._shown_map is not None else self.doc.scene.displacement
         return shown.curves.get((self.joint, channel))
 
     def show_joint(self, joint: str) -> None:
@@ -477,8 +477,8 @@ class CurveEditor(QtWidgets.QWidget):
 
     def _selected_target_joint(self) -> str | None:
         side, joint = self.doc.selection
-        if side == "target" and joint and self.doc.target is not None and \
-                joint in self.doc.target.skeleton.index:
+        if side == "target" and joint and self.doc.scene.target is not None and \
+                joint in self.doc.scene.target.skeleton.index:
             return joint
         return None
 
@@ -493,8 +493,8 @@ class CurveEditor(QtWidgets.QWidget):
             self.show_joint(ROOT)
         else:
             chosen = self._selected_target_joint()
-            if chosen is None and self.doc.target is not None:
-                chosen = self.doc.target.skeleton.names[0]
+            if chosen is None and self.doc.scene.target is not None:
+                chosen = self.doc.scene.target.skeleton.names[0]
             self.show_joint(chosen if chosen is not None else ROOT)
 
     def _sources_changed(self) -> None:
@@ -518,7 +518,7 @@ class CurveEditor(QtWidgets.QWidget):
     # ================================================================== model -> widget
     def _base_values(self) -> np.ndarray | None:
         """``(F, 3)`` the base motion's channels of the shown joint, in display units."""
-        composed = self.doc.composed
+        composed = self.doc.scene.composed
         if composed is None:
             return None
         if self._base_cache is None or self._base_cache[0] is not composed or \
@@ -534,10 +534,10 @@ class CurveEditor(QtWidgets.QWidget):
     def refresh(self) -> None:
         """Redraw from the document (or from the drag's preview map). Only what changed is
         redrawn: a drag step touches the dragged channels' curves and keys alone."""
-        ready = self.doc.composed is not None
-        if ready and self.joint != ROOT and self.joint not in self.doc.composed.skeleton.index:
+        ready = self.doc.scene.composed is not None
+        if ready and self.joint != ROOT and self.joint not in self.doc.scene.composed.skeleton.index:
             self.joint, self.channels = ROOT, TRANSLATION
-        F = self.doc.composed.num_frames if ready else 0
+        F = self.doc.scene.composed.num_frames if ready else 0
         frames = np.arange(F, dtype=float)
         visible = tuple(self.visible_channels()) if ready else ()
         decor = (self.joint, visible, self.base_check.isChecked())
@@ -583,8 +583,8 @@ class CurveEditor(QtWidgets.QWidget):
                 self.bases[axis].setVisible(base_shown)
         self._update_ranges()
         self._update_key_widgets()
-        if self.playhead.value() != self.doc.viewer.current_frame:
-            self._show_frame(self.doc.viewer.current_frame)
+        if self.playhead.value() != self.doc.scene.viewer.current_frame:
+            self._show_frame(self.doc.scene.viewer.current_frame)
         if ready != self._drawn.get("ready"):
             self._drawn["ready"] = ready
             for widget in (self.add_button, self.root_button, self.frame_all_button):
@@ -611,9 +611,9 @@ class CurveEditor(QtWidgets.QWidget):
     def _update_ranges(self) -> None:
         """Faint bands where constraints act (easing in and out), stronger where they hold,
         with the constraint's name."""
-        ready = self.doc.composed is not None
+        ready = self.doc.scene.composed is not None
         spans = tuple((c.name or c.joint, c.smooth_in, c.start, c.end, c.smooth_out)
-                      for c in self.doc.constraints if getattr(c, "enabled", True)) \
+                      for c in self.doc.scene.constraints if getattr(c, "enabled", True)) \
             if ready else ()
         if spans == self._drawn.get("ranges"):
             return
@@ -653,7 +653,7 @@ class CurveEditor(QtWidgets.QWidget):
             self.frame_box.setEnabled(single)
             self.value_box.setEnabled(single)
             self.value_box.setSuffix(self.suffix)
-            F = self.doc.composed.num_frames if self.doc.composed is not None else 1
+            F = self.doc.scene.composed.num_frames if self.doc.scene.composed is not None else 1
             # one below the range shows the special text: no single key selected
             self.frame_box.setRange(-1, max(F - 1, 0))
             if single:
@@ -673,7 +673,7 @@ class CurveEditor(QtWidgets.QWidget):
         self.refresh()
 
     def _update_playhead_bounds(self) -> None:
-        F = self.doc.num_frames
+        F = self.doc.scene.num_frames
         self.playhead.setBounds((0, max(F - 1, 0)))
 
     def _show_frame(self, frame: int) -> None:
@@ -693,14 +693,14 @@ class CurveEditor(QtWidgets.QWidget):
             self.doc.set_frame(int(round(self.playhead.value())))
 
     def _playhead_released(self) -> None:
-        self._show_frame(self.doc.viewer.current_frame)     # on the whole frame
+        self._show_frame(self.doc.scene.viewer.current_frame)     # on the whole frame
 
     # ================================================================== view
     def curves_extent(self) -> tuple[float, float, float, float] | None:
         """``(x0, x1, y0, y1)`` of the visible offset curves and their keys (display units)."""
-        if self.doc.composed is None:
+        if self.doc.scene.composed is None:
             return None
-        F = self.doc.composed.num_frames
+        F = self.doc.scene.composed.num_frames
         frames = np.arange(F, dtype=float)
         x0, x1 = 0.0, float(max(F - 1, 1))
         ys = [np.zeros(1)]
@@ -810,7 +810,7 @@ class CurveEditor(QtWidgets.QWidget):
 
     # ================================================================== dragging keys
     def _drag_start(self, channel: str, index: int, modifiers) -> bool:
-        if self.doc.composed is None:
+        if self.doc.scene.composed is None:
             return False
         frame = float(self.curve(channel).frames[index])
         if (channel, frame) not in self.selected:
@@ -819,9 +819,9 @@ class CurveEditor(QtWidgets.QWidget):
                 self.selected.add((channel, frame))
             else:
                 self.selected = {(channel, frame)}
-        original = self.doc.displacement
+        original = self.doc.scene.displacement
         keys = self._selected_keys()
-        F = self.doc.composed.num_frames
+        F = self.doc.scene.composed.num_frames
         # how far the selection may move in time: keys never pass an unselected neighbour
         # (strictly) and stay inside the clip
         open_lo, open_hi = -math.inf, math.inf
@@ -896,7 +896,7 @@ class CurveEditor(QtWidgets.QWidget):
         self._drag["map"] = new_map
         self._shown_map = new_map
         self.selected = {(c, f + delta[0]) for c, f in self._drag_frames()}
-        self.doc.show_preview(new_map.apply(self.doc.composed))
+        self.doc.show_preview(new_map.apply(self.doc.scene.composed))
         self.refresh()
 
     def _drag_frames(self) -> set:
@@ -913,7 +913,7 @@ class CurveEditor(QtWidgets.QWidget):
         moved = {(c, f + delta[0]) for c, f in self._drag_frames()}
         self._drag = None
         self._shown_map = None
-        if new_map is self.doc.displacement:
+        if new_map is self.doc.scene.displacement:
             self.doc.show_preview(None)         # back to the evaluated motion
             return
         self.selected = moved
@@ -938,7 +938,7 @@ class CurveEditor(QtWidgets.QWidget):
     def add_keys(self, frame: float, channels=None) -> None:
         """Key ``channels`` (default: the visible ones) at ``frame`` with the curve's value
         there, as one command; channels already keyed there are left alone."""
-        if self.doc.composed is None:
+        if self.doc.scene.composed is None:
             return
         frame = float(frame)
         channels = self.visible_channels() if channels is None else list(channels)
@@ -961,18 +961,18 @@ class CurveEditor(QtWidgets.QWidget):
         if not changed:
             return
         self.selected = set(added)
-        self._push(self._with_curves(self.doc.displacement, changed),
+        self._push(self._with_curves(self.doc.scene.displacement, changed),
                    f"Add {self._what(added)} at frame {frame:g}")
 
     def add_keys_at_current_frame(self) -> None:
-        self.add_keys(self.doc.viewer.current_frame)
+        self.add_keys(self.doc.scene.viewer.current_frame)
 
     def _add_key_near(self, pos: QtCore.QPointF) -> None:
         """Double-click: key the visible curve nearest ``pos`` (view coordinates) at the whole
         frame there, if the curve passes within a few pixels."""
-        if self.doc.composed is None:
+        if self.doc.scene.composed is None:
             return
-        F = self.doc.composed.num_frames
+        F = self.doc.scene.composed.num_frames
         frame = float(min(max(round(pos.x()), 0), F - 1))
         px = self.view_box.viewPixelSize()[1]
         best, best_d = None, _PICK_PX * px
@@ -998,7 +998,7 @@ class CurveEditor(QtWidgets.QWidget):
             changed[c] = Curve(curve.frames[keep], curve.values[keep],
                                tuple(np.array(curve.interpolation, dtype=object)[keep]))
         self.selected = set()
-        self._push(self._with_curves(self.doc.displacement, changed),
+        self._push(self._with_curves(self.doc.scene.displacement, changed),
                    f"Delete {self._what(keys)}")
 
     def set_interpolation(self, kind: str, keys=None) -> None:
@@ -1017,7 +1017,7 @@ class CurveEditor(QtWidgets.QWidget):
                 changed[c] = Curve(curve.frames, curve.values, tuple(interp))
         if not changed:
             return
-        self._push(self._with_curves(self.doc.displacement, changed),
+        self._push(self._with_curves(self.doc.scene.displacement, changed),
                    f"Set {self._what(keys)} to {kind}")
 
     def _interp_chosen(self, index: int) -> None:
@@ -1044,7 +1044,7 @@ class CurveEditor(QtWidgets.QWidget):
             return
         self.selected = {(c, float(frames[i]))}
         verb = "Move" if frame is not None else "Set"
-        self._push(self._with_curves(self.doc.displacement,
+        self._push(self._with_curves(self.doc.scene.displacement,
                                      {c: Curve(frames, values, curve.interpolation)}),
                    f"{verb} {self._what(keys)}")
 

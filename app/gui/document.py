@@ -1,46 +1,52 @@
-"""The document: one retargeting session, the undo stack, and the evaluated motions.
+"""The document: a Qt shell over one engine :class:`~engine.scene.Scene`.
 
-The document holds plain engine data (motions, the correspondence, binding and root options,
-constraints, the displacement map, viewer state); widgets never change it directly but push
-commands (:mod:`app.gui.commands`) on its one ``QUndoStack``. Every change re-evaluates what
-depends on it (the direct conversion takes milliseconds, so it runs at once; IK runs in a
-worker, see :mod:`app.gui.worker`) and emits the signals the widgets listen to.
+The scene holds the session's choices and sources and derives the binding, the direct
+conversion and the final motion (:mod:`engine.scene`); the document holds the current scene,
+the undo stack, the selection, the job runner and the signals the widgets listen to. Widgets
+never change the scene: every edit is a command (:mod:`app.gui.commands`) that swaps one scene
+for another. Undo holds scenes (choices; derived results are cached by their inputs in the
+engine), so undo and redo cost no recomputation when the result is still cached.
+
+Solving runs in the document's one :class:`~app.gui.jobs.JobRunner`. An edit that needs a
+solve is applied at once (its command is on the stack straight away) and the scene it made is
+marked *pending*; the solve's result then replaces that scene everywhere in the history (no
+second undo step). An edit made while a solve runs applies at once too and restarts the solve
+for the newest pending scene; a scene whose solve was dropped is solved again when undo or
+redo comes back to it.
 """
 from __future__ import annotations
 
 import dataclasses
+import time
+import weakref
 from pathlib import Path
 
 import numpy as np
 
+from app.gui.jobs import JobRunner
 from app.gui.qt import QtCore, QtGui
-from engine.conversion.correspondence import Correspondence
-from engine.correction.displacement import DisplacementMap
 from engine.errors import MotionComposerError
 from engine.kinematics import WorldPose, forward_kinematics
 from engine.motion import Motion
-from engine.conversion import BindOptions, bind
-from engine.conversion import RootOptions, convert
-from engine.conversion import compose
+from engine.project import (MissingSourceError, discard_autosave, find_autosave,
+                            project_from_json, save_project, write_autosave)
+from engine.scene import Scene
 
-__all__ = ["Document", "ViewerState"]
+__all__ = ["Document"]
 
-
-@dataclasses.dataclass
-class ViewerState:
-    """What the viewer shows: frame, play range, camera, which skeletons."""
-
-    current_frame: int = 0
-    play_range: tuple[int, int] | None = None
-    camera: dict = dataclasses.field(default_factory=dict)
-    show_performer: bool = True
-    show_intermediate: bool = False
-    show_target: bool = True
-    side_by_side: bool = True
+#: which signal each project field's change emits
+_FIELD_SIGNALS = {
+    "performer": "sourcesChanged", "target": "sourcesChanged",
+    "correspondence": "mappingChanged",
+    "bind_options": "optionsChanged", "root": "optionsChanged",
+    "auto_contacts": "optionsChanged", "contact_options": "optionsChanged",
+    "floor": "optionsChanged", "ik_options": "optionsChanged",
+    "constraints": "constraintsChanged",
+}
 
 
 class Document(QtCore.QObject):
-    """A retargeting session with undo."""
+    """A retargeting session with undo: the current scene and what the window shows of it."""
 
     #: anything changed (title, modified mark)
     changed = QtCore.Signal()
@@ -48,52 +54,50 @@ class Document(QtCore.QObject):
     sourcesChanged = QtCore.Signal()
     #: the correspondence changed
     mappingChanged = QtCore.Signal()
-    #: binding or root options changed
+    #: binding, root, contact or IK options changed
     optionsChanged = QtCore.Signal()
     #: constraints changed
     constraintsChanged = QtCore.Signal()
-    #: the evaluated motions changed
+    #: the motion shown changed
     motionChanged = QtCore.Signal()
     #: the current frame changed
     frameChanged = QtCore.Signal(int)
+    #: what the viewer shows changed (skeletons shown, side by side, camera, play range)
+    viewerChanged = QtCore.Signal()
     #: a joint was selected: side ("target" or "performer") and joint name ("" for none)
     selectionChanged = QtCore.Signal(str, str)
     #: an error the user should see (the window shows a dialog)
     errorRaised = QtCore.Signal(str)
+    #: a short note for the status bar (a pair an edit replaced, a solve restarted)
+    noted = QtCore.Signal(str)
+    #: a pending solve landed (the scene now carries its correction)
+    solved = QtCore.Signal()
 
     def __init__(self, parent=None):
         super().__init__(parent)
         self.undo_stack = QtGui.QUndoStack(self)
         self.undo_stack.cleanChanged.connect(self._stack_changed)
         self.undo_stack.indexChanged.connect(self._stack_changed)
+        self.jobs = JobRunner(self)
         self.path: Path | None = None
-        self.performer: Motion | None = None
-        self.target: Motion | None = None
-        self.performer_path: Path | None = None
-        self.target_path: Path | None = None
-        #: the project's sources as loaded (embedded text, reader overrides), by role
-        self.sources: dict = {}
-        self.correspondence = Correspondence({})
-        self.bind_options = BindOptions()
-        self.root_options = RootOptions()
-        self.constraints: list = []
-        self.auto_contacts = False
-        self.floor: float | None = None
-        self.displacement = DisplacementMap()
-        self.viewer = ViewerState()
         self.selection: tuple[str, str] = ("", "")
-        # evaluated
-        self.composed: Motion | None = None
-        self.motion: Motion | None = None
-        self.binding = None
-        self.intermediate = None
-        self.evaluation_error: str = ""
-        self._poses: dict[str, WorldPose] = {}
+        self._scene = Scene.empty()
+        self._preview: Motion | None = None
+        self._poses: dict[str, tuple[Motion, WorldPose]] = {}
+        #: scenes whose correction is still to be solved -> solve keyword arguments
+        self._pending: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._solving: Scene | None = None
+        #: [s] how long the last solve that landed took (None before one did)
+        self.solve_seconds: float | None = None
 
     def _stack_changed(self, *_args) -> None:
         self.changed.emit()
 
     # ------------------------------------------------------------------ state
+    @property
+    def scene(self) -> Scene:
+        return self._scene
+
     @property
     def modified(self) -> bool:
         return not self.undo_stack.isClean()
@@ -104,112 +108,268 @@ class Document(QtCore.QObject):
         return f"{name}{'*' if self.modified else ''} - Motion Composer"
 
     @property
-    def character(self):
-        """The target's glTF character (mesh and skin), or None for a BVH target."""
-        path = self.target_path
-        if path is None or Path(path).suffix.lower() not in (".glb", ".gltf"):
-            return None
-        cached = getattr(self, "_character", None)
-        if cached is None or cached[0] != str(path):
-            from engine.formats.gltf import read_gltf
-            try:
-                self._character = (str(path), read_gltf(path))
-            except MotionComposerError as exc:
-                self.errorRaised.emit(str(exc))
-                self._character = (str(path), None)
-        return self._character[1]
+    def motion(self) -> Motion | None:
+        """The target motion shown: a live preview while one is up, else the scene's."""
+        return self._preview if self._preview is not None else self._scene.motion
 
     @property
-    def num_frames(self) -> int:
-        return self.performer.num_frames if self.performer is not None else 0
-
-    @property
-    def ready(self) -> bool:
-        return self.motion is not None
-
-    # ------------------------------------------------------------------ evaluation
-    def evaluate(self) -> None:
-        """Re-run the direct conversion and apply the displacement map. Errors (an impossible
-        mapping while it is being edited) leave no motion and are kept in
-        ``evaluation_error`` for the panels to show."""
-        self.composed = self.motion = self.binding = self.intermediate = None
-        self._poses = {}
-        self.evaluation_error = ""
-        if self.performer is not None and self.target is not None and len(self.correspondence):
-            try:
-                self.binding = bind(self.performer, self.target, self.correspondence,
-                                    self.bind_options)
-                self.intermediate = convert(self.binding, self.performer, self.root_options)
-                self.composed = compose(self.binding, self.intermediate,
-                                        self.performer.frame_time,
-                                        name=f"{self.performer.name}_on_{self.target.name}")
-                self.motion = self.displacement.apply(self.composed)
-            except MotionComposerError as exc:
-                self.composed = self.motion = self.binding = self.intermediate = None
-                self.evaluation_error = str(exc)
-        self.motionChanged.emit()
-
-    def show_preview(self, motion: Motion | None) -> None:
-        """Show ``motion`` as the target's motion without changing the document (a live
-        preview while a handle or goal is dragged); ``None`` goes back to the evaluated one.
-        Nothing is pushed on the undo stack."""
-        if motion is None:
-            self.evaluate()
-            return
-        self.motion = motion
-        self._poses.pop("target", None)
-        self.motionChanged.emit()
+    def pending(self) -> bool:
+        """The current scene's correction is still being solved."""
+        return self._scene in self._pending
 
     def pose(self, which: str) -> WorldPose | None:
-        """World pose over all frames of ``"performer"``, ``"target"`` (the final motion),
-        ``"composed"`` or ``"character"`` (the target file itself), computed once."""
-        if which not in self._poses:
-            motion = {"performer": self.performer, "target": self.motion,
-                      "composed": self.composed, "character": self.target}.get(which)
-            if motion is None:
-                return None
-            self._poses[which] = forward_kinematics(motion)
-        return self._poses[which]
+        """World pose over all frames of ``"performer"``, ``"target"`` (the motion shown),
+        ``"composed"`` or ``"character"`` (the target file itself), computed once per motion."""
+        s = self._scene
+        motion = {"performer": s.performer, "target": self.motion, "composed": s.composed,
+                  "character": s.target}.get(which)
+        if motion is None:
+            return None
+        cached = self._poses.get(which)
+        if cached is None or cached[0] is not motion:
+            cached = (motion, forward_kinematics(motion))
+            self._poses[which] = cached
+        return cached[1]
 
-    # ------------------------------------------------------------------ frame, selection
+    # ------------------------------------------------------------------ applying scenes
+    def _apply(self, scene: Scene) -> None:
+        """Make ``scene`` current (commands call this) and tell the widgets what changed.
+        The viewer state is not part of the history: the current one is kept."""
+        old = self._scene
+        if scene.project.viewer is not old.project.viewer:
+            scene = _with_viewer(scene, old.project.viewer)
+        self._scene = scene
+        if scene not in self._pending:
+            # a live preview ends when its edit lands; one whose solve is still running
+            # stays up until the solve does
+            self._preview = None
+            self._emit_changes(old, scene)
+            self.motionChanged.emit()
+        else:
+            self._emit_changes(old, scene)
+        self._solve_if_pending()
+
+    def _emit_changes(self, old: Scene, new: Scene) -> None:
+        signals = []
+        if old.performer is not new.performer or old.target is not new.target:
+            signals.append("sourcesChanged")
+        for name, signal in _FIELD_SIGNALS.items():
+            if name in ("performer", "target"):
+                continue
+            if getattr(old.project, name, None) is not getattr(new.project, name, None) and \
+                    signal not in signals:
+                signals.append(signal)
+        for signal in signals:
+            getattr(self, signal).emit()
+
+    def load_scene(self, scene: Scene, path=None, *, modified: bool = False) -> None:
+        """Start a fresh history on ``scene`` (a project opened, recovered or new)."""
+        self.cancel_solve()
+        self._pending.clear()
+        self.undo_stack.clear()
+        self.path = Path(path) if path is not None else None
+        self.selection = ("", "")
+        self._preview = None
+        self._scene = scene
+        for signal in ("sourcesChanged", "mappingChanged", "optionsChanged",
+                       "constraintsChanged", "motionChanged", "viewerChanged"):
+            getattr(self, signal).emit()
+        self.frameChanged.emit(scene.viewer.current_frame)
+        if modified:
+            self.undo_stack.resetClean()
+        else:
+            self.undo_stack.setClean()
+        self.changed.emit()
+
+    # ------------------------------------------------------------------ edits
+    def edit(self, text: str, *, merge: str | None = None, solve: bool = False,
+             regenerate: bool = False, **changes) -> bool:
+        """Push one command setting project fields (``constraints=...``, ``root=...``).
+        ``solve``: the new scene's correction is solved in the background (``regenerate``
+        makes the automatic constraints again). ``merge``: consecutive edits with the same
+        key become one step. False when nothing changes."""
+        from app.gui.commands import push_scene
+        current = self._scene
+        if not solve and all(_same(getattr(current.project, k), v) for k, v in changes.items()):
+            return False
+        after = current.replace(**changes)
+        if solve:
+            self._pending[after] = {"regenerate": regenerate}
+        push_scene(self, text, current, after, merge=merge, fields=tuple(changes))
+        return True
+
+    def set_source(self, role: str, motion: Motion, source, text: str) -> None:
+        """Replace the performer or target (one command): the map is redone, keeping the
+        pairs set by hand that still fit (:meth:`engine.scene.Scene.with_source`)."""
+        from app.gui.commands import push_scene
+        current = self._scene
+        after = current.with_source(role, motion, source)
+        push_scene(self, text, current, after)
+
+    def solve(self, *, regenerate: bool = False, text: str = "Solve constraints",
+              **changes) -> None:
+        """Solve the constraints (with ``changes`` applied first) as one undoable step."""
+        self.edit(text, solve=True, regenerate=regenerate, **changes)
+
+    def show_preview(self, motion: Motion | None) -> None:
+        """Show ``motion`` as the target's motion without changing the scene (a live preview
+        while a handle or goal is dragged); ``None`` goes back to the scene's motion."""
+        if motion is None and self._preview is None:
+            return
+        self._preview = motion
+        self.motionChanged.emit()
+
+    # ------------------------------------------------------------------ solving
+    def _solve_if_pending(self) -> None:
+        scene = self._scene
+        if scene not in self._pending or scene is self._solving:
+            return
+        kwargs = self._pending[scene]
+        self._solving = scene
+        if self.jobs.busy:
+            self.noted.emit("The edit restarted the solve")
+
+        def work(progress, cancel):
+            t0 = time.perf_counter()
+            solved = scene.solve(progress=progress, cancel=cancel, **kwargs).scene
+            return solved, time.perf_counter() - t0
+
+        self.jobs.run("Solving", work, lambda result: self._solved(scene, result),
+                      on_end=lambda outcome: self._solve_ended(scene, outcome))
+
+    def _solved(self, scene: Scene, outcome: tuple) -> None:
+        result, self.solve_seconds = outcome
+        self._pending.pop(scene, None)
+        from app.gui.commands import replace_scene
+        replace_scene(self, scene, result)
+        if self._scene is scene:
+            old, self._scene = self._scene, _with_viewer(result, self._scene.project.viewer)
+            self._preview = None
+            self._emit_changes(old, self._scene)
+            self.motionChanged.emit()
+        self.solved.emit()
+
+    def _solve_ended(self, scene: Scene, outcome: str) -> None:
+        if self._solving is scene:
+            self._solving = None
+        if outcome == "failed":
+            self._pending.pop(scene, None)          # not retried on its own
+            if self._scene is scene:
+                self.show_preview(None)
+        self._solve_if_pending()
+
+    def cancel_solve(self) -> None:
+        """Stop the running solve at the user's request: the scene keeps the correction it
+        had (its constraints as edited), and the preview goes."""
+        solving, self._solving = self._solving, None
+        if solving is not None:
+            self._pending.pop(solving, None)
+        self.jobs.cancel()
+        self.show_preview(None)
+
+    # ------------------------------------------------------------------ frame, viewer, selection
     def set_frame(self, frame: int) -> None:
-        frame = int(np.clip(frame, 0, max(self.num_frames - 1, 0)))
-        if frame != self.viewer.current_frame:
-            self.viewer.current_frame = frame
+        frame = int(np.clip(frame, 0, max(self._scene.num_frames - 1, 0)))
+        if frame != self._scene.viewer.current_frame:
+            self._scene = _with_viewer(self._scene, dataclasses.replace(
+                self._scene.viewer, current_frame=frame))
             self.frameChanged.emit(frame)
+
+    def set_viewer(self, **changes) -> None:
+        """Change what the viewer shows (not undoable): ``show_performer=False``,
+        ``side_by_side=True``, ``camera={...}``, ``play_range=(a, b)``."""
+        viewer = self._scene.viewer.with_(**changes)
+        if viewer != self._scene.viewer:
+            self._scene = _with_viewer(self._scene, viewer)
+            self.viewerChanged.emit()
 
     def select(self, side: str, joint: str) -> None:
         if (side, joint) != self.selection:
             self.selection = (side, joint)
             self.selectionChanged.emit(side, joint)
 
-    # ------------------------------------------------------------------ raw setters (commands)
-    # Commands call these; widgets call the push_* helpers of app.gui.commands.
-    def _set_sources(self, performer, performer_path, target, target_path) -> None:
-        self.performer, self.performer_path = performer, performer_path
-        self.target, self.target_path = target, target_path
-        if self.performer is not None:
-            self.viewer.current_frame = min(self.viewer.current_frame,
-                                            self.performer.num_frames - 1)
-        self.sourcesChanged.emit()
-        self.evaluate()
+    # ------------------------------------------------------------------ files
+    def open(self, path, locate=None) -> None:
+        """Open the project at ``path``. A clip that has moved is asked for through
+        ``locate(role, missing) -> new path or None`` and the project is retried there (the
+        project is then modified). Raises :class:`~engine.errors.MotionComposerError`."""
+        path = Path(path)
+        scene, moved = _open_scene(path, locate)
+        self.load_scene(scene, path, modified=moved)
 
-    def _set_correspondence(self, correspondence: Correspondence) -> None:
-        self.correspondence = correspondence
-        self.mappingChanged.emit()
-        self.evaluate()
+    def recover(self, autosave, project_path=None, locate=None) -> None:
+        """Open the autosave ``autosave`` as the project at ``project_path`` (or unsaved), with
+        its work still to be saved."""
+        scene, _moved = _open_scene(Path(autosave), locate)
+        self.load_scene(scene, project_path, modified=True)
 
-    def _set_options(self, bind_options: BindOptions, root_options: RootOptions) -> None:
-        self.bind_options, self.root_options = bind_options, root_options
-        self.optionsChanged.emit()
-        self.evaluate()
+    def save(self, path) -> None:
+        """Save the scene's project at ``path`` (atomic, with a backup) and drop the
+        autosaves of the old and new place."""
+        path = Path(path)
+        save_project(self._scene.project, path)
+        discard_autosave(self.path)
+        self.path = path
+        self.undo_stack.setClean()
+        discard_autosave(self.path)
+        self.changed.emit()
 
-    def _set_constraints(self, constraints: list, displacement: DisplacementMap) -> None:
-        self.constraints = list(constraints)
-        self.displacement = displacement
-        self.constraintsChanged.emit()
-        self.evaluate()
+    def close(self) -> None:
+        """Stop background work, wait for its threads, and let Qt delete the document."""
+        self.cancel_solve()
+        self.jobs.wait()
+        self.deleteLater()
 
-    def _set_displacement(self, displacement: DisplacementMap) -> None:
-        self.displacement = displacement
-        self.evaluate()
+    def reset(self) -> None:
+        """An empty, unsaved document."""
+        self.load_scene(Scene.empty())
+
+    def autosave(self) -> Path:
+        return write_autosave(self._scene.project, self.path)
+
+    def discard_autosave(self) -> None:
+        discard_autosave(self.path)
+
+    @staticmethod
+    def recovery_candidate(project_path=None):
+        """The autosave to offer when opening ``project_path`` (or at start), or None."""
+        return find_autosave(project_path)
+
+
+def _with_viewer(scene: Scene, viewer) -> Scene:
+    return Scene(scene.project.replace(viewer=viewer), scene.performer, scene.target,
+                 scene.derived)
+
+
+def _same(a, b) -> bool:
+    if a is b:
+        return True
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
+def _open_scene(path: Path, locate) -> tuple[Scene, bool]:
+    try:
+        return Scene.open(path), False
+    except MissingSourceError as exc:
+        if locate is None:
+            raise
+        missing = exc
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MotionComposerError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    project = project_from_json(text, path)
+    while True:
+        new = locate(missing.role, missing.missing)
+        if not new:
+            raise missing
+        source = dataclasses.replace(getattr(project, missing.role),
+                                     path=str(Path(new).resolve()))
+        project = project.replace(**{missing.role: source})
+        try:
+            return Scene.from_project(project, path=path), True
+        except MissingSourceError as again:
+            missing = again

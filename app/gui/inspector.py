@@ -160,11 +160,11 @@ class ConstraintInspector(QtWidgets.QWidget):
     ``priority``, ``weight``, ``enabled``, ``name``, ``take_button``, ``pick_button``).
     """
 
-    def __init__(self, document, timeline=None, window=None, parent=None):
+    def __init__(self, document, timeline=None, parent=None):
         super().__init__(parent)
         self.doc = document
         self.timeline = timeline
-        self.live = live_solver(document, window)
+        self.live = live_solver(document)
         self.index: int | None = None
         self._pending: tuple | None = None     # (constraint, text) previewed, not committed
         self._idle = QtCore.QTimer(self)
@@ -307,7 +307,7 @@ class ConstraintInspector(QtWidgets.QWidget):
     @property
     def constraint(self) -> Constraint | None:
         i = self.index
-        return self.doc.constraints[i] if i is not None and 0 <= i < len(self.doc.constraints) \
+        return self.doc.scene.constraints[i] if i is not None and 0 <= i < len(self.doc.scene.constraints) \
             else None
 
     def _working(self) -> Constraint | None:
@@ -330,7 +330,7 @@ class ConstraintInspector(QtWidgets.QWidget):
         self._show_range()
 
     def _sources_changed(self) -> None:
-        names = list(self.doc.target.skeleton.names) if self.doc.target is not None else []
+        names = list(self.doc.scene.target.skeleton.names) if self.doc.scene.target is not None else []
         with _Blocked(self.joint):
             self.joint.clear()
             self.joint.addItems(names)
@@ -349,7 +349,7 @@ class ConstraintInspector(QtWidgets.QWidget):
         c = self.constraint
         self.form_widget.setVisible(c is not None)
         self.empty.setVisible(c is None)
-        self.take_button.setEnabled(c is not None and self.doc.ready)
+        self.take_button.setEnabled(c is not None and self.doc.scene.ready)
         self.pick_button.setEnabled(c is not None)
         if c is None:
             self.title.setText("No constraint")
@@ -413,7 +413,7 @@ class ConstraintInspector(QtWidgets.QWidget):
         c = self.constraint
         if c is None:
             return
-        ft = self.doc.performer.frame_time if self.doc.performer is not None else 0.0
+        ft = self.doc.scene.performer.frame_time if self.doc.scene.performer is not None else 0.0
         self.range_label.setText(f"{c.smooth_in} · {c.start}\u2013{c.end} · {c.smooth_out}"
                                  f"   ({c.start * ft:.3f}\u2013{c.end * ft:.3f} s)")
 
@@ -442,10 +442,10 @@ class ConstraintInspector(QtWidgets.QWidget):
         else:
             self._pending = None
             self._idle.stop()
-            self.live.commit(self._with(new), text, on_abort=self.refresh)
+            self.live.commit(self._with(new), text)
 
     def _with(self, new: Constraint) -> list:
-        constraints = list(self.doc.constraints)
+        constraints = list(self.doc.scene.constraints)
         constraints[self.index] = new
         return constraints
 
@@ -457,7 +457,7 @@ class ConstraintInspector(QtWidgets.QWidget):
             return
         new, text = self._pending
         self._pending = None
-        self.live.commit(self._with(new), text, on_abort=self.refresh)
+        self.live.commit(self._with(new), text)
 
     def _name_edited(self) -> None:
         c = self.constraint
@@ -489,7 +489,7 @@ class ConstraintInspector(QtWidgets.QWidget):
                                           else None):
             return
         pose, j = self._pose_and_index(c.joint)
-        frame = self.doc.viewer.current_frame
+        frame = self.doc.scene.viewer.current_frame
         here = pose.positions[frame, j] if pose is not None else np.zeros(3)
         turn = pose.rotations[frame, j] if pose is not None else np.array([0.0, 0, 0, 1])
         text = KIND_CHOICES[index][2].lower().replace(":", "")
@@ -557,7 +557,7 @@ class ConstraintInspector(QtWidgets.QWidget):
         if pose is None:
             self.status.setText(f"{joint}: no pose to take the goal from")
             return
-        frame = self.doc.viewer.current_frame
+        frame = self.doc.scene.viewer.current_frame
         self._apply(lambda c: from_pose(c, joint, pose, frame, j),
                     text or f"Take goal of {_label(c)} from pose at frame {frame}")
 

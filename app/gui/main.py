@@ -125,24 +125,24 @@ def self_test(app, window) -> str:
                               f"{' '.join((errors[-1] if errors else 'no reason given').split())}")
     load_s = time.perf_counter() - t0
     doc = window.doc
-    if not doc.ready:
+    if not doc.scene.ready:
         raise SelfTestFailure("the demo opened but is not ready (sources or map missing)")
-    if doc.num_frames <= 0 or doc.motion is None:
-        raise SelfTestFailure(f"the demo has no motion ({doc.num_frames} frames)")
-    if doc.evaluation_error:
-        raise SelfTestFailure(f"the demo did not evaluate: {doc.evaluation_error}")
+    if doc.scene.num_frames <= 0 or doc.motion is None:
+        raise SelfTestFailure(f"the demo has no motion ({doc.scene.num_frames} frames)")
+    if doc.scene.evaluation_error:
+        raise SelfTestFailure(f"the demo did not evaluate: {doc.scene.evaluation_error}")
 
     figure = window.viewport.figures.get("target")
-    steps = min(SELF_TEST_FRAMES, doc.num_frames)
-    first = max(0, min(doc.viewer.current_frame, doc.num_frames - steps))
+    steps = min(SELF_TEST_FRAMES, doc.scene.num_frames)
+    first = max(0, min(doc.scene.viewer.current_frame, doc.scene.num_frames - steps))
     before = None if figure is None else np.array(figure.points, copy=True)
     t0 = time.perf_counter()
     for f in range(first, first + steps):
         doc.set_frame(f)
         app.processEvents()
-        if doc.viewer.current_frame != f:
+        if doc.scene.viewer.current_frame != f:
             raise SelfTestFailure(f"set_frame({f}) left the document at frame "
-                                  f"{doc.viewer.current_frame}")
+                                  f"{doc.scene.viewer.current_frame}")
     step_s = time.perf_counter() - t0
     if errors:
         raise SelfTestFailure(f"an error was shown: {' '.join(errors[-1].split())}")
@@ -168,7 +168,7 @@ def self_test(app, window) -> str:
                 + (f" (OpenGL {gl.majorVersion()}.{gl.minorVersion()})" if gl else ""))
     else:
         drew = f"viewport not checked (no OpenGL on the '{app.platformName()}' platform)"
-    return (f"demo {doc.num_frames} frames, {doc.target.skeleton.num_joints} target joints, "
+    return (f"demo {doc.scene.num_frames} frames, {doc.scene.target.skeleton.num_joints} target joints, "
             f"loaded in {load_s:.2f} s; stepped {steps} frames ({first}-{first + steps - 1}) "
             f"at {steps / max(step_s, 1e-9):.0f} fps; {drew}; "
             f"{time.perf_counter() - started:.1f} s in all")

@@ -4,10 +4,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from app.gui.qt import QtCore, QtGui, QtWidgets
-from app.gui.commands import push_constraints, push_sources
 from app.gui.document import Document
 from app.gui.viewport import Viewport
-from app.gui.worker import Job
 from engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
@@ -23,7 +21,6 @@ class MainWindow(QtWidgets.QMainWindow):
         super().__init__(parent)
         self.doc = document or Document(self)
         self.settings = QtCore.QSettings()
-        self.job: Job | None = None
         self.setWindowTitle(self.doc.title)
         self.resize(1400, 900)
 
@@ -35,6 +32,12 @@ class MainWindow(QtWidgets.QMainWindow):
         self.doc.changed.connect(self._update_title)
         self.doc.errorRaised.connect(self.show_error)
         self.doc.motionChanged.connect(self._motion_changed)
+        self.doc.viewerChanged.connect(self.viewport.refresh)
+        self.doc.noted.connect(lambda text: self.statusBar().showMessage(text, 5000))
+        self.doc.jobs.started.connect(self._job_started)
+        self.doc.jobs.progressed.connect(lambda f: self.progress.setValue(int(f * 1000)))
+        self.doc.jobs.failed.connect(self.show_error)
+        self.doc.jobs.finished.connect(self._job_done)
         self.autosave_timer = QtCore.QTimer(self)
         self.autosave_timer.setInterval(AUTOSAVE_MS)
         self.autosave_timer.timeout.connect(self.autosave)
@@ -63,8 +66,8 @@ class MainWindow(QtWidgets.QMainWindow):
         try:                                   # the constraint timeline and inspector
             from app.gui.inspector import ConstraintInspector
             from app.gui.timeline import ConstraintTimeline
-            self.timeline = ConstraintTimeline(self.doc, window=self)
-            self.inspector = ConstraintInspector(self.doc, self.timeline, window=self)
+            self.timeline = ConstraintTimeline(self.doc)
+            self.inspector = ConstraintInspector(self.doc, self.timeline)
             self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
             docks += [("Constraints", self.timeline,
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
@@ -132,7 +135,7 @@ class MainWindow(QtWidgets.QMainWindow):
         edit.addAction(self.redo_action)
 
         view = bar.addMenu("&View")
-        v = self.doc.viewer
+        v = self.doc.scene.viewer
         self._action(view, "Show &Performer", lambda on: self._show("show_performer", on),
                      checkable=True, checked=v.show_performer)
         self._action(view, "Show &Intermediate", lambda on: self._show("show_intermediate", on),
@@ -164,12 +167,11 @@ class MainWindow(QtWidgets.QMainWindow):
         self.setWindowTitle(self.doc.title)
 
     def _motion_changed(self) -> None:
-        if self.doc.evaluation_error:
-            self.statusBar().showMessage(self.doc.evaluation_error, 10000)
+        if self.doc.scene.evaluation_error:
+            self.statusBar().showMessage(self.doc.scene.evaluation_error, 10000)
 
     def _show(self, key: str, on: bool) -> None:
-        setattr(self.doc.viewer, key, on)
-        self.viewport.refresh()
+        self.doc.set_viewer(**{key: on})
 
     # ------------------------------------------------------------------ dialogs (tests replace)
     def show_error(self, message: str) -> None:
@@ -219,8 +221,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def new_project(self) -> None:
         if not self.maybe_save():
             return
-        from app.gui import project_io
-        project_io.reset(self.doc)
+        self.doc.reset()
 
     def open_dialog(self) -> None:
         if not self.maybe_save():
@@ -230,14 +231,22 @@ class MainWindow(QtWidgets.QMainWindow):
             self.open_project(path)
 
     def open_project(self, path) -> bool:
-        from app.gui import project_io
-        ok = self._guard(project_io.load_into, self.doc, Path(path), self)
+        """Open a project; when its autosave is newer (a crash), offer to recover it."""
+        path = Path(path)
+        if self.offer_recovery(path):
+            self._add_recent(str(path))
+            return True
+        ok = self._guard(self.doc.open, path, self._locate)
         if ok:
-            self._add_recent(path)
-            self.viewport.set_camera_state(self.doc.viewer.camera)
-            if not self.doc.viewer.camera:
+            self._add_recent(str(path))
+            self.viewport.set_camera_state(self.doc.scene.viewer.camera)
+            if not self.doc.scene.viewer.camera:
                 self.viewport.frame_all()
         return ok
+
+    def _locate(self, role: str, missing: str) -> str:
+        return self.ask_open_path(f"The {role} clip {missing} has moved: where is it?",
+                                  "Motion files (*.bvh *.glb *.gltf);;All (*)")
 
     def save(self) -> bool:
         if self.doc.path is None:
@@ -253,20 +262,18 @@ class MainWindow(QtWidgets.QMainWindow):
         return self._save_to(Path(path))
 
     def _save_to(self, path: Path) -> bool:
-        from app.gui import project_io
-        self.doc.viewer.camera = self.viewport.camera_state()
-        ok = self._guard(project_io.save_from, self.doc, Path(path))
+        self.doc.set_viewer(camera=self.viewport.camera_state())
+        ok = self._guard(self.doc.save, Path(path))
         if ok:
             self._add_recent(str(path))
             self.statusBar().showMessage(f"Saved {path}", 5000)
         return ok
 
     def autosave(self) -> None:
-        if not self.doc.modified or not self.doc.ready:
+        if not self.doc.modified or not self.doc.scene.ready:
             return
-        from app.gui import project_io
         try:
-            project_io.autosave(self.doc)
+            self.doc.autosave()
         except MotionComposerError as exc:
             self.statusBar().showMessage(f"Autosave failed: {exc}", 10000)
 
@@ -277,36 +284,27 @@ class MainWindow(QtWidgets.QMainWindow):
             self.import_file(side, path)
 
     def import_file(self, side: str, path) -> bool:
-        from engine.formats.bvh import read_bvh
+        """Import a performer or a target: one command, which also redoes the map (pairs set
+        by hand that still fit are kept, the rest auto-mapped)."""
+        from engine.project import Source
 
         def load():
             if Path(path).suffix.lower() in (".glb", ".gltf"):
                 if side != "target":
-                    from engine.errors import MotionComposerError
                     raise MotionComposerError(f"{path}: a glTF file is a character; import it "
                                               "as the target")
                 from engine.formats.gltf import read_gltf
                 motion = read_gltf(path).rest_motion()
             else:
+                from engine.formats.bvh import read_bvh
                 motion = read_bvh(path)
-            if side == "performer":
-                push_sources(self.doc, performer=motion, performer_path=Path(path),
-                             text=f"Import performer {Path(path).name}")
-            else:
-                push_sources(self.doc, target=motion, target_path=Path(path),
-                             text=f"Import target {Path(path).name}")
-            if self.doc.performer is not None and self.doc.target is not None and \
-                    not len(self.doc.correspondence):
-                from app.gui.commands import push_correspondence
-                from engine.conversion.automap import automap
-                push_correspondence(self.doc, automap(self.doc.target.skeleton,
-                                                      self.doc.performer.skeleton),
-                                    "Auto-map")
+            self.doc.set_source(side, motion, Source(path=str(Path(path).resolve())),
+                                f"Import {side} {Path(path).name}")
             self.viewport.frame_all()
         return self._guard(load)
 
     def export_dialog(self) -> None:
-        if not self.doc.ready:
+        if not self.doc.scene.ready:
             self.show_error("Nothing to export yet: import a performer and a target and map "
                             "them first.")
             return
@@ -323,7 +321,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from engine.formats.bvh import write_bvh
         if str(path).lower().endswith((".glb", ".gltf")):
             from engine.formats.gltf import write_gltf
-            ok = self._guard(write_gltf, self.doc.motion, self.doc.character, path)
+            ok = self._guard(write_gltf, self.doc.motion, self.doc.scene.character, path)
         else:
             ok = self._guard(write_bvh, self.doc.motion, path)
         if ok:
@@ -331,20 +329,18 @@ class MainWindow(QtWidgets.QMainWindow):
         return ok
 
     def offer_recovery(self, project_path=None) -> bool:
-        """If an autosave newer than the project (or of an unsaved one) exists, offer it."""
-        from app.gui import project_io
-        auto = project_io.recovery_candidate(project_path)
+        """If an autosave newer than the project (or of an unsaved one) exists, offer it.
+        Declined, it is deleted; accepted, it opens with its work still to be saved."""
+        auto = self.doc.recovery_candidate(project_path)
         if auto is None:
             return False
         if not self.ask_yes_no(f"Motion Composer found unsaved work from an earlier session "
                                f"({auto}). Recover it?"):
-            project_io.discard_autosave(self.doc) if project_path is None else None
+            from engine.project import discard_autosave
+            discard_autosave(project_path)
             return False
-        ok = self._guard(project_io.load_into, self.doc, auto, self)
+        ok = self._guard(self.doc.recover, auto, project_path, self._locate)
         if ok:
-            self.doc.path = Path(project_path) if project_path else None
-            self.doc.undo_stack.resetClean()          # recovered work still needs saving
-            self.doc.changed.emit()
             self.viewport.frame_all()
         return ok
 
@@ -370,83 +366,51 @@ class MainWindow(QtWidgets.QMainWindow):
         self.recent_menu.setEnabled(bool(self._recent()))
 
     # ------------------------------------------------------------------ long work
-    def run_job(self, fn, on_success, label: str) -> None:
-        if self.job is not None:
-            self.show_error("Another computation is running; wait for it or cancel it.")
-            return
-        self.job = Job(fn, self)
+    def _job_started(self, label: str) -> None:
         self.progress.setValue(0)
         self.progress.setFormat(f"{label} %p%")
         self.progress.setVisible(True)
         self.cancel_button.setVisible(True)
-        self.job.progressed.connect(lambda f: self.progress.setValue(int(f * 1000)))
-        self.job.succeeded.connect(on_success)
-        self.job.failed.connect(self.show_error)
-        self.job.done.connect(self._job_done)
-        self.job.start()
 
     def _job_done(self) -> None:
+        if self.doc.jobs.busy:
+            return
         self.progress.setVisible(False)
         self.cancel_button.setVisible(False)
-        if self.job is not None and self.job.cancelled:
+        if self.doc.jobs.last_outcome == "cancelled":
             self.statusBar().showMessage("Cancelled", 5000)
-        self.job = None
 
     def cancel_job(self) -> None:
-        if self.job is not None:
-            self.job.cancel()
+        self.doc.cancel_solve()
 
-    def solve(self, constraints=None) -> None:
-        """Enforce ``constraints`` (the document's by default) in a worker; on success one
-        command sets them and the displacement map they give."""
-        if not self.doc.ready:
+    def solve(self) -> None:
+        """Enforce the constraints in the document's job runner: one undoable step."""
+        if not self.doc.scene.ready:
             self.show_error("Nothing to solve yet: import a performer and a target first.")
             return
-        from engine.correction.enforcement import enforce
-        composed = self.doc.composed
-        constraints = list(self.doc.constraints if constraints is None else constraints)
-        if not constraints:
+        if not self.doc.scene.constraints:
             self.show_error("There are no constraints to enforce.")
             return
-
-        def work(progress, cancel):
-            correction = enforce(composed, constraints, progress=progress, cancel=cancel)
-            return constraints, correction.displacement_map(
-                rotation_tolerance=1.7e-4, translation_tolerance=5e-5)
-
-        def done(result):
-            cons, displacement = result
-            push_constraints(self.doc, cons, displacement, text="Solve constraints")
-
-        self.run_job(work, done, "Solving")
+        self.doc.solve()
 
     def solve_contacts(self) -> None:
-        if not self.doc.ready:
+        """Turn automatic foot contacts on (with the project's contact options and floor) and
+        solve: one undoable step."""
+        if not self.doc.scene.ready:
             self.show_error("Nothing to solve yet: import a performer and a target first.")
             return
-        from engine.correction.contacts import contact_constraints, detect_contacts, find_feet
-        doc = self.doc
-        mapped = set(doc.correspondence.pairs.values())
-        feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.performer.skeleton)
-                if a in mapped]
-        contacts = detect_contacts(doc.performer, feet)
-        kept = [c for c in doc.constraints if not (c.auto and c.meta.get("source") ==
-                                                     "contact")]
-        new = contact_constraints(contacts, doc.performer, doc.composed,
-                                  doc.correspondence.pairs, floor=doc.floor)
-        self.solve(kept + new)
+        self.doc.solve(regenerate=True, auto_contacts=True,
+                       text="Add foot contacts and solve")
 
     # ------------------------------------------------------------------ closing
     def closeEvent(self, event) -> None:   # noqa: N802 - Qt's name
         # an exception escaping a Qt event override crashes PySide's error reporting, so
         # nothing may leave this method: an unexpected error is printed and the window stays
         try:
-            if self.job is not None:
-                self.job.cancel()
-                self.job.wait()
+            self.doc.cancel_solve()
+            self.doc.jobs.wait()
             if self.maybe_save():
-                from app.gui import project_io
-                project_io.discard_autosave(self.doc)
+                self.doc.discard_autosave()
                 self.autosave_timer.stop()
                 event.accept()
             else:

@@ -3,7 +3,7 @@
 Playback runs in real time at the performer's exact frame rate: a ``QTimer`` only wakes the bar
 up; each tick computes the frame from the wall-clock time elapsed since playing started
 (``QElapsedTimer``) times the speed, so slow drawing drops frames and never slows playback.
-With loop on it wraps within ``doc.viewer.play_range`` (or the whole clip), otherwise it stops
+With loop on it wraps within ``doc.scene.viewer.play_range`` (or the whole clip), otherwise it stops
 at the end.
 
 The current frame is viewer state, not an edit: the bar calls ``doc.set_frame`` (not undoable)
@@ -151,14 +151,14 @@ class PlaybackBar(QtWidgets.QWidget):
     @property
     def frame_time(self) -> float | None:
         """The performer's exact seconds per frame."""
-        p = self.doc.performer
+        p = self.doc.scene.performer
         return p.frame_time if p is not None else None
 
     def play_range(self) -> tuple[int, int]:
-        """First and last frame played: ``doc.viewer.play_range`` clamped to the clip, or the
+        """First and last frame played: ``doc.scene.viewer.play_range`` clamped to the clip, or the
         whole clip."""
-        last = max(self.doc.num_frames - 1, 0)
-        rng = self.doc.viewer.play_range
+        last = max(self.doc.scene.num_frames - 1, 0)
+        rng = self.doc.scene.viewer.play_range
         if rng is None:
             return 0, last
         lo, hi = (min(max(int(v), 0), last) for v in rng)
@@ -166,13 +166,13 @@ class PlaybackBar(QtWidgets.QWidget):
 
     # ------------------------------------------------------------------ slots
     def play(self) -> None:
-        if self.playing or self.frame_time is None or self.doc.num_frames < 2:
+        if self.playing or self.frame_time is None or self.doc.scene.num_frames < 2:
             return
         lo, hi = self.play_range()
-        frame = self.doc.viewer.current_frame
+        frame = self.doc.scene.viewer.current_frame
         if self.loop and not lo <= frame <= hi:
             frame = lo
-        elif not self.loop and frame >= (hi if frame <= hi else self.doc.num_frames - 1):
+        elif not self.loop and frame >= (hi if frame <= hi else self.doc.scene.num_frames - 1):
             frame = lo                     # at the end: play again from the start
         self._set_frame(frame)
         self._restart_clock()
@@ -191,19 +191,19 @@ class PlaybackBar(QtWidgets.QWidget):
     def step(self, n: int = 1) -> None:
         """Move ``n`` frames (stops playing)."""
         self.pause()
-        self.doc.set_frame(self.doc.viewer.current_frame + int(n))
+        self.doc.set_frame(self.doc.scene.viewer.current_frame + int(n))
 
     def to_start(self) -> None:
         """The play range's first frame (the clip's first if already there)."""
         lo, _hi = self.play_range()
-        cur = self.doc.viewer.current_frame
+        cur = self.doc.scene.viewer.current_frame
         self._jump(lo if cur != lo else 0)
 
     def to_end(self) -> None:
         """The play range's last frame (the clip's last if already there)."""
         _lo, hi = self.play_range()
-        cur = self.doc.viewer.current_frame
-        self._jump(hi if cur != hi else self.doc.num_frames - 1)
+        cur = self.doc.scene.viewer.current_frame
+        self._jump(hi if cur != hi else self.doc.scene.num_frames - 1)
 
     # ------------------------------------------------------------------ internals
     def _jump(self, frame: int) -> None:
@@ -212,7 +212,7 @@ class PlaybackBar(QtWidgets.QWidget):
             self._restart_clock()
 
     def _restart_clock(self) -> None:
-        self._anchor_frame = self.doc.viewer.current_frame
+        self._anchor_frame = self.doc.scene.viewer.current_frame
         self._clock.start()
 
     def _set_frame(self, frame: int) -> None:
@@ -231,7 +231,7 @@ class PlaybackBar(QtWidgets.QWidget):
         frame = self._anchor_frame + int(math.floor(elapsed / ft + 1e-6))
         lo, hi = self.play_range()
         if self._anchor_frame > hi:         # started after the range: play to the clip's end
-            lo, hi = 0, self.doc.num_frames - 1
+            lo, hi = 0, self.doc.scene.num_frames - 1
         if frame > hi:
             if self.loop and hi > lo:
                 frame = lo + (frame - lo) % (hi - lo + 1)
@@ -273,25 +273,25 @@ class PlaybackBar(QtWidgets.QWidget):
         if ft is None:
             self.label.setText("no clip")
         else:
-            last = max(self.doc.num_frames - 1, 0)
+            last = max(self.doc.scene.num_frames - 1, 0)
             # fixed widths (in a fixed font) so the text does not jitter while playing
             width = len(f"{last * ft:.3f}")
             self.label.setText(f"{frame:>{len(str(last))}} / {last}  "
                                f"{frame * ft:>{width}.3f} s")
 
     def _sources_changed(self) -> None:
-        n = self.doc.num_frames
+        n = self.doc.scene.num_frames
         last = max(n - 1, 0)
         with _Blocker(self.slider), _Blocker(self.spin):
             self.slider.setRange(0, last)
             self.slider.setPageStep(max(1, n // 20))
             self.spin.setRange(0, last)
-        has = self.doc.performer is not None
+        has = self.doc.scene.performer is not None
         for w in (self.start_button, self.back_button, self.play_button, self.forward_button,
                   self.end_button, self.slider, self.spin):
             w.setEnabled(has)
         if not has or n < 2:
             self.pause()
-        if self.doc.viewer.current_frame > last:
+        if self.doc.scene.viewer.current_frame > last:
             self.doc.set_frame(last)
-        self._show_frame(self.doc.viewer.current_frame)
+        self._show_frame(self.doc.scene.viewer.current_frame)

@@ -22,7 +22,7 @@ The plot (pyqtgraph, 2D only):
   picks the one that can move. While dragging the live solver previews the motion; release
   pushes one command ("Move start of contact LeftFoot 32-91 to 28"); a right click during the
   drag cancels it.
-* the playhead is an ``InfiniteLine`` kept equal to ``doc.viewer.current_frame`` both ways.
+* the playhead is an ``InfiniteLine`` kept equal to ``doc.scene.viewer.current_frame`` both ways.
 * a click on a row selects its constraint (``selected_index``, ``constraintSelected``) and its
   joint in the document (the viewport highlights it).
 """
@@ -36,7 +36,8 @@ from app.gui.qt import QtCore, QtGui, QtWidgets  # noqa: F401  (Qt set up before
 
 import pyqtgraph as pg  # noqa: E402
 
-from app.gui.live import live_solver, retimed  # noqa: E402
+from app.gui.live import live_solver  # noqa: E402
+from engine.correction.preview import retimed  # noqa: E402
 from engine.correction.constraints import Constraint, ConstraintError  # noqa: E402
 
 __all__ = ["ConstraintTimeline", "ConstraintRow", "FIELDS", "moved_range", "retimed",
@@ -474,10 +475,10 @@ class ConstraintTimeline(QtWidgets.QWidget):
 
     constraintSelected = QtCore.Signal(int)
 
-    def __init__(self, document, window=None, parent=None):
+    def __init__(self, document, parent=None):
         super().__init__(parent)
         self.doc = document
-        self.live = live_solver(document, window)
+        self.live = live_solver(document)
         self.rows: list[ConstraintRow] = []
         self.selected_index: int | None = None
         self._drag: dict | None = None
@@ -580,11 +581,11 @@ class ConstraintTimeline(QtWidgets.QWidget):
     # ------------------------------------------------------------------ model -> widget
     @property
     def frame_time(self) -> float | None:
-        p = self.doc.performer
+        p = self.doc.scene.performer
         return p.frame_time if p is not None else None
 
     def _sources_changed(self) -> None:
-        n = self.doc.num_frames
+        n = self.doc.scene.num_frames
         last = max(n - 1, 1)
         self.playhead.setBounds((0, last))
         self.view.setLimits(xMin=-0.02 * last - 2, xMax=last * 1.02 + 2, minXRange=8)
@@ -592,14 +593,14 @@ class ConstraintTimeline(QtWidgets.QWidget):
             self._num_frames = n
             self.fit()
         self.refresh()
-        self._frame_changed(self.doc.viewer.current_frame)
+        self._frame_changed(self.doc.scene.viewer.current_frame)
 
     def refresh(self) -> None:
-        """Rows from ``doc.constraints`` (existing row items are reused)."""
+        """Rows from ``doc.scene.constraints`` (existing row items are reused)."""
         if self._drag is not None:             # the model changed under a drag: drop it
             self._end_drag()
             self.live.cancel()
-        constraints = self.doc.constraints
+        constraints = self.doc.scene.constraints
         for i, c in enumerate(constraints):
             if i < len(self.rows):
                 self.rows[i].set_constraint(i, c)
@@ -682,7 +683,7 @@ class ConstraintTimeline(QtWidgets.QWidget):
             self.scrollbar.setValue(row - visible + 1)
 
     def fit(self) -> None:
-        last = max(self.doc.num_frames - 1, 1)
+        last = max(self.doc.scene.num_frames - 1, 1)
         self.view.setXRange(0, last, padding=0.01)
 
     def frame_to_pixel(self, frame: float, row: float) -> QtCore.QPoint:
@@ -722,7 +723,7 @@ class ConstraintTimeline(QtWidgets.QWidget):
     @property
     def selected(self) -> Constraint | None:
         i = self.selected_index
-        return self.doc.constraints[i] if i is not None and i < len(self.doc.constraints) \
+        return self.doc.scene.constraints[i] if i is not None and i < len(self.doc.scene.constraints) \
             else None
 
     def _joint_selected(self, _side: str, _joint: str) -> None:
@@ -733,7 +734,7 @@ class ConstraintTimeline(QtWidgets.QWidget):
         self.delete_button.setEnabled(has)
         self.duplicate_button.setEnabled(has)
         side, joint = self.doc.selection
-        ok = self.doc.ready and side == "target" and bool(joint)
+        ok = self.doc.scene.ready and side == "target" and bool(joint)
         self.add_button.setEnabled(ok)
         self.add_button.setToolTip(
             f"Add a position constraint on {joint} at the current frame" if ok else
@@ -759,19 +760,19 @@ class ConstraintTimeline(QtWidgets.QWidget):
     def drag_started(self, row: ConstraintRow, which: str) -> bool:
         self.live.settle()                       # a previewed inspector edit commits first
         if self._drag is not None or self.live.active or \
-                row.index >= len(self.doc.constraints):
+                row.index >= len(self.doc.scene.constraints):
             return False
         self.select(row.index)
-        original = self.doc.constraints[row.index]
+        original = self.doc.scene.constraints[row.index]
         self._drag = {"index": row.index, "which": which, "original": original,
-                      "constraints": list(self.doc.constraints), "row": row}
+                      "constraints": list(self.doc.scene.constraints), "row": row}
         self.live.begin()
         return True
 
     def _dragged(self, which: str, value: int):
         d = self._drag
         c = d["original"]
-        rng = moved_range(c.range, which, value, max(self.doc.num_frames - 1, 0))
+        rng = moved_range(c.range, which, value, max(self.doc.scene.num_frames - 1, 0))
         shift = rng[0] - c.smooth_in if which == "all" else None
         new = retimed(c, rng, shift)
         constraints = list(d["constraints"])
@@ -809,8 +810,7 @@ class ConstraintTimeline(QtWidgets.QWidget):
         if rng == original.range:
             self.live.cancel()
             return
-        self.live.commit(constraints, describe_move(original, which, rng),
-                         on_abort=self.refresh)
+        self.live.commit(constraints, describe_move(original, which, rng))
 
     @staticmethod
     def _value_for(which: str, rng, original) -> int:
@@ -857,18 +857,18 @@ class ConstraintTimeline(QtWidgets.QWidget):
         pose = doc.pose("target")
         if pose is None or joint not in doc.motion.skeleton.index:
             return
-        frame = doc.viewer.current_frame
-        last = doc.num_frames - 1
+        frame = doc.scene.viewer.current_frame
+        last = doc.scene.num_frames - 1
         j = doc.motion.skeleton.index[joint]
         rng = (max(frame - ADD_RAMP, 0), max(frame - ADD_HALF, 0), min(frame + ADD_HALF, last),
                min(frame + ADD_RAMP, last))
-        name = _unique_name(f"position {joint}", (c.name for c in doc.constraints))
+        name = _unique_name(f"position {joint}", (c.name for c in doc.scene.constraints))
         c = Constraint(joint=joint, kind="position",
                        goal={"point": pose.positions[frame, j].copy()},
                        smooth_in=rng[0], start=rng[1], end=rng[2], smooth_out=rng[3],
                        name=name)
-        constraints = list(doc.constraints) + [c]
-        self.live.commit(constraints, f"Add {name} at frame {frame}", on_abort=self.refresh,
+        constraints = list(doc.scene.constraints) + [c]
+        self.live.commit(constraints, f"Add {name} at frame {frame}",
                          on_done=lambda: self.select(len(constraints) - 1))
 
     def delete_selected(self) -> None:
@@ -877,9 +877,9 @@ class ConstraintTimeline(QtWidgets.QWidget):
         if c is None:
             return
         i = self.selected_index
-        constraints = list(self.doc.constraints)
+        constraints = list(self.doc.scene.constraints)
         del constraints[i]
-        self.live.commit(constraints, f"Delete {row_label(c)}", on_abort=self.refresh)
+        self.live.commit(constraints, f"Delete {row_label(c)}")
 
     def duplicate_selected(self) -> None:
         self.live.settle()
@@ -888,11 +888,11 @@ class ConstraintTimeline(QtWidgets.QWidget):
             return
         i = self.selected_index
         meta = {k: v for k, v in c.meta.items() if k != "source"}
-        name = _unique_name(f"{row_label(c)} copy", (x.name for x in self.doc.constraints))
+        name = _unique_name(f"{row_label(c)} copy", (x.name for x in self.doc.scene.constraints))
         copy = dataclasses.replace(c, name=name, auto=False, meta=meta)
-        constraints = list(self.doc.constraints)
+        constraints = list(self.doc.scene.constraints)
         constraints.insert(i + 1, copy)
-        self.live.commit(constraints, f"Duplicate {row_label(c)}", on_abort=self.refresh,
+        self.live.commit(constraints, f"Duplicate {row_label(c)}",
                          on_done=lambda: self.select(i + 1))
 
     def toggle_selected(self) -> None:
@@ -900,10 +900,9 @@ class ConstraintTimeline(QtWidgets.QWidget):
         c = self.selected
         if c is None:
             return
-        constraints = list(self.doc.constraints)
+        constraints = list(self.doc.scene.constraints)
         constraints[self.selected_index] = dataclasses.replace(c, enabled=not c.enabled)
-        self.live.commit(constraints, f"{'Disable' if c.enabled else 'Enable'} {row_label(c)}",
-                         on_abort=self.refresh)
+        self.live.commit(constraints, f"{'Disable' if c.enabled else 'Enable'} {row_label(c)}")
 
     def context_menu(self, global_pos: QtCore.QPoint) -> None:
         c = self.selected

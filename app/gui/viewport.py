@@ -148,13 +148,13 @@ class Viewport(gl.GLViewWidget):
 
     # ------------------------------------------------------------------ content
     def _motion_changed(self) -> None:
-        if not self._framed and self.doc.performer is not None:
+        if not self._framed and self.doc.scene.performer is not None:
             self.frame_all()
         self.refresh()
 
     def _layout(self) -> dict[str, np.ndarray]:
         """View-space offsets of the shown skeletons (side by side along X, or overlaid)."""
-        v = self.doc.viewer
+        v = self.doc.scene.viewer
         shown = [k for k, on in (("performer", v.show_performer),
                                  ("intermediate", v.show_intermediate),
                                  ("target", v.show_target)) if on]
@@ -179,7 +179,7 @@ class Viewport(gl.GLViewWidget):
 
     def _size(self) -> float:
         from engine.describe import stature
-        m = self.doc.target if self.doc.target is not None else self.doc.performer
+        m = self.doc.scene.target if self.doc.scene.target is not None else self.doc.scene.performer
         if m is None:
             return 1.7
         if not hasattr(self, "_size_cache") or self._size_cache[0] is not m:
@@ -189,18 +189,18 @@ class Viewport(gl.GLViewWidget):
     def skeleton_points(self, which: str) -> tuple[np.ndarray, np.ndarray] | None:
         """World positions (engine axes) of a skeleton at the current frame, and parents."""
         doc = self.doc
-        f = doc.viewer.current_frame
+        f = doc.scene.viewer.current_frame
         if which == "performer":
             pose = doc.pose("performer")
-            sk = doc.performer.skeleton if doc.performer is not None else None
+            sk = doc.scene.performer.skeleton if doc.scene.performer is not None else None
         elif which == "target":
             pose = doc.pose("target") or doc.pose("character")
-            sk = doc.target.skeleton if doc.target is not None else None
+            sk = doc.scene.target.skeleton if doc.scene.target is not None else None
             if doc.motion is None and pose is not None:
                 f = 0
         else:                                                     # intermediate
             pose = doc.pose("composed")
-            sk = doc.target.skeleton if doc.target is not None else None
+            sk = doc.scene.target.skeleton if doc.scene.target is not None else None
         if pose is None or sk is None:
             return None
         f = min(f, pose.positions.shape[0] - 1)
@@ -221,7 +221,7 @@ class Viewport(gl.GLViewWidget):
                 self.figures[which] = _Figure(self, COLORS[which])
             fig = self.figures[which]
             fig.set_visible(True)
-            sk = (doc.performer if which == "performer" else doc.target).skeleton
+            sk = (doc.scene.performer if which == "performer" else doc.scene.target).skeleton
             sel = sk.index.get(joint, -1) if side == (
                 "performer" if which == "performer" else "target") else -1
             fig.update(data[0], data[1], layout[which], width, sel)
@@ -233,14 +233,14 @@ class Viewport(gl.GLViewWidget):
     def _refresh_skin(self, layout) -> None:
         """The target character's mesh, deformed by the motion at the current frame."""
         doc = self.doc
-        character = doc.character if "target" in layout else None
-        motion = doc.motion if doc.motion is not None else doc.target
+        character = doc.scene.character if "target" in layout else None
+        motion = doc.motion if doc.motion is not None else doc.scene.target
         if character is None or motion is None or not character.meshes:
             if self.skin is not None:
                 self.skin.setVisible(False)
             return
         from engine.skinning import skin_character
-        f = min(doc.viewer.current_frame, motion.num_frames - 1)
+        f = min(doc.scene.viewer.current_frame, motion.num_frames - 1)
         parts = skin_character(character, motion, frames=[f])
         verts = np.concatenate([p[0] for p in parts])
         offsets = np.cumsum([0] + [len(m.positions) for m in character.meshes[:-1]])
@@ -260,14 +260,14 @@ class Viewport(gl.GLViewWidget):
         """Highlight the virtual bones of the selected mapping on the performer."""
         doc = self.doc
         side, joint = doc.selection
-        pairs = doc.correspondence.pairs
+        pairs = doc.scene.correspondence.pairs
         performer_joint = (pairs.get(joint) if side == "target" else
                            joint if side == "performer" else None)
-        if not performer_joint or "performer" not in layout or doc.performer is None:
+        if not performer_joint or "performer" not in layout or doc.scene.performer is None:
             self.virtual.setVisible(False)
             return
-        psk = doc.performer.skeleton
-        tsk = doc.target.skeleton if doc.target is not None else None
+        psk = doc.scene.performer.skeleton
+        tsk = doc.scene.target.skeleton if doc.scene.target is not None else None
         data = self.skeleton_points("performer")
         if data is None or performer_joint not in psk.index or tsk is None:
             self.virtual.setVisible(False)
@@ -296,15 +296,15 @@ class Viewport(gl.GLViewWidget):
 
     def _refresh_goals(self, layout) -> None:
         doc = self.doc
-        if "target" not in layout or not doc.constraints:
+        if "target" not in layout or not doc.scene.constraints:
             for item in (self.goals, self.paths, self.planes):
                 item.setVisible(False)
             return
         off = layout["target"]
-        f = doc.viewer.current_frame
+        f = doc.scene.viewer.current_frame
         points, lines, quads = [], [], []
         size = self._size()
-        for c in doc.constraints:
+        for c in doc.scene.constraints:
             if not c.enabled or not c.smooth_in <= f <= c.smooth_out:
                 continue                      # only what acts at this frame
             if c.kind == "position":
@@ -406,7 +406,7 @@ class Viewport(gl.GLViewWidget):
             d = np.hypot(px[:, 0] - x, px[:, 1] - y)
             k = int(np.argmin(d))
             if d[k] <= radius and (best is None or d[k] < best[0]):
-                sk = (self.doc.performer if which == "performer" else self.doc.target).skeleton
+                sk = (self.doc.scene.performer if which == "performer" else self.doc.scene.target).skeleton
                 best = (d[k], which, sk.names[k])
         return None if best is None else (best[1], best[2])
 
@@ -419,7 +419,7 @@ class Viewport(gl.GLViewWidget):
     def _active_goal(self):
         """(index, constraint, goal in view space) of a draggable position goal, or None."""
         i = self.active_constraint
-        cons = self.doc.constraints
+        cons = self.doc.scene.constraints
         if i is None or not 0 <= i < len(cons) or cons[i].kind != "position":
             return None
         off = self._layout().get("target")
@@ -454,7 +454,7 @@ class Viewport(gl.GLViewWidget):
             px = self.project(point[None])[0]
             if np.hypot(px[0] - ev.position().x(), px[1] - ev.position().y()) <= 14:
                 from app.gui.live import live_solver
-                self._goal_drag = (i, c, off, live_solver(self.doc, self.window()))
+                self._goal_drag = (i, c, off, live_solver(self.doc))
                 self._goal_drag[3].begin()
 
     def _dragged_goal(self, pos):
@@ -463,7 +463,7 @@ class Viewport(gl.GLViewWidget):
         engine = np.array([point[0], point[2], -point[1]])        # view (Z up) -> engine (Y up)
         import dataclasses
         moved = dataclasses.replace(c, goal={"point": engine})
-        constraints = list(self.doc.constraints)
+        constraints = list(self.doc.scene.constraints)
         constraints[i] = moved
         return constraints, engine
 

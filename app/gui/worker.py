@@ -35,6 +35,10 @@ class _Runner(QtCore.QObject):
                              traceback.format_exc(limit=4))
         else:
             self.succeeded.emit(result)
+        finally:
+            # end the thread's event loop from inside, so that waiting for it never depends on
+            # the GUI thread handling the result first
+            QtCore.QThread.currentThread().quit()
 
 
 class Job(QtCore.QObject):

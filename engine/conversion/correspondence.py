@@ -16,9 +16,12 @@ from ..errors import MappingError
 from ..fileio import atomic_write
 from ..skeleton import Skeleton
 
-__all__ = ["Correspondence"]
+__all__ = ["Correspondence", "BY_HAND"]
 
 FORMAT = "motion-composer-mapping"
+#: the note of a pair the user set by hand (pairs without a note are taken as set by hand too;
+#: any other note says how auto-mapping decided)
+BY_HAND = "set by hand"
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,17 @@ class Correspondence:
 
     def __len__(self) -> int:
         return len(self.pairs)
+
+    def set_by_hand(self, target_joint: str) -> bool:
+        """The pair of ``target_joint`` was set by the user, not by auto-mapping."""
+        return self.notes.get(target_joint, BY_HAND) == BY_HAND
+
+    def target_of(self, performer_joint: str) -> str | None:
+        """The target joint that ``performer_joint`` drives, or None."""
+        for t, p in self.pairs.items():
+            if p == performer_joint:
+                return t
+        return None
 
     def performer_of(self, target_joint: str) -> str | None:
         return self.pairs.get(target_joint)

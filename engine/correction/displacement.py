@@ -163,6 +163,14 @@ class DisplacementMap:
                 rot[:, j, ROTATION_CHANNELS.index(channel)] = curve.evaluate(t)
         return rot, tra
 
+    def restricted_to(self, joints) -> "DisplacementMap":
+        """This map without the curves of joints not in ``joints`` (the root's curves stay);
+        ``self`` when nothing is dropped."""
+        kept = tuple(c for c in self.curves if c[0] == ROOT or c[0] in joints)
+        if len(kept) == len(self.curves):
+            return self
+        return DisplacementMap({key: self.curves[key] for key in kept})
+
     def apply(self, motion: Motion) -> Motion:
         """``motion`` with the offsets added (the input is not changed)."""
         if not self.curves:

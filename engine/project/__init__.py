@@ -5,7 +5,7 @@ embedded), the correspondence, the binding and root choices, automatic-contact s
 floor, the constraints (automatic ones included, as edited), the displacement map currently
 applied (the IK correction reduced to keys, plus the animator's hand edits) and the viewer state.
 Loading never runs IK: the final motion is the direct conversion plus the saved displacement map,
-so it is the same, bit for bit, as before saving (:func:`evaluate_project`). :func:`solve_project`
+so it is the same, bit for bit, as before saving (:func:`engine.scene.evaluate_project`). :func:`engine.scene.solve_project`
 runs IK again and stores the new correction.
 
 The file is JSON (``.mcp``), human-readable, written deterministically (fixed key order,
@@ -68,18 +68,15 @@ from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS,
                                        TRANSLATION_CHANNELS, Curve, DisplacementMap)
 from ..errors import BVHError, MappingError, MotionComposerError
 from ..fileio import FileWriteError, atomic_write
-from ..correction.ik import IKOptions
 from ..motion import Motion
-from ..scene import Job, run_job
 from ..conversion.binding import BindOptions
 from ..conversion.converter import RootOptions
 from ..units import AXES, UNITS
 
 __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceError",
-           "ProjectMotion", "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "MIGRATIONS",
+           "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "MIGRATIONS",
            "project_to_json", "project_from_json", "save_project", "load_project",
-           "open_project", "read_sources", "check_project", "evaluate_project",
-           "solve_project", "correction_keys", "embed_sources", "autosave_path",
+           "open_project", "read_sources", "check_project", "correction_keys", "embed_sources", "autosave_path",
            "write_autosave", "find_autosave", "discard_autosave", "backup_path"]
 
 FORMAT = "motion-composer-project"
@@ -212,6 +209,35 @@ class ViewerState:
         object.__setattr__(self, "options", dict(self.options))
         object.__setattr__(self, "shown", tuple(s for s in SKELETONS if s in self.shown))
 
+    @property
+    def show_performer(self) -> bool:
+        return "performer" in self.shown
+
+    @property
+    def show_intermediate(self) -> bool:
+        return "intermediate" in self.shown
+
+    @property
+    def show_target(self) -> bool:
+        return "target" in self.shown
+
+    @property
+    def side_by_side(self) -> bool:
+        return bool(self.options.get("side_by_side", True))
+
+    def with_(self, **changes) -> "ViewerState":
+        """A copy with fields changed; ``show_performer``, ``show_intermediate``,
+        ``show_target`` (bool) and ``side_by_side`` are accepted too."""
+        shown = set(self.shown)
+        options = dict(self.options)
+        for name in SKELETONS:
+            on = changes.pop(f"show_{name}", None)
+            if on is not None:
+                (shown.add if on else shown.discard)(name)
+        if "side_by_side" in changes:
+            options["side_by_side"] = bool(changes.pop("side_by_side"))
+        return dataclasses.replace(self, shown=tuple(shown), options=options, **changes)
+
 
 @dataclass(frozen=True, eq=False)
 class Project:
@@ -235,22 +261,6 @@ class Project:
 
     def replace(self, **changes) -> "Project":
         return dataclasses.replace(self, **changes)
-
-    def job(self, performer: Motion, target: Motion, *, constraints=(),
-            auto_contacts: bool = False, floor: float | None = None,
-            ik_options: IKOptions | None = None) -> Job:
-        """A pipeline :class:`Job` with this project's map and options."""
-        return Job(performer=performer, target=target, correspondence=self.correspondence,
-                   bind_options=self.bind_options, root=self.root,
-                   constraints=tuple(constraints), auto_contacts=auto_contacts,
-                   contact_options=self.contact_options, floor=floor, ik_options=ik_options)
-
-
-class ProjectMotion(NamedTuple):
-    """``composed``: the direct conversion; ``motion``: with the displacement map applied."""
-
-    composed: Motion
-    motion: Motion
 
 
 class OpenedProject(NamedTuple):
@@ -362,53 +372,12 @@ def _not_a_joint(name: str, skeleton, side: str) -> str:
     return f"{name!r} is not a joint of the {side} skeleton{hint}"
 
 
-def evaluate_project(project: Project, performer: Motion | None = None,
-                     target: Motion | None = None) -> ProjectMotion:
-    """The direct conversion and the final motion (the conversion plus the displacement map).
-
-    No IK runs: the result is a pure function of the project's data, so a saved and reloaded
-    project gives the same motion bit for bit. ``performer`` and ``target`` skip reading the
-    sources again when the caller has them.
-    """
-    if performer is None or target is None:
-        performer, target = read_sources(project)
-    check_project(project, performer, target)
-    composed = run_job(project.job(performer, target)).composed
-    return ProjectMotion(composed, project.displacement.apply(composed))
-
-
 def correction_keys(correction: Correction | None) -> DisplacementMap:
     """An IK correction as the keys a project stores (tight tolerances: 0.01 degree, 0.05 mm)."""
     if correction is None:
         return DisplacementMap()
     return correction.displacement_map(rotation_tolerance=ROTATION_TOLERANCE,
                                        translation_tolerance=TRANSLATION_TOLERANCE)
-
-
-def solve_project(project: Project, performer: Motion | None = None,
-                  target: Motion | None = None, *, regenerate: bool = False,
-                  ik_options: IKOptions | None = None, progress=None, cancel=None) -> Project:
-    """A copy whose displacement map is the IK correction of its constraints, as keys.
-
-    With ``regenerate``, the automatic constraints are dropped and made again from the
-    project's settings (``auto_contacts``, ``floor``); otherwise the constraints are solved as
-    they are (automatic ones as edited). The map replaces the previous one, hand edits
-    included.
-    """
-    if performer is None or target is None:
-        performer, target = read_sources(project)
-    check_project(project, performer, target)
-    if regenerate:
-        job = project.job(performer, target,
-                          constraints=[c for c in project.constraints if not c.auto],
-                          auto_contacts=project.auto_contacts, floor=project.floor,
-                          ik_options=ik_options)
-    else:
-        job = project.job(performer, target, constraints=project.constraints,
-                          ik_options=ik_options)
-    result = run_job(job, progress=progress, cancel=cancel)
-    return project.replace(constraints=tuple(result.constraints),
-                           displacement=correction_keys(result.correction))
 
 
 def embed_sources(project: Project, roles=ROLES) -> Project:

@@ -18,7 +18,8 @@ import numpy as np  # noqa: E402
 from engine import forward_kinematics, read_bvh  # noqa: E402
 from engine.conversion.automap import automap  # noqa: E402
 from engine.correction.constraints import Constraint  # noqa: E402
-from engine.project import Project, Source, ViewerState, save_project, solve_project  # noqa: E402
+from engine.project import Project, Source, ViewerState, save_project  # noqa: E402
+from engine.scene import solve_project  # noqa: E402
 from engine.conversion import retarget  # noqa: E402
 
 PERFORMER = HERE.parent / "clips" / "cmu_131_01_walk.bvh"

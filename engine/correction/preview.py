@@ -1,0 +1,145 @@
+"""What a change of constraints can reach, so that a live preview solves only those frames.
+
+A drag of a time handle or a goal changes one constraint; the frames whose solution can differ
+are the *window* ``[lo, hi]`` covering the changed constraints' old and new ``[smooth_in,
+smooth_out]`` (a drag of one side's handles reaches that side only, :func:`affected_frames`).
+:func:`window_problem` cuts the constraint set down to what decides the window's frames: the
+constraints overlapping it, plus those active at the pass-one key postures that its ramps take
+(a ramp in the window eases from the posture at its ``smooth_in``, or towards the ones at its
+``end`` and ``smooth_out``, section 3.3), each with its active range clipped to the frames
+``[L, H]`` spanning the window and those keys. Every frame of the window then sees the same
+tasks and the same key postures as in the full solve, so the window is the full solve's (to
+the solver's tolerance; a test checks it); :func:`splice` puts its frames into the motion shown
+before the change.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["changed_window", "affected_frames", "overlapping", "window_problem", "retimed",
+           "splice"]
+
+
+def _same_but_range(a, b) -> bool:
+    """``a`` and ``b`` differ at most in their time range."""
+    if (a.joint, a.kind, a.priority, a.weight, a.enabled) != \
+            (b.joint, b.kind, b.priority, b.weight, b.enabled) or a.goal.keys() != b.goal.keys():
+        return False
+    for key, value in a.goal.items():
+        other = b.goal[key]
+        if isinstance(value, np.ndarray) or isinstance(other, np.ndarray):
+            if not np.array_equal(np.asarray(value), np.asarray(other)):
+                return False
+        elif value != other:
+            return False
+    return True
+
+
+def affected_frames(old, new) -> tuple[int, int]:
+    """The frames whose solution can differ between two versions of one constraint.
+
+    A change of the time range only (a handle drag) reaches the side that moved: moving
+    ``smooth_in`` or ``start`` changes ``[min smooth_in, max start]`` (the input ramp and the
+    frames entering or leaving the active range); the active frames beyond keep the same goal
+    and the output ramp the same key postures. Likewise on the ``end`` side. Any other change
+    reaches the whole of both ``[smooth_in, smooth_out]``."""
+    if not _same_but_range(old, new):
+        return min(old.smooth_in, new.smooth_in), max(old.smooth_out, new.smooth_out)
+    spans = []
+    if (old.smooth_in, old.start) != (new.smooth_in, new.start):
+        spans.append((min(old.smooth_in, new.smooth_in), max(old.start, new.start)))
+    if (old.end, old.smooth_out) != (new.end, new.smooth_out):
+        spans.append((min(old.end, new.end), max(old.smooth_out, new.smooth_out)))
+    if not spans:
+        return new.start, new.start
+    return min(s[0] for s in spans), max(s[1] for s in spans)
+
+
+def changed_window(before: list, after: list) -> tuple[int, int] | None:
+    """Frames ``(lo, hi)`` covering what can change between two constraint lists of the same
+    length (compared by identity: constraints are immutable, an edit makes a new one; see
+    :func:`affected_frames`). ``None`` when nothing differs or the lengths differ (a
+    constraint added or removed: solve everything)."""
+    if len(before) != len(after):
+        return None
+    lo, hi = None, None
+    for old, new in zip(before, after):
+        if old is new:
+            continue
+        a, b = affected_frames(old, new)
+        lo = a if lo is None else min(lo, a)
+        hi = b if hi is None else max(hi, b)
+    return None if lo is None else (lo, hi)
+
+
+def overlapping(constraints: list, lo: int, hi: int) -> list:
+    """The enabled constraints whose ``[smooth_in, smooth_out]`` meets ``[lo, hi]``."""
+    return [c for c in constraints if c.enabled and c.smooth_in <= hi and c.smooth_out >= lo]
+
+
+def retimed(c, rng: tuple, shift: int | None = None):
+    """``c`` over the range ``rng`` (smooth_in, start, end, smooth_out). A trajectory given
+    per frame becomes keys at the same frames (its length is tied to the old range);
+    ``shift`` (a whole-range move) moves a trajectory's keys along."""
+    goal = c.goal
+    if c.kind == "trajectory":
+        if "points" in goal:
+            pts = np.asarray(goal["points"])
+            frames = np.arange(c.start, c.start + len(pts), dtype=float)
+            goal = {"keys": np.column_stack([frames, pts])}
+        if shift:
+            keys = np.array(goal["keys"], dtype=float)
+            keys[:, 0] += shift
+            goal = {"keys": keys}
+    return dataclasses.replace(c, goal=goal, smooth_in=int(rng[0]), start=int(rng[1]),
+                               end=int(rng[2]), smooth_out=int(rng[3]))
+
+
+def window_problem(constraints: list, lo: int, hi: int) -> list:
+    """The constraints that decide frames ``lo..hi``, cut to the frames that matter.
+
+    * every enabled constraint overlapping ``[lo, hi]``;
+    * the key frames its ramps need from pass one, where a ramp reaches into the window: an
+      input ramp its ``smooth_in``, an output ramp its ``end`` and ``smooth_out``;
+      ``[L, H]`` spans the window and those keys;
+    * every other enabled constraint active at one of those keys (it shapes that key posture);
+    * each constraint's active range clipped to ``[L, H]``, dropping a ramp that lies wholly
+      outside (a clipped end has no ramp: what lies beyond does not reach the window).
+    """
+    inside = overlapping(constraints, lo, hi)
+    keys = set()
+    for c in inside:
+        if c.smooth_in < c.start and c.smooth_in <= hi and c.start >= lo:
+            keys.add(c.smooth_in)
+        if c.end < c.smooth_out and c.end <= hi and c.smooth_out >= lo:
+            keys.update((c.end, c.smooth_out))
+    outside_keys = sorted(k for k in keys if not lo <= k <= hi)
+    L, H = min([lo, *keys]), max([hi, *keys])
+    chosen = list(inside)
+    for c in constraints:
+        if c.enabled and c not in chosen and any(c.start <= k <= c.end for k in outside_keys):
+            chosen.append(c)
+    out = []
+    for c in constraints:                       # the document's order
+        if not any(c is x for x in chosen):
+            continue
+        si, st, en, so = c.range
+        if c not in inside:                     # only its active frames at the keys
+            si, so = st, en
+        if st < L:
+            si = st = min(L, en)
+        if en > H:
+            en = so = max(H, st)
+        out.append(c if (si, st, en, so) == c.range else retimed(c, (si, st, en, so)))
+    return out
+
+
+def splice(base, part, lo: int, hi: int):
+    """``base`` with frames ``lo..hi`` taken from ``part`` (same skeleton and length)."""
+    rot = np.array(base.rotations)
+    tra = np.array(base.translations)
+    rot[lo:hi + 1] = part.rotations[lo:hi + 1]
+    tra[lo:hi + 1] = part.translations[lo:hi + 1]
+    return base.replace(rotations=rot, translations=tra)
