@@ -1,8 +1,8 @@
 """Linear blend skinning, vectorised over frames and vertices.
 
-A :class:`~engine.formats.gltf.Mesh` holds its vertices in the bind pose, which is the skeleton's
-zero-rotation pose (see :mod:`engine.formats.gltf`): there every joint's world rotation is the identity
-and its position its bind position ``b_j``. In a pose where joint ``j`` has world rotation
+A :class:`~engine.formats.gltf.Mesh` holds its vertices in the bind pose, which is the
+skeleton's zero-rotation pose (see :mod:`engine.formats.gltf`): there every joint's world
+rotation is the identity and its position its bind position ``b_j``. In a pose where joint ``j`` has world rotation
 ``R_j`` and position ``p_j`` (from :func:`engine.kinematics.forward_kinematics`), a vertex
 ``v`` bound to joints ``j_k`` with weights ``w_k`` moves to
 

@@ -31,12 +31,6 @@ UNITS: dict[str, float] = {
 
 AXES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
 
-_AXIS_VECTORS = {
-    "+X": (1.0, 0.0, 0.0), "-X": (-1.0, 0.0, 0.0),
-    "+Y": (0.0, 1.0, 0.0), "-Y": (0.0, -1.0, 0.0),
-    "+Z": (0.0, 0.0, 1.0), "-Z": (0.0, 0.0, -1.0),
-}
-
 # Rotation matrices taking a file whose up axis is the key onto +Y up, each the smallest turn
 # that does it (Z-up goes (x, y, z) -> (x, z, -y), as Blender and the glTF exporters do).
 _TO_Y_UP = {
@@ -110,10 +104,6 @@ def detect_units(stature: float, *, cmu_names: bool) -> tuple[str, str]:
     if 300.0 <= s < 3000.0:
         return "mm", f"stature {shown} file units: millimetres"
     return "m", f"stature {shown} file units fits no known unit: metres assumed"
-
-
-def axis_vector(axis: str) -> np.ndarray:
-    return np.array(_AXIS_VECTORS[axis])
 
 
 def nearest_axis(vector: np.ndarray) -> str:

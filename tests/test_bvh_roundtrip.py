@@ -1,4 +1,5 @@
-"""BVH round trips: read -> write (engine.formats.bvh.format_bvh / write_bvh) -> read gives the same file.
+"""BVH round trips: read -> write (engine.formats.bvh.format_bvh / write_bvh) -> read gives the
+same file.
 
 Checked for every BVH we have (bundled clips always, ../shared/data when present): hierarchy,
 channel layout, End Sites, frame time (exactly), units / up axis / position modes as detected

@@ -29,8 +29,8 @@ FORBIDDEN = ("PySide6", "shiboken6", "PyQt5", "PyQt6", "PySide2", "shiboken2", "
              "pyqtgraph", "OpenGL")
 
 #: submodules that must be found, so that an empty package walk cannot pass unnoticed
-KNOWN_SUBMODULES = {"engine.formats.bvh", "engine.kinematics", "engine.quaternions", "engine.rotations",
-                    "engine.skeleton", "engine.motion"}
+KNOWN_SUBMODULES = {"engine.formats.bvh", "engine.kinematics", "engine.quaternions",
+                    "engine.rotations", "engine.skeleton", "engine.motion"}
 
 
 def forbidden_name(module: str | None) -> str | None:

@@ -1,8 +1,8 @@
 """The curve editor on a document of real clips with a real IK result on it.
 
 The bundled walk on the bundled T-pose skeleton, a left-hand position constraint solved by
-``engine.correction.enforcement.enforce`` and pushed with its reduced keys (``push_constraints``); the editor
-shows LeftForeArm's offset curves. Keys are dragged with real mouse events sent to the plot's
+``engine.correction.enforcement.enforce`` and pushed with its reduced keys
+(``push_constraints``); the editor shows LeftForeArm's offset curves. Keys are dragged with real mouse events sent to the plot's
 viewport at the key's pixel (mapped through the ViewBox), and checked against the document: the
 map, the undo stack, the previewed and the final motion. No OpenGL: runs under Xvfb and
 offscreen alike.

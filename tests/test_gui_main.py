@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.gui.qt import QtCore, QtWidgets
+from app.gui.qt import QtCore
 from conftest import REPO, clip_path
 
 DEMO = REPO / "resources" / "demo" / "demo.mcp"

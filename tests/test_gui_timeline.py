@@ -26,7 +26,8 @@ from app.gui.timeline import FIELDS, ConstraintTimeline, moved_range  # noqa: E4
 from engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
                                        overlapping, retimed, window_problem)
 from engine.correction.constraints import Constraint  # noqa: E402
-from engine.correction.contacts import contact_constraints, detect_contacts, find_feet  # noqa: E402
+from engine.correction.contacts import (contact_constraints, detect_contacts,  # noqa: E402
+                                        find_feet)
 from engine.correction.enforcement import enforce  # noqa: E402
 from engine.kinematics import forward_kinematics  # noqa: E402
 

@@ -10,7 +10,7 @@ from engine import forward_kinematics, read_bvh
 from engine.formats.bvh import format_bvh, parse_bvh
 from engine.conversion.correspondence import Correspondence
 from engine.errors import MappingError, MotionComposerError
-from engine.quaternions import qconj, qmul, qrot
+from engine.quaternions import qconj, qmul
 from engine.conversion import BindOptions, bind
 from engine.conversion import RootOptions
 from engine.conversion import retarget

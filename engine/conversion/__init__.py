@@ -9,6 +9,26 @@
   virtual bone, every frame.
 * :mod:`.composer` (*Motion Composer*, 2.3): copies the intermediate local values onto the
   target.
+
+The binding is computed once; conversion and composition are vectorised over frames.
+:func:`retarget` runs bind, convert and compose.
+
+How each mapped joint turns (its world rotation is ``delta * A`` with ``A`` its bound rest
+rotation): ``delta`` is the rotation taking the joint's virtual bones in the performer's
+reference pose to where they are in the frame. The *primary* virtual bone (the one leading to
+the child with the largest subtree, e.g. the spine for the hips) is matched exactly by the
+smallest swing. The roll about it, which the paper leaves out, is carried where the data
+allows: by the other virtual bones of a branching joint (the hip line for the hips, the
+shoulder line for the chest), else by the twist of the performer joint's own rotation (which
+carries a forearm's or a foot's roll), so a clip retargeted onto its own skeleton comes back
+unchanged. A joint with no usable virtual bone (a leaf, or a zero-length bone) takes the
+performer joint's whole rotation change.
+
+Unmapped target joints keep their bound local rotation (they follow their parent). Where a
+target chain has more joints than the performer maps (CC3's spine under CMU's), the
+``distribute="even"`` default spreads the chain's turn evenly over its joints and then corrects
+the chain so that its end still lies exactly along the virtual bone; ``"first"`` puts it all on
+the chain's first joint.
 """
 from .automap import automap
 from .binding import BindOptions, Binding, bind, is_upright, reference_pose

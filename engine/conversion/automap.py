@@ -4,8 +4,8 @@
 per side clavicle, upper arm, forearm, hand, thigh, shin, foot, toe and finger joints);
 :func:`automap` identifies both skeletons and pairs the joints that play the same role, giving
 a :class:`~engine.conversion.correspondence.Correspondence` that passes
-:meth:`~engine.conversion.correspondence.Correspondence.validate`, with a note per pair saying how it
-was decided.
+:meth:`~engine.conversion.correspondence.Correspondence.validate`, with a note per pair saying
+how it was decided.
 
 How roles are found
 -------------------
@@ -73,7 +73,8 @@ performer's middle joint nearest in normalised arc length (bone lengths from the
 chest), one target joint per performer joint, so ancestry is never inverted. The neck chain is
 mapped the same way (its first joints when either chain has only one). Fingers map by finger
 and number. A final pass drops any pair that would break
-:meth:`~engine.conversion.correspondence.Correspondence.validate` (none do on the conventions tested).
+:meth:`~engine.conversion.correspondence.Correspondence.validate` (none do on the conventions
+tested).
 
 Decision on ground roots: the target's **hips always map to the performer's hips** (the body
 root that carries the pelvis motion); joints between a ground root and the hips

@@ -1,34 +1,25 @@
-"""Direct motion conversion through an Intermediate Skeleton (the paper's section 2).
+"""The Anatomic Binding (the paper's section 2.1): the Intermediate Skeleton, built once.
 
-Three steps, each vectorised over frames:
+:func:`bind` builds the :class:`Binding` for a performer and a target character: the target's
+joints and local axes, posed so that each target bone points along the performer's *virtual
+bone* in the performer's reference pose. Its steps:
 
-* :func:`bind` (*Anatomic Binding*) builds the :class:`Binding`, our Intermediate Skeleton: the
-  target's joints and local axes, posed so that each target bone points along the performer's
-  *virtual bone* in the performer's reference pose (rest-posture alignment, section 2.1.4, on
-  by default; off keeps the target's own initial posture).
-* :func:`convert` (*Motion Converter*) orients every intermediate bone, root to leaves, along
-  its virtual bone in each frame of the capture.
-* :func:`compose` (*Motion Composer*) copies the intermediate skeleton's local values onto the
-  target and adds the root's translation.
-
-:func:`retarget` runs the three.
-
-How each mapped joint turns (its world rotation is ``delta * A`` with ``A`` its bound rest
-rotation): ``delta`` is the rotation taking the joint's virtual bones in the performer's
-reference pose to where they are in the frame. The *primary* virtual bone (the one leading to
-the child with the largest subtree, e.g. the spine for the hips) is matched exactly by the
-smallest swing. The roll about it, which the paper leaves out, is carried where the data
-allows: by the other virtual bones of a branching joint (the hip line for the hips, the
-shoulder line for the chest), else by the twist of the performer joint's own rotation (which
-carries a forearm's or a foot's roll), so a clip retargeted onto its own skeleton comes back
-unchanged. A joint with no usable virtual bone (a leaf, or a zero-length bone) takes the
-performer joint's whole rotation change.
-
-Unmapped target joints keep their bound local rotation (they follow their parent). Where a
-target chain has more joints than the performer maps (CC3's spine under CMU's), the
-``distribute="even"`` default spreads the chain's turn evenly over its joints and then corrects
-the chain so that its end still lies exactly along the virtual bone; ``"first"`` puts it all on
-the chain's first joint.
+* reference poses (:class:`BindOptions`, :func:`reference_pose`): each skeleton's rest pose
+  (zero rotations) or one of its frames; ``"auto"`` takes the rest pose when it stands upright
+  (:func:`is_upright`), else frame 0.
+* virtual bones: for each mapped target joint, the performer's vectors from its joint to the
+  joints mapped to its mapped children, in the reference pose (:class:`_Bones`). The primary
+  one leads to the child with the largest subtree. A bone gives no direction when it is shorter
+  than a thousandth of the height, crosses a performer joint whose translation is animated, or
+  is a short target bone pointing against its virtual bone; a joint whose primary bone gives
+  none has no bones (the converter turns it with its performer joint).
+* chains: the unmapped target joints between a mapped joint and its primary child.
+* rest alignment (section 2.1.4, on by default): root to leaves, each target bone turned onto
+  its virtual bone and rolled to match the other bones of a branching joint; off keeps the
+  target's own initial posture.
+* the root: the hip-height ratio (target hips over performer hips, each above its lowest
+  point, in the bound and the reference pose), the default scale of the root's translation,
+  and the joints whose position follows their performer joint's (``driven``).
 """
 from __future__ import annotations
 
@@ -85,8 +76,8 @@ def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarr
 
     Its vertical extent must be at least 0.7 of its widest horizontal extent (a T-pose's arm
     span is about its height; a skeleton lying along an axis fails), and where the head and
-    feet can be told (:func:`engine.conversion.automap.identify`), the head must be above the hips and
-    the hips above the feet (CC3's zero pose stands upside down).
+    feet can be told (:func:`engine.conversion.automap.identify`), the head must be above the
+    hips and the hips above the feet (CC3's zero pose stands upside down).
     """
     pose = fk_arrays(skeleton, rotations[None], translations[None])
     pts = pose.all_positions()[0]
@@ -268,24 +259,82 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     options = options or BindOptions()
     tsk, psk = target.skeleton, performer.skeleton
     mapped = _check_mapping(tsk, psk, correspondence)
-    J = tsk.num_joints
     anchor = _nearest_mapped_ancestor(tsk, mapped)
-    body_roots = [j for j in range(J) if mapped[j] >= 0 and anchor[j] < 0]
-    body_root = body_roots[0]
+    body_root = [j for j in range(tsk.num_joints) if mapped[j] >= 0 and anchor[j] < 0][0]
 
-    # reference poses
-    p_rot, p_tra, p_label = reference_pose(performer, options.performer_reference)
-    t_rot, t_tra, t_label = reference_pose(target, options.target_reference)
-    p_pose = fk_arrays(psk, p_rot[None], p_tra[None], end_sites=True)
-    p_world = p_pose.rotations[0]
-    p_pos = p_pose.positions[0]
-    p_all = p_pose.all_positions()[0]
-    t_pose = fk_arrays(tsk, t_rot[None], t_tra[None])
-    t_world_ref = t_pose.rotations[0]
-    t_pos_ref = t_pose.positions[0]
-    scale_len = max(float(np.ptp(p_all[:, 1])), 1e-6)
+    p_ref = _reference(performer, options.performer_reference)
+    t_ref = _reference(target, options.target_reference)
+    p_moving = _moving_performer_joints(performer)
+    bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving)
+    chains = _chains(tsk, bones)
 
-    # children of each mapped joint and the target offsets towards them (in the joint's frame)
+    rest_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
+    rest_local = rest_world.copy()
+    rest_local[1:] = qmul(qconj(rest_world[tsk.parents[1:]]), rest_world[1:])
+    bound = fk_arrays(tsk, rest_local[None], t_ref.translations[None])
+    rest_positions = bound.positions[0]
+    bones = _bones_in_posture(bones, rest_world, rest_positions)
+
+    t_hip = _height_above_floor(np.concatenate([rest_positions, bound.end_positions[0]]),
+                                body_root)
+    p_hip = _height_above_floor(p_ref.all_positions, int(mapped[body_root]))
+    ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
+    return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
+                   rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
+                   performer_rest_world=p_ref.world, performer_rest_positions=p_ref.positions,
+                   bones=bones, chains=chains, body_root=body_root,
+                   driven=_driven(tsk, mapped, body_root, p_moving),
+                   above_mapped=_above_mapped(tsk, mapped),
+                   root_translation=t_ref.translations, hip_height_ratio=float(ratio),
+                   options=options,
+                   notes={"performer reference": p_ref.label, "target reference": t_ref.label,
+                          "hip height ratio": f"{ratio:.4f}"})
+
+
+@dataclass(frozen=True, eq=False)
+class _Reference:
+    """A skeleton (``J`` joints, ``K`` translated, ``E`` End Sites) in its reference pose.
+
+    ``rotations``: ``(J, 4)`` local rotations; ``translations``: ``(K, 3)`` [m] local
+    translations; ``label``: which pose it is, for display; ``world``: ``(J, 4)`` world
+    rotations; ``positions``: ``(J, 3)`` [m] world joint positions; ``all_positions``:
+    ``(J + E, 3)`` [m] the joints' and then the End Sites' world positions.
+    """
+
+    rotations: np.ndarray
+    translations: np.ndarray
+    label: str
+    world: np.ndarray
+    positions: np.ndarray
+    all_positions: np.ndarray
+
+
+def _reference(motion: Motion, choice: str | int) -> _Reference:
+    """``motion``'s reference pose (see :func:`reference_pose`) and its forward kinematics."""
+    rot, tra, label = reference_pose(motion, choice)
+    pose = fk_arrays(motion.skeleton, rot[None], tra[None], end_sites=True)
+    return _Reference(rot, tra, label, pose.rotations[0], pose.positions[0],
+                      pose.all_positions()[0])
+
+
+def _moving_performer_joints(performer: Motion) -> set[int]:
+    """Performer joints (not the root) whose translation is animated (by more than 1e-6 m).
+
+    A virtual bone across one of them stretches and turns with the translation (Bandai's hips
+    under its ground root), so it gives no direction to follow.
+    """
+    psk = performer.skeleton
+    p_slots = {int(j): k for k, j in enumerate(psk.translated)}
+    return {j for j, k in p_slots.items() if j > 0 and
+            np.ptp(performer.translations[:, k], axis=0).max() > 1e-6}
+
+
+def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
+                   p_ref: _Reference, t_ref: _Reference, p_moving: set[int]) -> dict:
+    """Per mapped target joint, its :class:`_Bones`: the virtual bones towards its mapped
+    children that give a direction, in the reference poses (``target_local`` in the target's
+    reference posture; :func:`_bones_in_posture` moves it to the bound one)."""
+    J = tsk.num_joints
     kids: dict[int, list[int]] = {j: [] for j in range(J) if mapped[j] >= 0}
     for j in range(J):
         if mapped[j] >= 0 and anchor[j] >= 0:
@@ -293,37 +342,13 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     subtree = np.ones(J, dtype=np.intp)
     for j in range(J - 1, 0, -1):
         subtree[tsk.parents[j]] += subtree[j]
-
-    local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
-    local_t[tsk.translated] = t_tra
-    t_height = max(float(np.ptp(t_pos_ref[:, 1])), 1e-6)
-
-    # performer joints whose translation is animated: a virtual bone across one of them
-    # stretches and turns with the translation (Bandai's hips under its ground root), so it
-    # gives no direction to follow
-    p_slots = {int(j): k for k, j in enumerate(psk.translated)}
-    p_moving = {j for j, k in p_slots.items() if j > 0 and
-                np.ptp(performer.translations[:, k], axis=0).max() > 1e-6}
+    scale_len = max(float(np.ptp(p_ref.all_positions[:, 1])), 1e-6)
+    t_height = max(float(np.ptp(t_ref.positions[:, 1])), 1e-6)
 
     bones: dict[int, _Bones] = {}
     for j, children in kids.items():
-        usable = []
-        for c in children:
-            if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving):
-                continue
-            v = p_pos[mapped[c]] - p_pos[mapped[j]]
-            world_t = t_pos_ref[c] - t_pos_ref[j]
-            t = qrot(qconj(t_world_ref[j]), world_t)
-            if not (np.linalg.norm(v) > _MIN_BONE * scale_len and
-                    np.linalg.norm(t) > _MIN_BONE * t_height):
-                continue
-            # a short target bone pointing against its virtual bone is a rig's helper offset
-            # (the robot's "Hips" sits 10 cm below its pelvis, the capture's spine goes up):
-            # turning it over would fold the body, so it gives no direction
-            cos = np.dot(v, world_t) / (np.linalg.norm(v) * np.linalg.norm(world_t))
-            if cos < -0.5 and np.linalg.norm(world_t) < 0.1 * t_height:
-                continue
-            usable.append((c, v, t))
+        usable = [u for u in (_usable_bone(psk, mapped, j, c, p_ref, t_ref, p_moving, scale_len,
+                                           t_height) for c in children) if u is not None]
         usable.sort(key=lambda item: -subtree[item[0]])
         # the primary bone is the one towards the largest subtree (the spine from the hips);
         # when that one has no direction (CMU's LowerBack sits on its hips), aligning a leg in
@@ -336,16 +361,49 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
             continue
         ref = np.array([u[1] for u in usable])
         loc = np.array([u[2] for u in usable])
-        roll_by_bones = False
-        if len(usable) > 1:
-            n = ref[0] / np.linalg.norm(ref[0])
-            normal = ref[1:] - np.outer(ref[1:] @ n, n)
-            roll_by_bones = bool(np.any(np.linalg.norm(normal, axis=1) >
-                                        0.1 * np.linalg.norm(ref[1:], axis=1)))
         bones[j] = _Bones([u[0] for u in usable], [int(mapped[u[0]]) for u in usable], loc, ref,
-                          roll_by_bones)
+                          _rolls_by_bones(ref))
+    return bones
 
-    # chains of unmapped joints between a mapped joint and its primary child
+
+def _usable_bone(psk: Skeleton, mapped: np.ndarray, j: int, c: int, p_ref: _Reference,
+                 t_ref: _Reference, p_moving: set[int], scale_len: float, t_height: float):
+    """The virtual bone from mapped target joint ``j`` to its mapped child ``c``, as ``(c,
+    performer bone (3,) [m] in the world, target bone (3,) [m] in j's reference frame)``, or
+    ``None`` when it gives no direction to follow.
+
+    ``scale_len`` and ``t_height`` [m]: the performer's and the target's heights.
+    """
+    if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving):
+        return None
+    v = p_ref.positions[mapped[c]] - p_ref.positions[mapped[j]]
+    world_t = t_ref.positions[c] - t_ref.positions[j]
+    t = qrot(qconj(t_ref.world[j]), world_t)
+    if not (np.linalg.norm(v) > _MIN_BONE * scale_len and
+            np.linalg.norm(t) > _MIN_BONE * t_height):
+        return None
+    # a short target bone pointing against its virtual bone is a rig's helper offset
+    # (the robot's "Hips" sits 10 cm below its pelvis, the capture's spine goes up):
+    # turning it over would fold the body, so it gives no direction
+    cos = np.dot(v, world_t) / (np.linalg.norm(v) * np.linalg.norm(world_t))
+    if cos < -0.5 and np.linalg.norm(world_t) < 0.1 * t_height:
+        return None
+    return c, v, t
+
+
+def _rolls_by_bones(ref: np.ndarray) -> bool:
+    """Whether the secondary virtual bones ``ref[1:]`` ``(C - 1, 3)`` stray far enough from the
+    primary one ``ref[0]`` to give the roll about it (a branching joint)."""
+    if len(ref) < 2:
+        return False
+    n = ref[0] / np.linalg.norm(ref[0])
+    normal = ref[1:] - np.outer(ref[1:] @ n, n)
+    return bool(np.any(np.linalg.norm(normal, axis=1) > 0.1 * np.linalg.norm(ref[1:], axis=1)))
+
+
+def _chains(tsk: Skeleton, bones: dict) -> dict[int, list[int]]:
+    """Per mapped target joint with a primary bone, the unmapped joints between it and its
+    primary child, top first."""
     chains: dict[int, list[int]] = {}
     for j, b in bones.items():
         if b.children:
@@ -355,46 +413,54 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                 path.append(int(k))
                 k = tsk.parents[k]
             chains[j] = path[::-1]
+    return chains
 
-    # the bound rest posture, root to leaves
+
+def _rest_posture(tsk: Skeleton, t_rot: np.ndarray, bones: dict,
+                  rest_alignment: bool) -> np.ndarray:
+    """``(J, 4)`` world rotations of the bound rest posture, root to leaves: the target's
+    reference local rotations ``t_rot`` ``(J, 4)``, each joint with bones turned onto its
+    virtual bones when ``rest_alignment`` is on."""
+    J = tsk.num_joints
     rest_world = np.empty((J, 4))
     for j in range(J):
         parent = tsk.parents[j]
         w = t_rot[j] if parent < 0 else qmul(rest_world[parent], t_rot[j])
-        if options.rest_alignment and j in bones and bones[j].children:
+        if rest_alignment and j in bones and bones[j].children:
             b = bones[j]
             from_dirs = qrot(w, b.target_local)
             w = qmul(_align(from_dirs, b.reference, b.roll_by_bones), w)
         rest_world[j] = w
-    rest_local = rest_world.copy()
-    rest_local[1:] = qmul(qconj(rest_world[tsk.parents[1:]]), rest_world[1:])
-    bound = fk_arrays(tsk, rest_local[None], t_tra[None])
-    rest_positions = bound.positions[0]
-    # the target offsets towards the children, in the bound posture
+    return rest_world
+
+
+def _bones_in_posture(bones: dict, rest_world: np.ndarray, rest_positions: np.ndarray) -> dict:
+    """The bones with ``target_local`` taken in the bound posture (world rotations ``(J, 4)``,
+    positions ``(J, 3)`` [m]) instead of the target's reference posture."""
+    out = dict(bones)
     for j, b in bones.items():
         if b.children:
             loc = qrot(qconj(rest_world[j]), rest_positions[b.children] - rest_positions[j])
-            bones[j] = _Bones(b.children, b.performer, loc, b.reference, b.roll_by_bones)
+            out[j] = _Bones(b.children, b.performer, loc, b.reference, b.roll_by_bones)
+    return out
 
-    t_hip = _height_above_floor(np.concatenate([rest_positions, bound.end_positions[0]]),
-                                body_root)
-    p_hip = _height_above_floor(p_all, int(mapped[body_root]))
-    ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
-    above_mapped = np.zeros(J, dtype=bool)          # unmapped joints with a mapped descendant
-    for j in range(J):
+
+def _above_mapped(tsk: Skeleton, mapped: np.ndarray) -> np.ndarray:
+    """``(J,)`` bool: the joints with a mapped descendant."""
+    above = np.zeros(tsk.num_joints, dtype=bool)
+    for j in range(tsk.num_joints):
         if mapped[j] >= 0:
             for a in tsk.ancestors(j):
-                above_mapped[a] = True
+                above[a] = True
+    return above
+
+
+def _driven(tsk: Skeleton, mapped: np.ndarray, body_root: int, p_moving: set[int]) -> list:
+    """The target joints whose world position follows their performer joint's: the body root,
+    and translated target joints whose performer joint's translation is animated."""
     driven = [body_root]
     for j in tsk.translated[1:]:
         p = int(mapped[j])
         if j != body_root and p in p_moving:
             driven.append(int(j))
-    return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
-                   rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
-                   performer_rest_world=p_world, performer_rest_positions=p_pos, bones=bones,
-                   chains=chains, body_root=body_root, driven=driven,
-                   above_mapped=above_mapped, root_translation=t_tra,
-                   hip_height_ratio=float(ratio), options=options,
-                   notes={"performer reference": p_label, "target reference": t_label,
-                          "hip height ratio": f"{ratio:.4f}"})
+    return driven

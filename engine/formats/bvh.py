@@ -160,6 +160,169 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     lines = text.split("\n")
     toks = _Tokens(lines, path)
+    tree = _parse_hierarchy(toks)
+    head = _parse_motion_header(lines, toks.motion_line, path)
+    values = _parse_values(text, lines, head, tree.names, tree.channels, path)
+    return BVHRecord(names=tree.names, parents=tree.parents,
+                     offsets=np.array(tree.offsets, dtype=float),
+                     channels=list(tree.channels),  # type: ignore[arg-type]
+                     end_sites=tree.end_sites, frame_time=head.frame_time, values=values,
+                     joint_lines=tree.joint_lines, first_row_line=head.first_row + 1, path=path)
+
+
+# ------------------------------------------------------------------ HIERARCHY section
+class _Hierarchy:
+    """The joints and End Sites of the HIERARCHY section, filled keyword by keyword.
+
+    ``names``, ``parents``, ``offsets`` (3 values in file units, ``None`` until read),
+    ``channels`` (``None`` until read) and ``joint_lines`` have one entry per joint in file
+    order; ``end_sites`` holds ``(parent joint, offset (3,))``. ``stack`` holds the open
+    blocks as ``(kind, joint index, line)``, kind ``"joint"`` or ``"end"`` (an End Site of that
+    joint).
+    """
+
+    def __init__(self, toks: _Tokens):
+        self.toks = toks
+        self.path = toks.path
+        self.names: list[str] = []
+        self.name_lines: dict[str, int] = {}
+        self.parents: list[int] = []
+        self.offsets: list[list[float] | None] = []
+        self.channels: list[tuple[str, ...] | None] = []
+        self.joint_lines: list[int] = []
+        self.end_sites: list[tuple[int, np.ndarray]] = []
+        self.stack: list[tuple[str, int, int]] = []
+        self.end_offset: list[float] | None = None
+        self.closed_root = False
+
+    def open_brace(self):
+        tok, line, _ = self.toks.next("'{'")
+        if tok != "{":
+            raise BVHError(f"expected '{{', found {tok!r}", self.path, line)
+
+    def joint(self, key: str, line: int, index: int):
+        """``ROOT name`` or ``JOINT name`` (a name may have several words; ``{`` may end it)."""
+        stack, path = self.stack, self.path
+        if key == "ROOT" and stack:
+            raise BVHError("ROOT inside another joint; expected JOINT or '}'", path, line)
+        if key == "ROOT" and self.closed_root:
+            raise BVHError("a second ROOT: this reader takes one skeleton per file", path,
+                           line)
+        if key == "JOINT" and (not stack or stack[-1][0] != "joint"):
+            where = "inside an End Site" if stack else "outside any ROOT"
+            raise BVHError(f"JOINT {where}; expected it inside a ROOT or JOINT", path, line)
+        rest = self.toks.rest_of_line(line, index)
+        brace_on_line = False
+        if rest and rest[-1].endswith("{"):
+            brace_on_line = True
+            rest[-1] = rest[-1][:-1]
+            if not rest[-1]:
+                rest.pop()
+        name = " ".join(rest)
+        if not name:
+            raise BVHError(f"expected a joint name after {key}", path, line)
+        if name in self.name_lines:
+            raise BVHError(f"duplicate joint name {name!r} (first at line "
+                           f"{self.name_lines[name]}); joint names must be unique", path, line)
+        self.name_lines[name] = line
+        self.names.append(name)
+        self.parents.append(stack[-1][1] if stack else -1)
+        self.offsets.append(None)
+        self.channels.append(None)
+        self.joint_lines.append(line)
+        if not brace_on_line:
+            self.open_brace()
+        stack.append(("joint", len(self.names) - 1, line))
+
+    def end_site(self, line: int):
+        """``End Site`` (``{`` may end it)."""
+        site, sline, _ = self.toks.next("'Site' after 'End'")
+        if site.upper().rstrip("{") != "SITE":
+            raise BVHError(f"expected 'End Site', found 'End {site}'", self.path, sline)
+        if not self.stack or self.stack[-1][0] != "joint":
+            raise BVHError("End Site outside a joint; expected it inside a JOINT", self.path,
+                           line)
+        if not site.endswith("{"):
+            self.open_brace()
+        self.stack.append(("end", self.stack[-1][1], line))
+        self.end_offset = None
+
+    def offset(self, line: int):
+        """``OFFSET x y z`` of the open joint or End Site."""
+        if not self.stack:
+            raise BVHError("OFFSET outside any joint", self.path, line)
+        values = [self.toks.number(f"the {axis} value of OFFSET") for axis in "XYZ"]
+        kind, j, _ = self.stack[-1]
+        if kind == "end":
+            if self.end_offset is not None:
+                raise BVHError("a second OFFSET in one End Site", self.path, line)
+            self.end_offset = values
+        else:
+            if self.offsets[j] is not None:
+                raise BVHError(f"a second OFFSET for joint {self.names[j]!r}", self.path, line)
+            self.offsets[j] = values
+
+    def channel_list(self, line: int):
+        """``CHANNELS n name...`` of the open joint: 0 to 6 known channels, none twice."""
+        path = self.path
+        if not self.stack or self.stack[-1][0] != "joint":
+            raise BVHError("CHANNELS outside a joint (End Sites have no channels)", path,
+                           line)
+        j = self.stack[-1][1]
+        if self.channels[j] is not None:
+            raise BVHError(f"a second CHANNELS line for joint {self.names[j]!r}", path, line)
+        count_tok, cline, _ = self.toks.next("the channel count after CHANNELS")
+        if not _is_count(count_tok) or int(count_tok) > 6:
+            raise BVHError(f"expected a channel count from 0 to 6 after CHANNELS, found "
+                           f"{count_tok!r}", path, cline)
+        found = []
+        for _ in range(int(count_tok)):
+            ch, chline, _ = self.toks.next(f"{count_tok} channel names after CHANNELS")
+            canon = _CHANNEL_CANON.get(ch.lower())
+            if canon is None:
+                raise BVHError(f"unknown channel {ch!r} (channel {len(found) + 1} of "
+                               f"{count_tok}); expected one of {', '.join(_KNOWN_CHANNELS)}",
+                               path, chline)
+            if canon in found:
+                raise BVHError(f"channel {canon} appears twice for joint {self.names[j]!r}",
+                               path, chline)
+            found.append(canon)
+        self.channels[j] = tuple(found)
+
+    def close(self, line: int):
+        """``}``: the open joint (it must have an OFFSET) or End Site ends."""
+        if not self.stack:
+            raise BVHError("unbalanced braces: '}' with no open joint", self.path, line)
+        kind, j, opened = self.stack.pop()
+        if kind == "end":
+            if self.end_offset is None:
+                raise BVHError(f"the End Site opened at line {opened} has no OFFSET", self.path,
+                               line)
+            self.end_sites.append((j, np.array(self.end_offset)))
+        else:
+            if self.offsets[j] is None:
+                raise BVHError(f"joint {self.names[j]!r} (line {opened}) has no OFFSET",
+                               self.path, line)
+            if self.channels[j] is None:
+                self.channels[j] = ()
+        if not self.stack:
+            self.closed_root = True
+
+    def finish(self):
+        """At the end of the hierarchy's tokens: every block closed, MOTION next."""
+        if self.stack:
+            kind, j, line = self.stack[-1]
+            what = f"joint {self.names[j]!r}" if kind == "joint" else "an End Site"
+            raise self.toks.error(f"the hierarchy stops before {what} (opened at line {line}) "
+                                  "is closed; expected '}' (the file may be truncated)")
+        if self.toks.motion_line is None:
+            raise self.toks.error("no MOTION section; expected the keyword MOTION after the "
+                                  "hierarchy (the file may be truncated)")
+
+
+def _parse_hierarchy(toks: _Tokens) -> _Hierarchy:
+    """Read the HIERARCHY section's tokens, up to the MOTION keyword."""
+    path = toks.path
     first = toks.peek()
     if first is None:
         raise BVHError("no HIERARCHY section; expected a BVH file starting with HIERARCHY",
@@ -168,164 +331,74 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
         raise BVHError(f"expected the keyword HIERARCHY, found {first[0][:40]!r}; is this a BVH "
                        "file?", path, first[1])
     toks.pos = 1
-
-    names: list[str] = []
-    name_lines: dict[str, int] = {}
-    parents: list[int] = []
-    offsets: list[list[float] | None] = []
-    channels: list[tuple[str, ...] | None] = []
-    joint_lines: list[int] = []
-    end_sites: list[tuple[int, np.ndarray]] = []
-    # stack entries: (kind, index, line) with kind "joint" or "end"
-    stack: list[tuple[str, int, int]] = []
-    end_offset: list[float] | None = None
-    closed_root = False
-
-    def open_brace():
-        tok, line, _ = toks.next("'{'")
-        if tok != "{":
-            raise BVHError(f"expected '{{', found {tok!r}", path, line)
-
-    while True:
-        item = toks.peek()
-        if item is None:
-            if stack:
-                kind, j, line = stack[-1]
-                what = f"joint {names[j]!r}" if kind == "joint" else "an End Site"
-                raise toks.error(f"the hierarchy stops before {what} (opened at line {line}) is "
-                                 "closed; expected '}' (the file may be truncated)")
-            if toks.motion_line is None:
-                raise toks.error("no MOTION section; expected the keyword MOTION after the "
-                                 "hierarchy (the file may be truncated)")
-            break
+    tree = _Hierarchy(toks)
+    while toks.peek() is not None:
         tok, line, index = toks.next("a keyword")
         key = tok.upper()
         if key in ("ROOT", "JOINT"):
-            if key == "ROOT" and stack:
-                raise BVHError("ROOT inside another joint; expected JOINT or '}'", path, line)
-            if key == "ROOT" and closed_root:
-                raise BVHError("a second ROOT: this reader takes one skeleton per file", path,
-                               line)
-            if key == "JOINT" and (not stack or stack[-1][0] != "joint"):
-                where = "inside an End Site" if stack else "outside any ROOT"
-                raise BVHError(f"JOINT {where}; expected it inside a ROOT or JOINT", path, line)
-            rest = toks.rest_of_line(line, index)
-            brace_on_line = False
-            if rest and rest[-1].endswith("{"):
-                brace_on_line = True
-                rest[-1] = rest[-1][:-1]
-                if not rest[-1]:
-                    rest.pop()
-            name = " ".join(rest)
-            if not name:
-                raise BVHError(f"expected a joint name after {key}", path, line)
-            if name in name_lines:
-                raise BVHError(f"duplicate joint name {name!r} (first at line "
-                               f"{name_lines[name]}); joint names must be unique", path, line)
-            name_lines[name] = line
-            names.append(name)
-            parents.append(stack[-1][1] if stack else -1)
-            offsets.append(None)
-            channels.append(None)
-            joint_lines.append(line)
-            if not brace_on_line:
-                open_brace()
-            stack.append(("joint", len(names) - 1, line))
+            tree.joint(key, line, index)
         elif key == "END":
-            site, sline, _ = toks.next("'Site' after 'End'")
-            if site.upper().rstrip("{") != "SITE":
-                raise BVHError(f"expected 'End Site', found 'End {site}'", path, sline)
-            if not stack or stack[-1][0] != "joint":
-                raise BVHError("End Site outside a joint; expected it inside a JOINT", path, line)
-            if not site.endswith("{"):
-                open_brace()
-            stack.append(("end", stack[-1][1], line))
-            end_offset = None
+            tree.end_site(line)
         elif key == "OFFSET":
-            if not stack:
-                raise BVHError("OFFSET outside any joint", path, line)
-            values = [toks.number(f"the {axis} value of OFFSET") for axis in "XYZ"]
-            kind, j, _ = stack[-1]
-            if kind == "end":
-                if end_offset is not None:
-                    raise BVHError("a second OFFSET in one End Site", path, line)
-                end_offset = values
-            else:
-                if offsets[j] is not None:
-                    raise BVHError(f"a second OFFSET for joint {names[j]!r}", path, line)
-                offsets[j] = values
+            tree.offset(line)
         elif key == "CHANNELS":
-            if not stack or stack[-1][0] != "joint":
-                raise BVHError("CHANNELS outside a joint (End Sites have no channels)", path,
-                               line)
-            j = stack[-1][1]
-            if channels[j] is not None:
-                raise BVHError(f"a second CHANNELS line for joint {names[j]!r}", path, line)
-            count_tok, cline, _ = toks.next("the channel count after CHANNELS")
-            if not _is_count(count_tok) or int(count_tok) > 6:
-                raise BVHError(f"expected a channel count from 0 to 6 after CHANNELS, found "
-                               f"{count_tok!r}", path, cline)
-            found = []
-            for _ in range(int(count_tok)):
-                ch, chline, _ = toks.next(f"{count_tok} channel names after CHANNELS")
-                canon = _CHANNEL_CANON.get(ch.lower())
-                if canon is None:
-                    raise BVHError(f"unknown channel {ch!r} (channel {len(found) + 1} of "
-                                   f"{count_tok}); expected one of {', '.join(_KNOWN_CHANNELS)}",
-                                   path, chline)
-                if canon in found:
-                    raise BVHError(f"channel {canon} appears twice for joint {names[j]!r}",
-                                   path, chline)
-                found.append(canon)
-            channels[j] = tuple(found)
+            tree.channel_list(line)
         elif tok == "}":
-            if not stack:
-                raise BVHError("unbalanced braces: '}' with no open joint", path, line)
-            kind, j, opened = stack.pop()
-            if kind == "end":
-                if end_offset is None:
-                    raise BVHError(f"the End Site opened at line {opened} has no OFFSET", path,
-                                   line)
-                end_sites.append((j, np.array(end_offset)))
-            else:
-                if offsets[j] is None:
-                    raise BVHError(f"joint {names[j]!r} (line {opened}) has no OFFSET", path,
-                                   line)
-                if channels[j] is None:
-                    channels[j] = ()
-            if not stack:
-                closed_root = True
+            tree.close(line)
         elif key == "HIERARCHY":
             raise BVHError("a second HIERARCHY keyword", path, line)
         else:
-            expected = ("ROOT" if not stack and not closed_root else
-                        "MOTION" if not stack else "OFFSET, CHANNELS, JOINT, End Site or '}'")
+            expected = ("ROOT" if not tree.stack and not tree.closed_root else
+                        "MOTION" if not tree.stack else
+                        "OFFSET, CHANNELS, JOINT, End Site or '}'")
             raise BVHError(f"unexpected {tok[:40]!r}; expected {expected}", path, line)
-
-    if not names:
+    tree.finish()
+    if not tree.names:
         raise BVHError("the hierarchy has no ROOT joint", path, toks.motion_line)
+    return tree
 
-    # ------------------------------------------------------------------ MOTION section
-    line_no = toks.motion_line
-    motion_rest = lines[line_no:]                       # lines after MOTION
 
-    def header(regex, label, start):
-        k = start
-        while k < len(motion_rest) and not motion_rest[k].strip():
-            k += 1
-        if k >= len(motion_rest):
-            # point at the last line with content (MOTION itself, or the Frames: line)
-            last = max((i for i in range(start) if motion_rest[i].strip()), default=-1)
-            raise BVHError(f"the file ends after MOTION; expected a '{label}' line", path,
-                           line_no + last + 1)
-        m = regex.match(motion_rest[k])
-        if not m:
-            raise BVHError(f"expected '{label} <number>', found {motion_rest[k].strip()[:60]!r}",
-                           path, line_no + k + 1)
-        return m.group(1), k
+# ------------------------------------------------------------------ MOTION section
+@dataclass(frozen=True)
+class _MotionHeader:
+    """The ``Frames:`` and ``Frame Time:`` lines after MOTION.
 
-    frames_tok, k = header(_FRAMES_RE, "Frames:", 0)
-    frames_line = line_no + k + 1
+    ``frames``: the frame count; ``frames_line``: its line number; ``frame_time``: seconds per
+    frame; ``first_row``: the 0-based index in the text's lines of the first row of values (the
+    line after ``Frame Time:``).
+    """
+
+    frames: int
+    frames_line: int
+    frame_time: float
+    first_row: int
+
+
+def _header_line(motion_rest: list[str], motion_line: int, regex, label: str, start: int,
+                 path) -> tuple[str, int]:
+    """The value of the first line with content at or after ``motion_rest[start]``, which must
+    match ``regex`` (``label <number>``), and its index in ``motion_rest``."""
+    k = start
+    while k < len(motion_rest) and not motion_rest[k].strip():
+        k += 1
+    if k >= len(motion_rest):
+        # point at the last line with content (MOTION itself, or the Frames: line)
+        last = max((i for i in range(start) if motion_rest[i].strip()), default=-1)
+        raise BVHError(f"the file ends after MOTION; expected a '{label}' line", path,
+                       motion_line + last + 1)
+    m = regex.match(motion_rest[k])
+    if not m:
+        raise BVHError(f"expected '{label} <number>', found {motion_rest[k].strip()[:60]!r}",
+                       path, motion_line + k + 1)
+    return m.group(1), k
+
+
+def _parse_motion_header(lines: list[str], motion_line: int, path) -> _MotionHeader:
+    """Read ``Frames: n`` (1 to :data:`_MAX_FRAMES`) and ``Frame Time: seconds`` (positive)
+    after the MOTION keyword on line ``motion_line``."""
+    motion_rest = lines[motion_line:]                   # lines after MOTION
+    frames_tok, k = _header_line(motion_rest, motion_line, _FRAMES_RE, "Frames:", 0, path)
+    frames_line = motion_line + k + 1
     if not _is_count(frames_tok):
         raise BVHError(f"expected a whole number of frames after 'Frames:', found "
                        f"{frames_tok!r}", path, frames_line)
@@ -336,8 +409,9 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
     if n_frames > _MAX_FRAMES:
         raise BVHError(f"'Frames: {n_frames}' is more than this reader accepts "
                        f"({_MAX_FRAMES})", path, frames_line)
-    ft_tok, k = header(_FRAME_TIME_RE, "Frame Time:", k + 1)
-    ft_line = line_no + k + 1
+    ft_tok, k = _header_line(motion_rest, motion_line, _FRAME_TIME_RE, "Frame Time:", k + 1,
+                             path)
+    ft_line = motion_line + k + 1
     try:
         frame_time = float(ft_tok)
     except ValueError:
@@ -345,10 +419,16 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
     if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
         raise BVHError(f"expected a positive number of seconds after 'Frame Time:', found "
                        f"{ft_tok!r}", path, ft_line)
+    return _MotionHeader(n_frames, frames_line, frame_time, ft_line)
 
-    n_cols = sum(len(c) for c in channels)            # type: ignore[arg-type]
-    first_row = ft_line                                # 0-based index of the first row line
-    offset = sum(len(line) + 1 for line in lines[:first_row])   # the rows, as one slice
+
+def _parse_values(text: str, lines: list[str], head: _MotionHeader, names, channels,
+                  path) -> np.ndarray:
+    """``(F, C)`` the rows of channel values: parsed in one pass (:mod:`._numparse`), or row by
+    row when that pass fails or finds a count or a value that is wrong, so that the error
+    names the line."""
+    n_cols = sum(len(c) for c in channels)
+    offset = sum(len(line) + 1 for line in lines[:head.first_row])   # the rows, as one slice
     block = text[offset:]
     parsed = None
     if n_cols:
@@ -356,18 +436,15 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
             parsed = parse_number_rows(block.encode("utf-8"), n_cols)
         except UnicodeEncodeError:
             parsed = None
-    if parsed is not None and parsed[1] == n_frames:
+    if parsed is not None and parsed[1] == head.frames:
         values = parsed[0]
     else:
-        values = _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names,
-                                       channels, path)
+        values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
+                                       head.frames_line, names, channels, path)
     if not np.all(np.isfinite(values)):
-        values = _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names,
-                                       channels, path)
-    return BVHRecord(names=names, parents=parents, offsets=np.array(offsets, dtype=float),
-                     channels=list(channels), end_sites=end_sites,  # type: ignore[arg-type]
-                     frame_time=frame_time, values=values, joint_lines=joint_lines,
-                     first_row_line=first_row + 1, path=path)
+        values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
+                                       head.frames_line, names, channels, path)
+    return values
 
 
 def _channel_label(col: int, names, channels) -> str:
@@ -404,11 +481,13 @@ def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names
             try:
                 v = float(tok)
             except ValueError:
-                raise BVHError(f"value {c + 1} of frame {row + 1} ({_channel_label(c, names, channels)})"
-                               f" is {tok[:40]!r}; expected a number", path, line) from None
+                raise BVHError(f"value {c + 1} of frame {row + 1} "
+                               f"({_channel_label(c, names, channels)}) is {tok[:40]!r}; "
+                               "expected a number", path, line) from None
             if not math.isfinite(v):
-                raise BVHError(f"value {c + 1} of frame {row + 1} ({_channel_label(c, names, channels)})"
-                               f" is {tok[:40]!r}; expected a finite number", path, line)
+                raise BVHError(f"value {c + 1} of frame {row + 1} "
+                               f"({_channel_label(c, names, channels)}) is {tok[:40]!r}; "
+                               "expected a finite number", path, line)
             values[row, c] = v
         row += 1
     if row < n_frames and n_cols:

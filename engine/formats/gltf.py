@@ -55,7 +55,7 @@ import math
 import os
 import struct
 import urllib.parse
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -810,6 +810,7 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
 
 
 def _build(doc: _Doc, *, skin, fps) -> Character:
+    """The :class:`Character` of a parsed file: its joints, bind pose, poses and meshes."""
     notes: list[str] = []
     nodes = doc.array("nodes")
     g = _graph(doc)
@@ -818,16 +819,100 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
         raise doc.error("skins", "the file has no skin; a character needs a skinned skeleton "
                                  "(skins[].joints)")
     selected = _select_skins(doc, skins, skin)
+    hint = _writer_hint(doc)
+    fps = _frame_rate(doc, fps, hint)
+
+    skin_nodes, ibms = _skin_joints(doc, nodes, skins, selected, notes)
+    joints = _joint_tree(g, nodes, skin_nodes, notes)
+    bind, frames = _bind_matrices(doc, g, nodes, joints, selected, skin_nodes, ibms, notes)
+    rot, bind_scale = _bind_rotations(doc, bind, joints, selected, skin_nodes)
+    bind_pos = bind[:, :3, 3].copy()
+    offsets = bind_pos.copy()
+    offsets[1:] -= bind_pos[joints.parents[1:]]
+    end_sites = _end_sites(g, nodes, joints, bind, bind_pos)
+    size = _extent(bind_pos, end_sites)
+    height = float(np.ptp(bind_pos[:, 1]))
+    if height > 20.0:
+        notes.append(f"the bind pose is {height:.3g} m tall in glTF metres; the file was "
+                     "probably authored in centimetres (scale it where sizes matter)")
+
+    default, poses = _poses(doc, g, joints, rot, fps, notes)
+    channels = _channels(joints, offsets, size, [default] + poses, hint)
+    skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
+                        channels=channels, end_sites=end_sites, source=GLTF_SOURCE)
+    stem = Path(doc.path).stem if doc.path else "character"
+    motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
+    node_pose = _pose_motion(default, skeleton, joints.parents, 1.0 / fps)
+    node_pose = node_pose.replace(name=f"{stem} (default pose)")
+
+    skin_maps = [np.array([joints.index[n] for n in js], dtype=np.intp) for js in skin_nodes]
+    meshes = _meshes(doc, g, selected, skin_maps, frames, ibms, joints, bind, notes)
+
+    joint_t, joint_q, joint_s = _node_rest(g, joints.nodes)
+    skin_names = tuple(str(skins[s].get("name") or f"skin_{s}") for s in selected)
+    return Character(
+        name=stem, skeleton=skeleton, meshes=tuple(meshes), motions=motions,
+        bind_rotations=_frozen(_matrix_to_quat(rot)), bind_scales=_frozen(bind_scale),
+        node_translations=_frozen(joint_t), node_rotations=_frozen(joint_q),
+        node_scales=_frozen(joint_s), node_indices=_frozen(np.array(joints.nodes, np.intp)),
+        skin_joints=tuple(_frozen(m) for m in skin_maps),
+        skin_frames=_frozen(np.array(frames)), skin_names=skin_names,
+        skins=tuple(selected), node_pose=node_pose, fps=float(fps), path=doc.path,
+        notes=tuple(notes))
+
+
+def _writer_hint(doc: _Doc) -> dict:
+    """What :func:`write_gltf` recorded in ``asset.extras`` (frame rate, position channels),
+    or ``{}``."""
     extras = doc.js.get("asset", {}).get("extras", {})
     hint = extras.get(_EXTRAS_KEY, {}) if isinstance(extras, dict) else {}
-    hint = hint if isinstance(hint, dict) else {}
+    return hint if isinstance(hint, dict) else {}
+
+
+def _frame_rate(doc: _Doc, fps: float | None, hint: dict) -> float:
+    """[frames/s] the rate asked for, else the one the writer recorded, else the default."""
     if fps is None:
         hinted = hint.get("fps")
         fps = float(hinted) if isinstance(hinted, (int, float)) and hinted > 0 else DEFAULT_FPS
     if not (math.isfinite(fps) and fps > 0):
         raise GLTFError(f"the frame rate must be a positive number, not {fps!r}", doc.path)
+    return fps
 
-    # ---------------------------------------------------------------- the joints
+
+# ---------------------------------------------------------------- the joints
+@dataclass
+class _Joints:
+    """The skeleton's ``J`` joints among the scene's nodes.
+
+    Attributes:
+        nodes: ``(J,)`` the node of each joint, parents first (scene order); ``-1`` for a new
+            root joining root joints that lie in separate node trees.
+        index: node -> joint index.
+        parents: ``(J,)`` parent joint index, ``-1`` for the root.
+        names: ``(J,)`` unique joint names.
+        members: the joint nodes: every selected skin's joints, and the common ancestor that
+            joins several root joints.
+    """
+
+    nodes: list[int]
+    index: dict[int, int]
+    parents: np.ndarray
+    names: list[str]
+    members: set[int]
+
+
+def _joint_ancestor(g: _Graph, members: set[int], n: int) -> int:
+    """The nearest node above node ``n`` that is in ``members``, or -1."""
+    p = g.parent[n]
+    while p >= 0 and p not in members:
+        p = g.parent[p]
+    return int(p)
+
+
+def _skin_joints(doc: _Doc, nodes: list, skins: list, selected: list[int],
+                 notes: list[str]) -> tuple[list[list[int]], list[np.ndarray | None]]:
+    """Per selected skin, its joint nodes and its inverse bind matrices ``(len(joints), 4, 4)``
+    (``None`` when the skin has none: its default node pose is its bind pose)."""
     skin_nodes: list[list[int]] = []
     ibms: list[np.ndarray | None] = []
     for s in selected:
@@ -857,76 +942,96 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
             notes.append(f"skin {s} has no inverse bind matrices: the default node pose is "
                          "taken as its bind pose")
         skin_nodes.append(list(joints))
-    jset = set().union(*map(set, skin_nodes))
+    return skin_nodes, ibms
 
-    def joint_ancestor(n: int) -> int:
-        p = g.parent[n]
-        while p >= 0 and p not in jset:
-            p = g.parent[p]
-        return int(p)
 
-    roots = [n for n in g.order if n in jset and joint_ancestor(n) < 0]
+def _joint_tree(g: _Graph, nodes: list, skin_nodes: list[list[int]],
+                notes: list[str]) -> _Joints:
+    """The skins' joints as one tree: each joint's parent is its nearest joint ancestor, and
+    several root joints are joined under their common ancestor node (or a new ``root``)."""
+    members = set().union(*map(set, skin_nodes))
+    roots = [n for n in g.order if n in members and _joint_ancestor(g, members, n) < 0]
     synthetic = False
     if len(roots) > 1:
-        chains = []
-        for r in roots:
-            chain, p = [], g.parent[r]
-            while p >= 0:
-                chain.append(int(p))
-                p = g.parent[p]
-            chains.append(chain)
-        common = [p for p in chains[0] if all(p in c for c in chains[1:])]
-        if common:
-            jset.add(common[0])
+        common = _common_ancestor(g, roots)
+        if common >= 0:
+            members.add(common)
             notes.append(f"{len(roots)} root joints: their common ancestor node "
-                         f"{common[0]} ({nodes[common[0]].get('name', 'unnamed')}) joins them "
+                         f"{common} ({nodes[common].get('name', 'unnamed')}) joins them "
                          "as the skeleton's root")
         else:
             synthetic = True
             notes.append(f"{len(roots)} root joints in separate node trees: a new joint "
                          "'root' at the origin joins them")
-    order = [n for n in g.order if n in jset]
+    order = [n for n in g.order if n in members]
     joint_nodes = ([-1] if synthetic else []) + order
-    jindex = {n: j for j, n in enumerate(joint_nodes)}
-    J = len(joint_nodes)
-    parents = np.full(J, -1, dtype=np.intp)
+    index = {n: j for j, n in enumerate(joint_nodes)}
+    parents = np.full(len(joint_nodes), -1, dtype=np.intp)
     for j, n in enumerate(joint_nodes):
         if n >= 0:
-            a = joint_ancestor(n)
-            parents[j] = jindex[a] if a >= 0 else (0 if synthetic else -1)
+            a = _joint_ancestor(g, members, n)
+            parents[j] = index[a] if a >= 0 else (0 if synthetic else -1)
     if synthetic:
         parents[0] = -1
     names = _joint_names(nodes, joint_nodes, notes)
+    return _Joints(joint_nodes, index, parents, names, members)
 
-    # ---------------------------------------------------------------- the bind pose
-    def node_world(n: int) -> np.ndarray:
-        return np.eye(4) if n < 0 else g.world[n]
 
+def _common_ancestor(g: _Graph, roots: list[int]) -> int:
+    """The lowest node above every node of ``roots``, or -1 when they are in separate trees."""
+    chains = []
+    for r in roots:
+        chain, p = [], g.parent[r]
+        while p >= 0:
+            chain.append(int(p))
+            p = g.parent[p]
+        chains.append(chain)
+    common = [p for p in chains[0] if all(p in c for c in chains[1:])]
+    return common[0] if common else -1
+
+
+# ---------------------------------------------------------------- the bind pose
+def _node_world(g: _Graph, n: int) -> np.ndarray:
+    """``(4, 4)`` node ``n``'s rest world matrix; the identity for a new root (``n = -1``)."""
+    return np.eye(4) if n < 0 else g.world[n]
+
+
+def _skin_bind(doc: _Doc, g: _Graph, nodes: list, s: int, joints: list[int],
+               ibm: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """One skin's world bind matrices ``(len(joints), 4, 4)`` and its frame ``F = world_top *
+    IBM_top`` ``(4, 4)`` (see the module notes; NaN without inverse bind matrices)."""
+    sw = f"skins[{s}].inverseBindMatrices"
+    if ibm is None:
+        return np.array([g.world[n] for n in joints]), np.full((4, 4), np.nan)
+    for k in range(len(joints)):
+        if not np.allclose(ibm[k, 3], (0, 0, 0, 1), atol=1e-5):
+            raise doc.error(sw, f"matrix {k} (joint {nodes[joints[k]].get('name', k)})"
+                                " is not affine (its last row must be 0 0 0 1)")
+    det = np.linalg.det(ibm[:, :3, :3])
+    if np.any(np.abs(det) < 1e-30):
+        k = int(np.argmin(np.abs(det)))
+        raise doc.error(sw, f"matrix {k} (joint {nodes[joints[k]].get('name', k)}) is "
+                            "singular")
+    ref = min(range(len(joints)), key=lambda k: (g.depth[joints[k]],
+                                                g.order.index(joints[k])))
+    frame = g.world[joints[ref]] @ ibm[ref]
+    return frame @ np.linalg.inv(ibm), frame
+
+
+def _bind_matrices(doc: _Doc, g: _Graph, nodes: list, joints: _Joints, selected: list[int],
+                   skin_nodes: list[list[int]], ibms: list[np.ndarray | None],
+                   notes: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """``(J, 4, 4)`` world bind matrices [m] of the joints (from the first skin that lists a
+    joint; a joint no skin lists is bound where its node rests) and each skin's frame."""
+    J = len(joints.nodes)
     bind = np.empty((J, 4, 4))
     have = np.zeros(J, dtype=bool)
     frames = []
-    for s, joints, ibm in zip(selected, skin_nodes, ibms):
-        sw = f"skins[{s}].inverseBindMatrices"
-        if ibm is None:
-            mats = np.array([g.world[n] for n in joints])
-            frame = np.full((4, 4), np.nan)
-        else:
-            for k in range(len(joints)):
-                if not np.allclose(ibm[k, 3], (0, 0, 0, 1), atol=1e-5):
-                    raise doc.error(sw, f"matrix {k} (joint {nodes[joints[k]].get('name', k)})"
-                                        " is not affine (its last row must be 0 0 0 1)")
-            det = np.linalg.det(ibm[:, :3, :3])
-            if np.any(np.abs(det) < 1e-30):
-                k = int(np.argmin(np.abs(det)))
-                raise doc.error(sw, f"matrix {k} (joint {nodes[joints[k]].get('name', k)}) is "
-                                    "singular")
-            ref = min(range(len(joints)), key=lambda k: (g.depth[joints[k]],
-                                                        g.order.index(joints[k])))
-            frame = g.world[joints[ref]] @ ibm[ref]
-            mats = frame @ np.linalg.inv(ibm)
+    for s, js, ibm in zip(selected, skin_nodes, ibms):
+        mats, frame = _skin_bind(doc, g, nodes, s, js, ibm)
         frames.append(frame)
-        for k, n in enumerate(joints):
-            j = jindex[n]
+        for k, n in enumerate(js):
+            j = joints.index[n]
             if not have[j]:
                 bind[j] = mats[k]
                 have[j] = True
@@ -934,61 +1039,76 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
                 d = float(np.linalg.norm(bind[j, :3, 3] - mats[k, :3, 3]))
                 size = float(np.ptp(bind[have, :3, 3], axis=0).max()) if have.sum() > 1 else 1
                 if d > 1e-4 * max(size, 1e-9):
-                    notes.append(f"skin {s} binds joint {names[j]!r} {d:.3g} m away from the "
-                                 "first skin that lists it; its meshes use their own skin")
-    for j, n in enumerate(joint_nodes):
+                    notes.append(f"skin {s} binds joint {joints.names[j]!r} {d:.3g} m away "
+                                 "from the first skin that lists it; its meshes use their own "
+                                 "skin")
+    for j, n in enumerate(joints.nodes):
         if not have[j]:
-            bind[j] = node_world(n)
+            bind[j] = _node_world(g, n)
     if not np.all(np.isfinite(bind)):
         j = int(np.flatnonzero(~np.all(np.isfinite(bind), axis=(1, 2)))[0])
-        raise doc.error("skins", f"joint {names[j]!r} has no finite bind matrix (its inverse "
-                                 "bind matrix is nearly singular)")
+        raise doc.error("skins", f"joint {joints.names[j]!r} has no finite bind matrix (its "
+                                 "inverse bind matrix is nearly singular)")
+    return bind, frames
+
+
+def _bind_rotations(doc: _Doc, bind: np.ndarray, joints: _Joints, selected: list[int],
+                    skin_nodes: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The bind matrices' rotations ``(J, 3, 3)`` and uniform scales ``(J,)``; a mirroring,
+    non-uniform or sheared bind matrix is refused."""
     rot, sig, det = _polar(bind[:, :3, :3])
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         spread = sig.max(axis=1) / np.maximum(sig.min(axis=1), 1e-300) - 1.0
-    for j in range(J):
+    for j in range(len(joints.nodes)):
         if det[j] <= 0 or spread[j] > _SCALE_TOL:
             which = next((f"skins[{s}].inverseBindMatrices" for s, js in
-                          zip(selected, skin_nodes) if joint_nodes[j] in js), "nodes")
+                          zip(selected, skin_nodes) if joints.nodes[j] in js), "nodes")
             what = "a mirroring (negative) scale" if det[j] <= 0 else \
                 f"a non-uniform scale or shear (scales {', '.join(f'{x:.4g}' for x in sig[j])})"
-            raise doc.error(which, f"joint {names[j]!r} has {what} in its bind pose; only "
-                                   "uniform scale can be baked into the skeleton")
-    bind_pos = bind[:, :3, 3].copy()
-    bind_scale = sig.mean(axis=1)
-    bind_quat = _matrix_to_quat(rot)
-    offsets = bind_pos.copy()
-    offsets[1:] -= bind_pos[parents[1:]]
+            raise doc.error(which, f"joint {joints.names[j]!r} has {what} in its bind pose; "
+                                   "only uniform scale can be baked into the skeleton")
+    return rot, sig.mean(axis=1)
 
-    # End Sites: childless, meshless non-joint children of joints (Blender's "_end" bones)
+
+def _end_sites(g: _Graph, nodes: list, joints: _Joints, bind: np.ndarray,
+               bind_pos: np.ndarray) -> list[EndSite]:
+    """End Sites: the childless, meshless non-joint children of joints (Blender's ``_end``
+    bones), their offsets [m] in the bind pose."""
     end_sites = []
-    for j, n in enumerate(joint_nodes):
+    for j, n in enumerate(joints.nodes):
         if n < 0:
             continue
         for c in nodes[n].get("children", []):
             node = nodes[c]
-            if c in jset or node.get("children") or "mesh" in node or "camera" in node:
+            if c in joints.members or node.get("children") or "mesh" in node or \
+                    "camera" in node:
                 continue
             tip = (bind[j] @ g.local[c])[:3, 3]
             end_sites.append(EndSite(j, tip - bind_pos[j], node.get("name") or
-                                     f"{names[j]}_end"))
-    size = float(np.ptp(np.concatenate([bind_pos] + [[bind_pos[e.parent] + e.offset]
+                                     f"{joints.names[j]}_end"))
+    return end_sites
+
+
+def _extent(bind_pos: np.ndarray, end_sites: list[EndSite]) -> float:
+    """[m] the character's size: the largest extent of its joints and End Sites along an axis
+    in the bind pose (``bind_pos`` ``(J, 3)``)."""
+    return float(np.ptp(np.concatenate([bind_pos] + [[bind_pos[e.parent] + e.offset]
                                                       for e in end_sites]), axis=0).max())
 
-    height = float(np.ptp(bind_pos[:, 1]))
-    if height > 20.0:
-        notes.append(f"the bind pose is {height:.3g} m tall in glTF metres; the file was "
-                     "probably authored in centimetres (scale it where sizes matter)")
 
-    # ---------------------------------------------------------------- poses
+# ---------------------------------------------------------------- poses
+def _poses(doc: _Doc, g: _Graph, joints: _Joints, rot: np.ndarray, fps: float,
+           notes: list[str]) -> tuple[_Pose, list[_Pose]]:
+    """The scene's default node pose and every animation the skeleton can take, sampled at
+    ``fps`` (``rot``: ``(J, 3, 3)`` the bind rotations)."""
     needed = set()
-    for n in joint_nodes:
+    for n in joints.nodes:
         while n >= 0 and n not in needed:
             needed.add(n)
             n = g.parent[n]
     needed_order = [n for n in g.order if n in needed]
-    default = _pose_from_world(np.array([node_world(n) for n in joint_nodes])[None], rot,
-                               parents, "default pose")
+    default = _pose_from_world(np.array([_node_world(g, n) for n in joints.nodes])[None], rot,
+                               joints.parents, "default pose")
     poses: list[_Pose] = []
     weights_note = False
     for a, anim in enumerate(doc.array("animations")):
@@ -999,8 +1119,8 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
         world, used, skipped = _animate(doc, a, anim, g, needed_order, times)
         weights_note |= skipped
         G = np.array([world[n] if n >= 0 else np.broadcast_to(np.eye(4), world[
-            needed_order[0]].shape) for n in joint_nodes]).transpose(1, 0, 2, 3)
-        pose = _pose_from_world(G, rot, parents, name)
+            needed_order[0]].shape) for n in joints.nodes]).transpose(1, 0, 2, 3)
+        pose = _pose_from_world(G, rot, joints.parents, name)
         if pose is None:
             notes.append(f"animation {name!r} scales a joint non-uniformly (or beyond "
                          "finite numbers); it was left out")
@@ -1012,47 +1132,39 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
         notes.append("morph-target weight channels are not used")
     if default is None:
         raise doc.error("nodes", "the default pose scales a joint non-uniformly")
+    return default, poses
 
-    # ---------------------------------------------------------------- translated joints
+
+# ---------------------------------------------------------------- translated joints
+def _channels(joints: _Joints, offsets: np.ndarray, size: float, poses: list[_Pose],
+              hint: dict) -> tuple[tuple[str, ...], ...]:
+    """Per joint, its BVH channels: rotations, and positions for the root and every joint whose
+    local translation strays from its offset ``(J, 3)`` [m] in one of ``poses`` (or that the
+    writer listed)."""
+    J = len(joints.nodes)
     tol = _MOVE_TOL * max(size, 1e-9)
     moving = np.zeros(J, dtype=bool)
     moving[0] = True
-    for pose in [default] + poses:
-        local_t = _local_translations(pose, parents)
+    for pose in poses:
+        local_t = _local_translations(pose, joints.parents)
         dev = np.linalg.norm(local_t - offsets, axis=-1).max(axis=0)
         moving |= dev > tol
     listed = hint.get("positionChannels")
     if isinstance(listed, list):
         for nm in listed:
-            if nm in names:
-                moving[names.index(nm)] = True
-    channels = tuple(POSITION_LAYOUT + ROTATION_LAYOUT if moving[j] else ROTATION_LAYOUT
-                     for j in range(J))
-    skeleton = Skeleton(names=names, parents=parents, offsets=offsets, channels=channels,
-                        end_sites=end_sites, source=GLTF_SOURCE)
-    stem = Path(doc.path).stem if doc.path else "character"
-    motions = tuple(_pose_motion(p, skeleton, parents, 1.0 / fps) for p in poses)
-    node_pose = _pose_motion(default, skeleton, parents, 1.0 / fps)
-    node_pose = node_pose.replace(name=f"{stem} (default pose)")
+            if nm in joints.names:
+                moving[joints.names.index(nm)] = True
+    return tuple(POSITION_LAYOUT + ROTATION_LAYOUT if moving[j] else ROTATION_LAYOUT
+                 for j in range(J))
 
-    # ---------------------------------------------------------------- meshes
-    skin_maps = [np.array([jindex[n] for n in joints], dtype=np.intp) for joints in skin_nodes]
-    meshes = _meshes(doc, g, selected, skin_maps, frames, ibms, jindex, joint_ancestor, bind,
-                     notes)
 
+def _node_rest(g: _Graph, joint_nodes: list[int]):
+    """The joints' node rest TRS: translations ``(J, 3)`` [m], rotations ``(J, 4)`` (x, y, z, w)
+    and scales ``(J, 3)``; a new root (node -1) has the identity."""
     joint_t = np.array([g.t[n] if n >= 0 else np.zeros(3) for n in joint_nodes])
     joint_q = np.array([g.q[n] if n >= 0 else np.array([0, 0, 0, 1.0]) for n in joint_nodes])
     joint_s = np.array([g.s[n] if n >= 0 else np.ones(3) for n in joint_nodes])
-    skin_names = tuple(str(skins[s].get("name") or f"skin_{s}") for s in selected)
-    return Character(
-        name=stem, skeleton=skeleton, meshes=tuple(meshes), motions=motions,
-        bind_rotations=_frozen(bind_quat), bind_scales=_frozen(bind_scale),
-        node_translations=_frozen(joint_t), node_rotations=_frozen(joint_q),
-        node_scales=_frozen(joint_s), node_indices=_frozen(np.array(joint_nodes, np.intp)),
-        skin_joints=tuple(_frozen(m) for m in skin_maps),
-        skin_frames=_frozen(np.array(frames)), skin_names=skin_names,
-        skins=tuple(selected), node_pose=node_pose, fps=float(fps), path=doc.path,
-        notes=tuple(notes))
+    return joint_t, joint_q, joint_s
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -1198,8 +1310,8 @@ def _pose_motion(pose: _Pose, skeleton: Skeleton, parents: np.ndarray,
 
 
 # =========================================================================== meshes
-def _meshes(doc: _Doc, g: _Graph, selected, skin_maps, frames, ibms, jindex, joint_ancestor,
-            bind, notes) -> list[Mesh]:
+def _meshes(doc: _Doc, g: _Graph, selected, skin_maps, frames, ibms, tree: _Joints, bind,
+            notes) -> list[Mesh]:
     nodes = doc.array("nodes")
     out: list[Mesh] = []
     loose = 0
@@ -1226,11 +1338,11 @@ def _meshes(doc: _Doc, g: _Graph, selected, skin_maps, frames, ibms, jindex, joi
             k = selected.index(s)
             rigid_joint = None
         else:
-            a = n if n in jindex else joint_ancestor(n)
+            a = n if n in tree.index else _joint_ancestor(g, tree.members, n)
             if a < 0:
                 loose += 1
                 continue
-            rigid_joint = jindex[a]
+            rigid_joint = tree.index[a]
             chain = np.eye(4)
             p = n
             while p != a:
