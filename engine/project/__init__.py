@@ -14,7 +14,7 @@ gives the same bytes::
 
     {
       "format": "motion-composer-project",
-      "version": 1,
+      "version": 2,
       "performer": {"path": "clips/walk.bvh", "units": null, "scale": null, "up_axis": null,
                     "position_mode": null},
       "target": {...},
@@ -24,6 +24,7 @@ gives the same bytes::
       "root": {"mode": "scaled", "scale": null},
       "contacts": {"auto": true, "options": {"height": 0.03, ...}},
       "floor": null,
+      "ik": {"tolerance": 0.0001, "max_iterations": 60, "damping": 0.005, ...},
       "viewer": {"current_frame": 0, "play_range": null, "camera": {...},
                  "shown": ["performer", "target"], "options": {}},
       "constraints": [{"joint": "LeftFoot", "kind": "position", ...}, ...],

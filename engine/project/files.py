@@ -167,6 +167,10 @@ def _check(project: Project, performer: Motion, target: Motion) -> None:
         if c.smooth_out > F - 1:
             raise _Invalid(f"{where}.range", f"smooth_out {c.smooth_out} is past the last "
                                              f"frame ({F - 1})")
+    for i, (joint, _) in enumerate(project.ik_options.joint_limits):
+        if joint >= tsk.num_joints:
+            raise _Invalid(f"ik.joint_limits[{i}]", f"joint {joint} is past the target's last "
+                                                    f"joint ({tsk.num_joints - 1})")
     for i, (joint, _) in enumerate(project.displacement.curves):
         if joint != ROOT and joint not in tsk.index:
             raise _Invalid(f"displacement.channels[{i}].joint",
@@ -248,11 +252,14 @@ def solve_project(project: Project, performer: Motion | None = None,
     With ``regenerate``, the automatic constraints are dropped and made again from the
     project's settings (``auto_contacts``, ``floor``); otherwise the constraints are solved as
     they are (automatic ones as edited). The map replaces the previous one, hand edits
-    included.
+    included. ``ik_options`` solve with other settings than the project's; the copy then
+    holds them (their ``scale`` left to each run).
     """
     if performer is None or target is None:
         performer, target = read_sources(project)
     check_project(project, performer, target)
+    if ik_options is not None:
+        project = project.replace(ik_options=dataclasses.replace(ik_options, scale=None))
     if regenerate:
         job = project.job(performer, target,
                           constraints=[c for c in project.constraints if not c.auto],

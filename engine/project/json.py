@@ -17,13 +17,17 @@ from ..correction.constraints import KINDS, Constraint, ConstraintError
 from ..correction.contacts import ContactOptions
 from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS,
                                        TRANSLATION_CHANNELS, Curve, DisplacementMap)
-from ..errors import MotionComposerError
+from ..correction.ik import IKOptions
+from ..errors import IKOptionsError, MotionComposerError
 from ..units import AXES, UNITS
 from .migrations import migrate
 from .model import (FORMAT, ROLES, SKELETONS, VERSION, Project, ProjectError, Source,
                     ViewerState, _Invalid, _kind, _show)
 
-__all__ = ["project_to_json", "project_from_json"]
+__all__ = ["project_to_json", "project_from_json", "ik_dict", "IK_FIELDS"]
+
+#: the IK settings a project stores (``scale`` is taken from the character on each run)
+IK_FIELDS = tuple(f.name for f in dataclasses.fields(IKOptions) if f.name != "scale")
 
 
 # --------------------------------------------------------------------------- writing
@@ -58,6 +62,7 @@ def _project_dict(p: Project, folder) -> dict:
                      "options": {f.name: float(getattr(p.contact_options, f.name))
                                  for f in dataclasses.fields(ContactOptions)}},
         "floor": float(p.floor) if p.floor is not None else None,
+        "ik": ik_dict(p.ik_options),
         "viewer": {"current_frame": int(v.current_frame),
                    "play_range": [int(x) for x in v.play_range] if v.play_range else None,
                    "camera": dict(sorted(v.camera.items())),
@@ -71,6 +76,13 @@ def _project_dict(p: Project, folder) -> dict:
     if embedded:
         out["embedded"] = embedded
     return out
+
+
+def ik_dict(options: IKOptions) -> dict:
+    """The ``"ik"`` object: every setting but ``scale`` (a per-run value), in field order;
+    ``joint_limits`` as ``[[joint index, angle], ...]``."""
+    return {name: ([[j, a] for j, a in options.joint_limits] if name == "joint_limits"
+                   else getattr(options, name)) for name in IK_FIELDS}
 
 
 def _displacement_dict(displacement: DisplacementMap) -> dict:
@@ -186,13 +198,17 @@ def project_from_json(text: str, path=None) -> Project:
 
 
 def _parse(text: str):
+    bad = []                                  # NaN, Infinity, too large: found after parsing
+
     def constant(name):
-        raise _Invalid("", f"{name} is not a number a project may hold")
+        bad.append(_NotANumber(f"{name} is not a number a project may hold"))
+        return bad[-1]
 
     def number(s):
         value = float(s)
         if not math.isfinite(value):
-            raise _Invalid("", f"the number {s[:20]} is too large")
+            bad.append(_NotANumber(f"the number {s[:20]} is too large"))
+            return bad[-1]
         return value
 
     def unique(pairs):
@@ -204,8 +220,11 @@ def _parse(text: str):
         return out
 
     try:
-        return json.loads(text, parse_constant=constant, parse_float=number,
+        data = json.loads(text, parse_constant=constant, parse_float=number,
                           object_pairs_hook=unique)
+        if bad:
+            _reject_not_a_number(data, "")
+        return data
     except json.JSONDecodeError as exc:
         tail = (" (the file ends there: it looks truncated)"
                 if exc.pos >= len(text.rstrip()) else "")
@@ -217,8 +236,27 @@ def _parse(text: str):
         raise _Invalid("", f"not valid JSON: {exc}") from None
 
 
+class _NotANumber:
+    """A value the file holds that no project may (NaN, Infinity, a number too large)."""
+
+    def __init__(self, problem: str):
+        self.problem = problem
+
+
+def _reject_not_a_number(value, where: str) -> None:
+    """Raise naming the field of the first :class:`_NotANumber` in ``value``."""
+    if isinstance(value, _NotANumber):
+        raise _Invalid(where, value.problem)
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _reject_not_a_number(v, _sub(where, k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _reject_not_a_number(v, f"{where}[{i}]")
+
+
 _TOP = ("format", "version", "performer", "target", "correspondence", "binding", "root",
-        "contacts", "floor", "viewer", "constraints", "displacement", "embedded")
+        "contacts", "floor", "ik", "viewer", "constraints", "displacement", "embedded")
 
 
 def _build(data: dict, folder) -> Project:
@@ -236,6 +274,7 @@ def _build(data: dict, folder) -> Project:
         root=_root(data.get("root", {})),
         auto_contacts=auto_contacts, contact_options=contact_options,
         floor=_optional(_num, data.get("floor"), "floor"),
+        ik_options=_ik(data.get("ik", {})),
         constraints=tuple(_constraint(c, f"constraints[{i}]")
                           for i, c in enumerate(_list(data.get("constraints", []),
                                                       "constraints"))),
@@ -322,6 +361,31 @@ def _contacts(data) -> tuple[bool, ContactOptions]:
     options = ContactOptions(**{k: _num(v, f"contacts.options.{k}", positive=True)
                                 for k, v in o.items()})
     return _bool(d.get("auto", False), "contacts.auto"), options
+
+
+def _ik(data) -> IKOptions:
+    d = _obj(data, "ik", optional=IK_FIELDS)
+    values = {}
+    for key, value in d.items():
+        where = f"ik.{key}"
+        if key == "max_iterations":
+            values[key] = _int(value, where, minimum=0)
+        elif key == "joint_limits":
+            values[key] = tuple(_joint_limit(item, f"{where}[{i}]")
+                                for i, item in enumerate(_list(value, where)))
+        else:
+            values[key] = _num(value, where)
+    try:
+        return IKOptions(**values)
+    except IKOptionsError as exc:
+        raise _Invalid(f"ik.{exc.field}", exc.problem) from None
+
+
+def _joint_limit(data, where: str) -> tuple[int, float]:
+    pair = _list(data, where)
+    if len(pair) != 2:
+        raise _Invalid(where, f"expected [joint index, angle], not {_show(pair)}")
+    return _int(pair[0], f"{where}[0]", minimum=0), _num(pair[1], f"{where}[1]")
 
 
 _CONSTRAINT_KEYS = ("priority", "weight", "name", "enabled", "auto", "meta")

@@ -75,3 +75,17 @@ def _v0_to_v1(old: dict) -> dict:
     data["correspondence"] = {"pairs": pairs}
     data["version"] = 1
     return data
+
+
+@migrator(1)
+def _v1_to_v2(old: dict) -> dict:
+    """Version 1 had no IK settings: its corrections were solved with the constants the
+    solver then had built in, which version 2 holds in the ``"ik"`` object."""
+    return dict(old, ik=dict(_SOLVER_BEFORE_V2), version=2)
+
+
+#: the IK settings built into the solver up to format version 1
+_SOLVER_BEFORE_V2 = {"tolerance": 1e-4, "max_iterations": 60, "damping": 0.005,
+                     "max_step": 0.05, "attraction": 0.5, "settle": 1e-5,
+                     "nullspace_damping": 1e-6, "step_cap": 0.3, "polish_share": 0.25,
+                     "priority_gate": 10.0, "joint_limits": []}

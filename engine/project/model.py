@@ -25,7 +25,7 @@ __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceErr
 
 FORMAT = "motion-composer-project"
 #: the format version this module writes (and the newest it reads)
-VERSION = 1
+VERSION = 2
 SUFFIX = ".mcp"
 ROLES = ("performer", "target")
 #: skeletons the viewer can show
@@ -178,7 +178,11 @@ class ViewerState:
 @dataclass(frozen=True, eq=False)
 class Project:
     """A whole retargeting session (see the module doc). Plain data: change it with
-    :func:`dataclasses.replace`."""
+    :func:`dataclasses.replace`.
+
+    ``ik_options`` are the settings its correction is solved with; their ``scale`` stays
+    ``None`` (each run takes the character's stature), so it is not part of a project.
+    """
 
     performer: Source
     target: Source
@@ -188,12 +192,16 @@ class Project:
     auto_contacts: bool = False
     contact_options: ContactOptions = field(default_factory=ContactOptions)
     floor: float | None = None
+    ik_options: IKOptions = field(default_factory=IKOptions)
     constraints: tuple = ()
     displacement: DisplacementMap = field(default_factory=DisplacementMap)
     viewer: ViewerState = field(default_factory=ViewerState)
 
     def __post_init__(self):
         object.__setattr__(self, "constraints", tuple(self.constraints))
+        if self.ik_options.scale is not None:
+            raise ValueError("a project's IK options leave scale None: each run takes the "
+                             "character's stature")
 
     def replace(self, **changes) -> "Project":
         return dataclasses.replace(self, **changes)
@@ -201,11 +209,13 @@ class Project:
     def job(self, performer: Motion, target: Motion, *, constraints=(),
             auto_contacts: bool = False, floor: float | None = None,
             ik_options: IKOptions | None = None) -> Job:
-        """A pipeline :class:`Job` with this project's map and options."""
+        """A pipeline :class:`Job` with this project's map and options (``ik_options``
+        overrides the project's)."""
         return Job(performer=performer, target=target, correspondence=self.correspondence,
                    bind_options=self.bind_options, root=self.root,
                    constraints=tuple(constraints), auto_contacts=auto_contacts,
-                   contact_options=self.contact_options, floor=floor, ik_options=ik_options)
+                   contact_options=self.contact_options, floor=floor,
+                   ik_options=self.ik_options if ik_options is None else ik_options)
 
 
 class ProjectMotion(NamedTuple):
