@@ -40,6 +40,66 @@ def _add_reader_options(parser: argparse.ArgumentParser) -> None:
                             "(relative)")
 
 
+#: (flag, IKOptions field, help) of the solver settings the commands that run IK take
+IK_FLAGS = (
+    ("--ik-tolerance", "tolerance", "metres: a position or plane task is met below this error"),
+    ("--ik-iterations", "max_iterations", "the cap of iterations per frame"),
+    ("--ik-damping", "damping",
+     "damped least squares lambda, as a fraction of the character's stature"),
+    ("--ik-max-step", "max_step",
+     "the largest correction asked of one task per iteration, as a fraction of the stature"),
+    ("--ik-attraction", "attraction",
+     "gain from 0 to 1 of the pull towards the converted posture per iteration"),
+    ("--ik-settle", "settle", "a frame whose tasks are met stops once its largest step is "
+                              "below this, radians or metres"),
+    ("--ik-nullspace-damping", "nullspace_damping",
+     "the lambda, as a fraction of the stature, of the null-space projections of the lower "
+     "priorities and the attraction"),
+    ("--ik-step-cap", "step_cap", "radians: the largest turn of any joint in one iteration"),
+    ("--ik-polish-share", "polish_share",
+     "the share from 0 to 1 of the iterations, at their end, that only restore the first "
+     "priority level"),
+    ("--ik-priority-gate", "priority_gate",
+     "a lower priority runs while the higher ones are within this many tolerances, fading "
+     "out at twice that"),
+)
+
+
+def _add_ik_options(parser: argparse.ArgumentParser, defaults: str) -> None:
+    from engine.correction.ik import IKOptions
+
+    solver = IKOptions()
+    group = parser.add_argument_group(f"IK settings (not given: {defaults})")
+    for flag, name, text in IK_FLAGS:
+        group.add_argument(flag, dest=f"ik_{name}", metavar="N" if name == "max_iterations"
+                           else "X", help=f"{text} (default {getattr(solver, name):g})")
+
+
+def ik_options_from_args(args, base):
+    """``base`` (an :class:`~engine.correction.ik.IKOptions`) with the ``--ik-*`` values
+    given on the command line; a bad value raises :class:`MotionComposerError` naming its
+    flag."""
+    import dataclasses
+
+    from engine.errors import IKOptionsError
+
+    changes, flags = {}, {}
+    for flag, name, _ in IK_FLAGS:
+        text = getattr(args, f"ik_{name}")
+        if text is None:
+            continue
+        flags[name] = flag
+        try:
+            changes[name] = int(text) if name == "max_iterations" else float(text)
+        except ValueError:
+            wanted = "a whole number" if name == "max_iterations" else "a number"
+            raise MotionComposerError(f"{flag}: expected {wanted}, not {text!r}") from None
+    try:
+        return dataclasses.replace(base, **changes)
+    except IKOptionsError as exc:
+        raise MotionComposerError(f"{flags[exc.field]}: {exc.problem}") from None
+
+
 GLTF_SUFFIXES = (".glb", ".gltf")
 
 
@@ -148,10 +208,12 @@ def cmd_retarget(args) -> int:
     from engine.errors import MotionComposerError
     from engine.fileio import atomic_write
     from engine.conversion import BindOptions, RootOptions
+    from engine.correction.ik import IKOptions
     from engine.project import Project, Source
     from engine.scene import Scene
 
     started = time.perf_counter()
+    ik_options = ik_options_from_args(args, IKOptions())
     performer = read_bvh(args.performer)
     character = None
     if Path(args.target).suffix.lower() in (".glb", ".gltf"):
@@ -185,7 +247,8 @@ def cmd_retarget(args) -> int:
                                  distribute=args.distribute),
         root=RootOptions(mode=args.root,
                          scale=tuple(args.root_scale) if args.root_scale else None),
-        constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor)
+        constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor,
+        ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
     if Path(args.output).suffix.lower() in (".glb", ".gltf"):
         from engine.formats.gltf import write_gltf
@@ -226,6 +289,7 @@ def cmd_export(args) -> int:
     started = time.perf_counter()
     scene = Scene.open(args.project)
     if args.solve:
+        scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
     scene.check()
     motion = scene.motion
@@ -239,6 +303,7 @@ def cmd_export(args) -> int:
 
 def cmd_batch(args) -> int:
     """``batch PROJECT CLIP... -o DIR``: one project's rules over many clips, in parallel."""
+    import dataclasses
     import time
 
     from engine.batch import recipe_from_project, run_batch
@@ -249,6 +314,8 @@ def cmd_batch(args) -> int:
     recipe = recipe_from_project(project, suffix=args.suffix)
     if args.any_skeleton:
         recipe = type(recipe)(**{**recipe.__dict__, "pairs": {}})
+    ik = ik_options_from_args(args, project.ik_options)
+    recipe = type(recipe)(**{**recipe.__dict__, "ik": dataclasses.asdict(ik)})
     width = len(str(len(args.clips)))
 
     def progress(done, total, summary):
@@ -339,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "constraints and the IK correction), to reopen or export later")
     proj.add_argument("--embed-sources", action="store_true",
                       help="embed both clips in the project so that it can be sent on its own")
+    _add_ik_options(rt, "the solver's defaults; --save-project stores them")
     rt.set_defaults(func=cmd_retarget)
 
     bt = sub.add_parser("batch", help="apply one project's rules to many clips",
@@ -357,6 +425,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="map each clip automatically instead of with the project's map "
                          "(clips from other skeletons)")
     bt.add_argument("--summary", metavar="FILE.json", help="write the per-clip summary")
+    _add_ik_options(bt, "the project's")
     bt.set_defaults(func=cmd_batch)
 
     ex = sub.add_parser("export", help="write the motion of a saved project",
@@ -368,6 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--solve", action="store_true",
                     help="solve the project's constraints with IK again instead of using the "
                          "saved correction (hand edits to the curves are then replaced)")
+    _add_ik_options(ex, "the project's; they apply with --solve")
     ex.set_defaults(func=cmd_export)
     return parser
 

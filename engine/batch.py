@@ -31,6 +31,7 @@ class Recipe:
         floor: keep the feet on or above this height [m], or None.
         suffix: appended to each clip's stem for its output name.
         target_reader: options for reading the target (units, up_axis, ...).
+        ik: :class:`~engine.correction.ik.IKOptions` fields (none: the defaults).
     """
 
     target_path: str
@@ -41,12 +42,14 @@ class Recipe:
     floor: float | None = None
     suffix: str = ""
     target_reader: dict = field(default_factory=dict)
+    ik: dict = field(default_factory=dict)
 
 
 def recipe_from_project(project, *, suffix: str = "") -> Recipe:
     """The rules of a saved project, for other clips: its target, mapping, binding, root
-    options, automatic contacts and floor. (Its own constraints name frames of its own clip,
-    so they do not carry over; automatic contacts are detected again on each clip.)"""
+    options, automatic contacts, floor and IK settings. (Its own constraints name frames of
+    its own clip, so they do not carry over; automatic contacts are detected again on each
+    clip.)"""
     import dataclasses
     src = project.target
     if src.path is None:
@@ -57,7 +60,8 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
     root = dataclasses.asdict(project.root)
     return Recipe(target_path=str(src.path), pairs=dict(project.correspondence.pairs),
                   bind=bind, root=root, auto_contacts=bool(project.auto_contacts),
-                  floor=project.floor, suffix=suffix, target_reader=src.reader_options())
+                  floor=project.floor, suffix=suffix, target_reader=src.reader_options(),
+                  ik=dataclasses.asdict(project.ik_options))
 
 
 def _read_character(path: str, options: dict):
@@ -78,6 +82,7 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     from .errors import MotionComposerError
     from .conversion.binding import BindOptions
     from .conversion.converter import RootOptions
+    from .correction.ik import IKOptions
     from .project import Project, Source
     from .scene import Scene
 
@@ -96,7 +101,7 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
                           target=Source(recipe.target_path, **recipe.target_reader),
                           correspondence=corr, bind_options=BindOptions(**recipe.bind),
                           root=RootOptions(**recipe.root), auto_contacts=recipe.auto_contacts,
-                          floor=recipe.floor)
+                          floor=recipe.floor, ik_options=IKOptions(**recipe.ik))
         result = Scene(project, performer, target).solve(regenerate=True)
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         out = Path(out_dir) / f"{Path(clip).stem}{recipe.suffix}.bvh"

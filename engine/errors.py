@@ -17,6 +17,7 @@ __all__ = [
     "ExportError",
     "SkeletonError",
     "MappingError",
+    "IKOptionsError",
 ]
 
 
@@ -82,3 +83,20 @@ class MappingError(MotionComposerError):
         self.path = os.fspath(path) if path is not None else None
         self.problem = problem
         super().__init__(f"{self.path}: {problem}" if self.path else problem)
+
+
+class IKOptionsError(MotionComposerError):
+    """An inverse-kinematics setting out of its range (a negative damping, a NaN tolerance).
+
+    Attributes:
+        field: the :class:`~engine.correction.ik.IKOptions` field (``"damping"``).
+        problem: the message without the field.
+    """
+
+    def __init__(self, field: str, problem: str):
+        self.field = field
+        self.problem = problem
+        super().__init__(f"IK option {field}: {problem}")
+
+    def __reduce__(self):                     # survives pickling (worker processes)
+        return type(self), (self.field, self.problem)

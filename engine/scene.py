@@ -306,7 +306,8 @@ class Scene:
         return value.message if isinstance(value, _Failed) else ""
 
     def _ik_options(self, composed):
-        return getattr(self.project, "ik_options", None)
+        # the project's settings; their scale (None) is the character's stature per run
+        return self.project.ik_options
 
     @property
     def character(self):
@@ -434,9 +435,13 @@ def solve_project(project: Project, performer: Motion | None = None,
     With ``regenerate``, the automatic constraints are dropped and made again from the
     project's settings (``auto_contacts``, ``floor``); otherwise the constraints are solved as
     they are (automatic ones as edited). The map replaces the previous one, hand edits
-    included."""
+    included. ``ik_options`` solve with other settings than the project's."""
+    if ik_options is not None:
+        # solved with other settings than the project's: the copy holds them (their scale
+        # is each run's: the character's stature)
+        project = project.replace(ik_options=dataclasses.replace(ik_options, scale=None))
     scene = Scene.from_project(project, performer, target)
-    return scene.solve(regenerate=regenerate, ik_options=ik_options, progress=progress,
+    return scene.solve(regenerate=regenerate, progress=progress,
                        cancel=cancel).scene.project
 
 

@@ -16,9 +16,9 @@ from app.cli import main
 from conftest import REPO, clip_path
 from engine import forward_kinematics, read_bvh
 from engine.formats.bvh import format_bvh
-from engine.scene import evaluate_project
-from engine.project import (MissingSourceError, ProjectError, load_project,
+from engine.project import (VERSION, MissingSourceError, ProjectError, load_project,
                             open_project)
+from engine.scene import evaluate_project
 from ik_fixtures import MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")
@@ -143,7 +143,7 @@ def test_a_corrupt_project_gives_one_line_and_exit_2(session, capsys, tmp_path):
     data["version"] = 7
     bad.write_text(json.dumps(data))
     _one_line_exit_2(*_run(capsys, "export", bad, "-o", tmp_path / "o.bvh"),
-                     "newer Motion Composer (format version 7; this one reads up to 1)")
+                     f"newer Motion Composer (format version 7; this one reads up to {VERSION})")
     _one_line_exit_2(*_run(capsys, "export", tmp_path / "none.mcp", "-o", tmp_path / "o.bvh"),
                      "none.mcp", "no such project file")
     assert not (tmp_path / "o.bvh").exists()

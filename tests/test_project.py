@@ -356,7 +356,7 @@ def test_a_truncated_file(saved):
 
 def test_broken_json(saved):
     text = saved.read_text()
-    saved.write_text(text.replace('"version": 1,', '"version": 1', 1))
+    saved.write_text(text.replace(f'"version": {VERSION},', f'"version": {VERSION}', 1))
     with pytest.raises(ProjectError, match=r"not valid JSON at line 4, column 3"):
         load_project(saved)
     saved.write_text(text.replace('"floor": -0.93', '"floor": NaN', 1))

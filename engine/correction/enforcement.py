@@ -29,6 +29,7 @@ Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -152,7 +153,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     Args:
         composed: the directly converted motion: the attraction posture of every frame.
         constraints: :class:`Constraint` list (disabled ones are skipped).
-        options: solver settings; ``scale`` defaults to the character's height.
+        options: solver settings (default :class:`IKOptions`); an unset ``scale`` is
+            the composed motion's stature.
         warm_start: solve frame by frame from the solution at t - 1 (the paper's scheme)
             instead of in batches from the attraction posture.
         progress: called with a fraction in [0, 1].
@@ -165,8 +167,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     sk = composed.skeleton
     F = composed.num_frames
     cons = _check(constraints, composed)
-    if options is None:
-        options = IKOptions(scale=max(stature(composed), 0.1))
+    options = options if options is not None else IKOptions()
+    if options.scale is None:
+        options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
     base_rot = composed.rotations
     base_tra = composed.translations
     timings = {}

@@ -19,10 +19,14 @@ converge leave the batch.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import IKOptionsError
 from ..quaternions import qconj, qmul, qnormalize, qrot, to_matrix
 from ..skeleton import Skeleton
 
@@ -108,20 +112,47 @@ class Task:
 
 @dataclass(frozen=True)
 class IKOptions:
-    """Solver settings.
+    """Solver settings: plain, frozen, hashable data (a cache may key results by them).
+
+    Every field is checked on construction; a value out of its range raises
+    :class:`~engine.errors.IKOptionsError` naming the field. Lengths are given as fractions
+    of ``scale`` (the character's size) so that one setting suits a child and a giant.
 
     Attributes:
         tolerance: [m] a position or plane task is met below this error (orientation tasks
-            use ``tolerance / scale`` radians with ``scale`` [m] the character's size).
-        max_iterations: the cap per frame.
-        damping: damped least squares lambda, as a fraction of ``scale`` [m].
-        max_step: the largest task correction taken per iteration, as a fraction of ``scale``.
+            use ``tolerance / scale`` radians). Default 1e-4 (0.1 mm); positive.
+        max_iterations: the cap of iterations per frame. Default 60; a whole number >= 0.
+        damping: damped least squares lambda of the task levels, as a fraction of
+            ``scale``. Larger is steadier near singularities (a stretched leg) and slower to
+            converge. Default 0.005; positive.
+        max_step: the largest correction asked of one task per iteration, as a fraction of
+            ``scale``. Default 0.05; positive.
         attraction: gain [0, 1] of the pull towards the attraction posture per iteration.
-        settle: a frame whose tasks are met is done once its largest step is below this
-            (radians or metres): the null-space pull has converged too.
-        joint_limits: joint index -> largest angle [rad] a joint may turn away from its
-            attraction posture (optional).
-        scale: [m] the character's size (its height); set by the caller.
+            Default 0.5.
+        settle: [rad or m] a frame whose tasks are met is done once its largest step is below
+            this: the null-space pull has converged too. Default 1e-5; >= 0.
+        nullspace_damping: the lambda, as a fraction of ``scale``, of the damped
+            pseudo-inverses that project a lower level and the attraction into the null space
+            of the higher levels; small, so that the projection stays nearly exact.
+            Default 1e-6; positive.
+        step_cap: [rad] the largest turn of any joint in one iteration; a larger step is
+            scaled down as a whole (so that it stays in the higher levels' null space).
+            Default 0.3; positive.
+        polish_share: the share [0, 1] of ``max_iterations`` at their end during which, with
+            more than one priority level, only the first level is restored (no lower level,
+            no attraction): frames still going there have unreachable lower levels, which
+            would otherwise end mid-oscillation. Default 0.25 (the last quarter).
+        priority_gate: a lower priority level runs in full while the higher levels are at
+            most this many times their tolerance from being met, fades out linearly to
+            nothing at twice that, and waits beyond (its steps are first-order invisible to
+            the higher levels, but near their singularities the second-order part would push
+            them off faster than they recover). Default 10; positive.
+        joint_limits: ``((joint index, angle [rad]), ...)`` sorted by joint: the largest angle
+            a joint may turn away from its attraction posture. A ``{joint: angle}`` mapping is
+            accepted and stored as pairs. Default none; angles >= 0.
+        scale: [m] the character's size (its stature), a per-run value: ``None`` (the default)
+            lets :func:`~engine.correction.enforcement.enforce` take the composed motion's
+            stature; :func:`solve_frames` needs it set.
     """
 
     tolerance: float = 1e-4
@@ -130,8 +161,70 @@ class IKOptions:
     max_step: float = 0.05
     attraction: float = 0.5
     settle: float = 1e-5
-    joint_limits: dict = field(default_factory=dict)
-    scale: float = 1.7
+    nullspace_damping: float = 1e-6
+    step_cap: float = 0.3
+    polish_share: float = 0.25
+    priority_gate: float = 10.0
+    joint_limits: tuple = ()
+    scale: float | None = None
+
+    def __post_init__(self):
+        for name, low, high, open_low in _NUMBER_RANGES:
+            object.__setattr__(self, name, _checked_number(name, getattr(self, name), low,
+                                                           high, open_low))
+        count = self.max_iterations
+        if isinstance(count, bool) or not isinstance(count, numbers.Integral):
+            raise IKOptionsError("max_iterations", f"expected a whole number, not {count!r}")
+        if count < 0:
+            raise IKOptionsError("max_iterations", f"expected a whole number >= 0, not {count}")
+        object.__setattr__(self, "max_iterations", int(count))
+        object.__setattr__(self, "joint_limits", _checked_limits(self.joint_limits))
+        if self.scale is not None:
+            object.__setattr__(self, "scale", _checked_number("scale", self.scale, 0.0, None,
+                                                              True))
+
+
+#: (field, lowest, highest or None, lowest excluded) of the real-valued settings
+_NUMBER_RANGES = (("tolerance", 0.0, None, True), ("damping", 0.0, None, True),
+                  ("max_step", 0.0, None, True), ("attraction", 0.0, 1.0, False),
+                  ("settle", 0.0, None, False), ("nullspace_damping", 0.0, None, True),
+                  ("step_cap", 0.0, None, True), ("polish_share", 0.0, 1.0, False),
+                  ("priority_gate", 0.0, None, True))
+
+
+def _checked_number(name: str, value, low: float, high: float | None, open_low: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise IKOptionsError(name, f"expected a number, not {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise IKOptionsError(name, f"expected a finite number, not {value!r}")
+    if value < low or (open_low and value == low) or (high is not None and value > high):
+        wanted = (f"from {low:g} to {high:g}" if high is not None else
+                  f"above {low:g}" if open_low else f">= {low:g}")
+        raise IKOptionsError(name, f"expected a number {wanted}, not {value!r}")
+    return value
+
+
+def _checked_limits(limits) -> tuple:
+    """``joint_limits`` as sorted ``(joint, angle)`` pairs."""
+    pairs = limits.items() if isinstance(limits, Mapping) else limits
+    try:
+        pairs = [tuple(pair) for pair in pairs]
+    except TypeError:
+        raise IKOptionsError("joint_limits", f"expected {{joint index: angle}} or (joint, "
+                                             f"angle) pairs, not {limits!r}") from None
+    out = {}
+    for pair in pairs:
+        if len(pair) != 2:
+            raise IKOptionsError("joint_limits", f"expected (joint index, angle), not {pair!r}")
+        joint, angle = pair
+        if isinstance(joint, bool) or not isinstance(joint, numbers.Integral) or joint < 0:
+            raise IKOptionsError("joint_limits", f"expected a joint index (a whole number >= "
+                                                 f"0), not {joint!r}")
+        if int(joint) in out:
+            raise IKOptionsError("joint_limits", f"joint {int(joint)} is limited twice")
+        out[int(joint)] = _checked_number("joint_limits", angle, 0.0, None, False)
+    return tuple(sorted(out.items()))
 
 
 class _Structure:
@@ -258,10 +351,31 @@ def _damped_pinv(a: np.ndarray, lam2: float) -> np.ndarray:
     return a.transpose(0, 2, 1) @ np.linalg.inv(gram)
 
 
+class _Rows:
+    """The rows of a task set (``K`` in all): ``weights (B, K)``, each row's task
+    ``task (K,)``, the rows of each priority level, highest first, and each row's tolerance
+    ``tol (K,)`` (metres; radians for orientation)."""
+
+    def __init__(self, tasks: list[Task], structure: _Structure, options: IKOptions):
+        self.weights = np.concatenate([np.repeat(t.weight[:, None], t.rows, axis=1)
+                                       for t in tasks], axis=1)
+        self.task = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
+        self.levels = [np.flatnonzero([tasks[i].priority == lvl for i in self.task])
+                       for lvl in structure.levels]
+        is_orient = np.concatenate([[t.kind == "orientation"] * t.rows for t in tasks])
+        self.tol = np.where(is_orient, options.tolerance / options.scale, options.tolerance)
+
+
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
                  attraction_rot: np.ndarray, attraction_root: np.ndarray,
                  options: IKOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of frames that share ``tasks``.
+
+    Each iteration: the tasks' errors at the current posture; a step that restores the
+    priority levels in turn (:func:`_levels_step`), plus the pull towards the attraction
+    posture in the null space of every task (:func:`_attraction_step`); frames whose tasks
+    are met and whose posture has stopped moving leave the batch; the step is applied
+    (:func:`_apply_step`).
 
     Args:
         rot: ``(B, J, 4)`` starting local rotations (the attraction posture, or the solution
@@ -269,32 +383,27 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         tra: ``(B, K, 3)`` local translations of ``skeleton.translated`` (the root's first; only
             the root's is an unknown).
         attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
+        options: the settings; ``options.scale`` must be set.
 
     Returns:
         ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
         frame ``(B, T)`` (metres; radians for orientation), iterations used per frame ``(B,)``.
     """
+    if options.scale is None:
+        raise ValueError("solve_frames needs options.scale, the character's size [m]")
     rot = np.array(rot, dtype=float)
     tra = np.array(tra, dtype=float)
     B = rot.shape[0]
     structure = _Structure(skeleton, tasks)
+    rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
-    scale = options.scale
-    lam2 = (options.damping * scale) ** 2
-    ns_lam2 = (1e-6 * scale) ** 2
-    max_step = options.max_step * scale
-    tol = options.tolerance
-    weights = np.concatenate([np.repeat(t.weight[:, None], t.rows, axis=1) for t in tasks],
-                             axis=1)                                             # (B, K)
-    task_of_row = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
-    level_rows = [np.flatnonzero([tasks[i].priority == lvl for i in task_of_row])
-                  for lvl in structure.levels]
-    is_orient = np.concatenate([[t.kind == "orientation"] * t.rows for t in tasks])
-    row_tol = np.where(is_orient, tol / scale, tol)
     joints = structure.joints
     # joints that move nothing constrained sit at their attraction posture
     others = np.setdiff1d(np.arange(skeleton.num_joints), joints)
     rot[:, others] = attraction_rot[:, others]
+    # the last share of the cap only restores the first level (for frames still going:
+    # unreachable lower levels, which would otherwise end mid-oscillation)
+    polish_from = int((1.0 - options.polish_share) * options.max_iterations)
 
     iterations = np.zeros(B, dtype=np.intp)
     residual = np.zeros((B, len(tasks)))
@@ -307,48 +416,17 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         sticky_all[active] = sticky
         task_err = np.sqrt(np.add.reduceat(err * err, structure.row0[:-1], axis=1))
         residual[active] = task_err
-        met = np.all(np.abs(err) <= row_tol, axis=1)
+        met = np.all(np.abs(err) <= rows.tol, axis=1)
         if it == options.max_iterations:
             break
         iterations[active] += 1
-        err_raw = err
-        # the last quarter of the cap only restores the first level (for frames still going:
-        # unreachable lower levels, which would otherwise end mid-oscillation)
-        polishing = len(level_rows) > 1 and it >= int(0.75 * options.max_iterations)
-        # clamp the correction asked of each task
-        norms = task_err[:, task_of_row]
-        err = err * np.minimum(1.0, max_step / np.maximum(norms, 1e-12))
-        w = weights[active]
-        err = err * w
-        jac = jac * w[:, :, None]
-        nb = len(active)
-        dq = np.zeros((nb, structure.n))
-        stacked = None
-        behind = np.zeros(nb)               # how far the higher levels are from being met
-        for rows in level_rows:
-            jl, el = jac[:, rows], err[:, rows]
-            if stacked is None:
-                jt = jl
-                gate = 1.0
-            else:
-                jt = jl - (jl @ _damped_pinv(stacked, ns_lam2)) @ stacked
-                # a lower level waits while a higher one is not met: its steps are first-order
-                # invisible to the higher levels, but near their singularities (a stretched
-                # leg) the second-order part would push them off faster than they recover
-                gate = np.clip(2.0 - behind / 10.0, 0.0, 1.0)[:, None]
-                if polishing:
-                    gate = 0.0
-            dq += gate * _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
-            behind = np.maximum(behind, (np.abs(err_raw[:, rows]) / row_tol[rows]).max(axis=1))
-            stacked = jl if stacked is None else np.concatenate([stacked, jl], axis=1)
-        # attraction, in the null space of every task
-        dz = np.zeros((nb, structure.n))
-        dz[:, 0:3] = attraction_root[active] - t[:, 0]
+        polishing = len(rows.levels) > 1 and it >= polish_from
+        dq, stacked = _levels_step(err, jac, task_err, rows, active, structure.n, options,
+                                   polishing)
         cur = r[:, joints]
-        dz[:, 3:] = quat_to_rotvec(qmul(attraction_rot[active][:, joints],
-                                        qconj(cur))).reshape(nb, -1)
-        dz *= 0.0 if polishing else options.attraction
-        dq += dz - (_damped_pinv(stacked, ns_lam2) @ (stacked @ dz[..., None]))[..., 0]
+        dq += _attraction_step(stacked, t[:, 0], cur, attraction_root[active],
+                               attraction_rot[active][:, joints],
+                               0.0 if polishing else options.attraction, options)
         # a frame is done when its tasks are met and the posture has stopped moving
         settled = met & (np.abs(dq).max(axis=1) < options.settle)
         if np.all(settled):
@@ -357,27 +435,97 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         keep = ~settled
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
-        nb = len(active)
-        # apply
-        t = t.copy()
-        t[:, 0] += dq[:, 0:3]
-        step = dq[:, 3:].reshape(nb, len(joints), 3)
-        # at most 0.3 rad for any joint in one step, scaling the whole step alike so that
-        # it stays in the null space of the higher priorities
-        biggest = np.linalg.norm(step, axis=-1).max(axis=1)
-        shrink = np.minimum(1.0, 0.3 / np.maximum(biggest, 1e-12))
-        step = step * shrink[:, None, None]
-        t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
-        new = qnormalize(qmul(rotvec_to_quat(step), cur))
-        for j, limit in options.joint_limits.items():
-            if j in structure.col:
-                k = int(np.searchsorted(joints, j))
-                off = quat_to_rotvec(qmul(new[:, k], qconj(attraction_rot[active][:, j])))
-                ang = np.linalg.norm(off, axis=-1, keepdims=True)
-                off = off * np.minimum(1.0, limit / np.maximum(ang, 1e-12))
-                new[:, k] = qmul(rotvec_to_quat(off), attraction_rot[active][:, j])
-        r = r.copy()
-        r[:, joints] = new
+        r, t = _apply_step(dq, r, t, cur, structure, attraction_rot[active], options)
         rot[active] = r
         tra[active] = t
     return rot, tra, residual, iterations
+
+
+def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _Rows,
+                 active: np.ndarray, n: int, options: IKOptions,
+                 polishing: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The step ``(b, N)`` that restores the priority levels in turn, each in the null space
+    of the levels above, and the stacked Jacobian ``(b, K, N)`` of every level.
+
+    ``err (b, K)``, ``jac (b, K, N)`` and ``task_err (b, T)`` are the errors, Jacobians and
+    per-task errors of the ``active`` frames; while ``polishing`` only the first level acts.
+    """
+    scale = options.scale
+    lam2 = (options.damping * scale) ** 2
+    ns_lam2 = (options.nullspace_damping * scale) ** 2
+    err_raw = err
+    # clamp the correction asked of each task
+    norms = task_err[:, rows.task]
+    err = err * np.minimum(1.0, options.max_step * scale / np.maximum(norms, 1e-12))
+    w = rows.weights[active]
+    err = err * w
+    jac = jac * w[:, :, None]
+    dq = np.zeros((len(active), n))
+    stacked = None
+    behind = np.zeros(len(active))          # how far the higher levels are from being met
+    for level in rows.levels:
+        jl, el = jac[:, level], err[:, level]
+        if stacked is None:
+            jt = jl
+            gate = 1.0
+        else:
+            jt = jl - (jl @ _damped_pinv(stacked, ns_lam2)) @ stacked
+            # a lower level waits while a higher one is not met: its steps are first-order
+            # invisible to the higher levels, but near their singularities (a stretched
+            # leg) the second-order part would push them off faster than they recover
+            gate = np.clip(2.0 - behind / options.priority_gate, 0.0, 1.0)[:, None]
+            if polishing:
+                gate = 0.0
+        dq += gate * _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
+        behind = np.maximum(behind, (np.abs(err_raw[:, level]) / rows.tol[level]).max(axis=1))
+        stacked = jl if stacked is None else np.concatenate([stacked, jl], axis=1)
+    return dq, stacked
+
+
+def _attraction_step(stacked: np.ndarray, root: np.ndarray, cur: np.ndarray,
+                     home_root: np.ndarray, home: np.ndarray, gain: float,
+                     options: IKOptions) -> np.ndarray:
+    """The pull ``(b, N)`` towards the attraction posture, in the null space of every task.
+
+    ``root (b, 3)`` and ``cur (b, C, 4)`` are the current root translation and rotations of
+    the unknown joints, ``home_root`` and ``home`` the attraction posture's; ``stacked``
+    ``(b, K, N)`` the tasks' weighted Jacobian.
+    """
+    nb = len(root)
+    dz = np.zeros((nb, stacked.shape[2]))
+    dz[:, 0:3] = home_root - root
+    dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
+    dz *= gain
+    ns_lam2 = (options.nullspace_damping * options.scale) ** 2
+    return dz - (_damped_pinv(stacked, ns_lam2) @ (stacked @ dz[..., None]))[..., 0]
+
+
+def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
+                structure: _Structure, home: np.ndarray,
+                options: IKOptions) -> tuple[np.ndarray, np.ndarray]:
+    """The posture ``(r, t)`` after the step ``dq (b, N)``: the root moves, the unknown
+    joints (``cur (b, C, 4)`` now) turn, the whole step scaled down so that no joint turns
+    more than ``options.step_cap``, and limited joints are held within their angle of the
+    attraction posture ``home (b, J, 4)``."""
+    joints = structure.joints
+    nb = len(dq)
+    t = t.copy()
+    t[:, 0] += dq[:, 0:3]
+    step = dq[:, 3:].reshape(nb, len(joints), 3)
+    # at most step_cap for any joint in one step, scaling the whole step alike so that it
+    # stays in the null space of the higher priorities
+    biggest = np.linalg.norm(step, axis=-1).max(axis=1)
+    shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
+    step = step * shrink[:, None, None]
+    t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
+    new = qnormalize(qmul(rotvec_to_quat(step), cur))
+    for j, limit in options.joint_limits:
+        if j in structure.col:
+            k = int(np.searchsorted(joints, j))
+            off = quat_to_rotvec(qmul(new[:, k], qconj(home[:, j])))
+            ang = np.linalg.norm(off, axis=-1, keepdims=True)
+            off = off * np.minimum(1.0, limit / np.maximum(ang, 1e-12))
+            new[:, k] = qmul(rotvec_to_quat(off), home[:, j])
+    r = r.copy()
+    r[:, joints] = new
+    return r, t

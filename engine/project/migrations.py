@@ -1,0 +1,91 @@
+"""Format versions: every format change gets a new version and a migrator from the one
+before; :func:`migrate` takes an older file's data forward to :data:`~.model.VERSION`."""
+from __future__ import annotations
+
+from typing import Callable
+
+from .model import FORMAT, ROLES, VERSION, _Invalid, _kind, _show
+
+__all__ = ["MIGRATIONS", "migrator", "migrate"]
+
+
+#: version n -> a function taking a version-n project (a dict) to version n + 1
+MIGRATIONS: dict[int, Callable[[dict], dict]] = {}
+
+
+def migrator(version: int):
+    """Register a function migrating format ``version`` to ``version + 1``."""
+    def register(function):
+        MIGRATIONS[version] = function
+        return function
+    return register
+
+
+def migrate(data) -> dict:
+    """``data`` (a parsed project file of any supported version) in the current format."""
+    if not isinstance(data, dict):
+        raise _Invalid("", f"not a Motion Composer project: expected a JSON object, not "
+                           f"{_kind(data)}")
+    if data.get("format") != FORMAT:
+        raise _Invalid("format", f"not a Motion Composer project (expected \"format\": "
+                                 f"\"{FORMAT}\")")
+    version = data.get("version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 0:
+        raise _Invalid("version", f"expected a format version (a whole number), not "
+                                  f"{_show(version)}")
+    if version > VERSION:
+        raise _Invalid("version", f"this project was written by a newer Motion Composer "
+                                  f"(format version {version}; this one reads up to "
+                                  f"{VERSION}); update Motion Composer to open it")
+    while version < VERSION:
+        step = MIGRATIONS.get(version)
+        if step is None:
+            raise _Invalid("version", f"format version {version} is too old for this Motion "
+                                      f"Composer (it reads {min(MIGRATIONS, default=VERSION)} "
+                                      f"to {VERSION})")
+        data = step(data)
+        assert data["version"] == version + 1, "a migrator must raise the version by one"
+        version = data["version"]
+    return data
+
+
+@migrator(0)
+def _v0_to_v1(old: dict) -> dict:
+    """Version 0 (the first sessions): sources were bare paths, the mapping a list of
+    ``[target, performer]`` pairs under ``"mapping"``; no viewer state, contacts, floor or
+    embedding."""
+    data = {k: v for k, v in old.items() if k not in ("mapping", "performer", "target")}
+    for role in ROLES:
+        src = old.get(role)
+        if not isinstance(src, str):
+            raise _Invalid(role, f"expected the clip's path (format version 0), not "
+                                 f"{_show(src)}")
+        data[role] = {"path": src}
+    mapping = old.get("mapping")
+    if not isinstance(mapping, list):
+        raise _Invalid("mapping", f"expected a list of [target, performer] joint pairs, not "
+                                  f"{_show(mapping)}")
+    pairs = {}
+    for i, item in enumerate(mapping):
+        if not (isinstance(item, list) and len(item) == 2 and all(isinstance(x, str)
+                                                                  for x in item)):
+            raise _Invalid(f"mapping[{i}]", f"expected [target joint, performer joint], not "
+                                            f"{_show(item)}")
+        pairs[item[0]] = item[1]
+    data["correspondence"] = {"pairs": pairs}
+    data["version"] = 1
+    return data
+
+
+@migrator(1)
+def _v1_to_v2(old: dict) -> dict:
+    """Version 1 had no IK settings: its corrections were solved with the constants the
+    solver then had built in, which version 2 holds in the ``"ik"`` object."""
+    return dict(old, ik=dict(_SOLVER_BEFORE_V2), version=2)
+
+
+#: the IK settings built into the solver up to format version 1
+_SOLVER_BEFORE_V2 = {"tolerance": 1e-4, "max_iterations": 60, "damping": 0.005,
+                     "max_step": 0.05, "attraction": 0.5, "settle": 1e-5,
+                     "nullspace_damping": 1e-6, "step_cap": 0.3, "polish_share": 0.25,
+                     "priority_gate": 10.0, "joint_limits": []}
