@@ -106,7 +106,7 @@ def run_job(job: Job, *, progress=None, cancel=None) -> JobResult:
         "timings": timings,
     }
     if contacts:
-        pins = [c for c in constraints if c.auto and c.kind == "position"]
+        pins = [c for c in constraints if c.auto and c.kind_object.fixed_point]
         for c in pins:
             before = horizontal_drift(composed, c.joint, c.start, c.end)
             after = horizontal_drift(motion, c.joint, c.start, c.end)
