@@ -511,6 +511,14 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
     assert not inspector.form_widget.isVisibleTo(inspector)
 
 
+def test_the_inspector_lists_the_kinds_of_the_registry(inspector):
+    from engine.correction.constraints import KINDS
+    texts = [inspector.kind.itemText(i) for i in range(inspector.kind.count())]
+    assert texts == [k.choice_label(v) for k in KINDS.values() for v in k.variants]
+    assert sorted(inspector._page) == sorted(KINDS)
+    assert len(set(inspector._page.values())) == inspector.goal_pages.count() == len(KINDS)
+
+
 def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     i = _row_of(doc, HAND)
     c0 = doc.constraints[i]
