@@ -109,7 +109,7 @@ class TaskState:
 class Task:
     """One Cartesian task slot for a batch of frames; its goal may differ per frame and it may
     be switched off on some frames (``weight`` 0 there), so frames whose tasks differ can
-    share one batch.
+    still share one batch.
 
     Attributes:
         kind: the :class:`~engine.correction.constraints.ConstraintKind` whose error and

@@ -12,9 +12,14 @@ testing its name:
   describes with a :class:`~engine.correction.ik.TaskState`;
 * a declarative description for the inspector (:class:`GoalField` per editable goal value)
   and the viewport (how its goal is drawn).
+
+Adding a kind is a module with a :class:`ConstraintKind` subclass and its instance ``KIND``,
+listed in :data:`~engine.correction.constraints.KINDS`; the inspector builds its page from
+its fields, the viewport draws it if its ``draw`` is one of :data:`DRAWINGS`.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -93,7 +98,7 @@ class GoalField:
     bounds: tuple[float, float] = (-1e4, 1e4)
 
 
-class ConstraintKind:
+class ConstraintKind(ABC):
     """A constraint kind; one instance of each in :data:`~engine.correction.constraints.KINDS`.
 
     Attributes:
@@ -130,10 +135,10 @@ class ConstraintKind:
         return "rad" if self.angular else "m"
 
     # ------------------------------------------------------------------ goal
+    @abstractmethod
     def validate(self, goal: dict, start: int, end: int, label: str) -> dict:
         """The goal as stored (arrays, normalised), for a constraint active from ``start`` to
         ``end``; a :class:`ConstraintError` naming the field otherwise."""
-        raise NotImplementedError
 
     def variant(self, goal: dict):
         """The goal's variant (one of :attr:`variants`)."""
@@ -159,16 +164,16 @@ class ConstraintKind:
         """The point ``c``'s goal carries over to another kind at ``frame`` (``None``)."""
         return None
 
+    @abstractmethod
     def converted_goal(self, c, variant, here: np.ndarray, turn: np.ndarray, frame: int) -> dict:
         """``c``'s goal as this kind: what carries over is kept, the rest comes from the
         joint's world position ``here`` [m] and rotation ``turn`` (x, y, z, w) at ``frame``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def goal_from_pose(self, c, positions: np.ndarray, rotations: np.ndarray, frame: int,
                        index: int) -> dict:
         """``c``'s goal where joint ``index`` is in a pose (``(F, J, 3)`` world positions [m],
         ``(F, J, 4)`` world rotations) at ``frame``."""
-        raise NotImplementedError
 
     def retimed_goal(self, c, shift: int | None) -> dict:
         """``c``'s goal once its range changes (``shift``: the whole range moved by so many
@@ -191,15 +196,15 @@ class ConstraintKind:
         """``(goal_size,)`` the task goal of a slot's frames no constraint owns."""
         return np.zeros(self.goal_size)
 
+    @abstractmethod
     def task_goals(self, c, frames: np.ndarray) -> np.ndarray:
         """``(n, goal_size)`` the task goals of ``c`` at its active ``frames``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def ramp_goal(self, c, pos: np.ndarray, wrot: np.ndarray, u: float) -> np.ndarray:
         """``(goal_size,)`` the task goal at fraction ``u`` of ``c``'s input ramp, from where
         the joint was at ``smooth_in`` (world position ``pos``, rotation ``wrot``) to the goal
         at ``start``."""
-        raise NotImplementedError
 
     def chain(self, skeleton, joint: int) -> list[int]:
         """The joints whose rotation moves the task on ``joint``, sorted: its ancestors."""
@@ -209,10 +214,10 @@ class ConstraintKind:
         """``(B,)`` where the task acts (a one-sided task does not while satisfied)."""
         return np.ones(state.batch, dtype=bool)
 
+    @abstractmethod
     def error(self, goal: np.ndarray, state: "TaskState") -> np.ndarray:
         """``(B, rows)`` the task error (goal minus current) for task goals ``(B, goal_size)``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def jacobian(self, goal: np.ndarray, state: "TaskState") -> np.ndarray:
         """``(B, rows, 3 + 3C)`` d(current) / d(root translation, chain rotation vectors)."""
-        raise NotImplementedError
