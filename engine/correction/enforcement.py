@@ -11,7 +11,8 @@ the key postures. Pass two, as section 3.3 says:
 
 * input ramp ``[smooth_in, start)``: the effector's goal moves along the line from where the
   effector was at ``smooth_in`` (pass one) to the goal at ``start`` (Cartesian smoothing; a
-  plane slides along its normal, an orientation turns along the shortest arc);
+  plane slides along its normal, an orientation turns along the shortest arc: each kind's
+  ``ramp_goal``);
 * active range: the goal itself;
 * output ramp ``(end, smooth_out]``: the joint values of the constrained joint's chain, from
   the effector up to the root, are interpolated between the pass-one postures at ``end`` and at
@@ -26,6 +27,10 @@ paper does; both converge to the same posture, the posture nearest the attractio
 the tasks (a test checks it), and the batch is many times faster.
 
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
+
+The steps, in order: :func:`_check` (the constraints that apply), :func:`_pass_one` (key
+postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two`, and
+:func:`_correction` (the displacement and the corrected motion).
 """
 from __future__ import annotations
 
