@@ -477,7 +477,7 @@ def _report(composed: Motion, correction, constraints: list, mapped: int, timing
     }
     motion = correction.motion if correction is not None else composed
     pins = [c for c in constraints if c.auto and c.meta.get("source") == "contact"
-            and c.kind == "position"]
+            and c.kind_object.fixed_point]
     if pins:
         for c in pins:
             report["contacts"].append({

@@ -498,7 +498,8 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
     assert inspector.index == i and inspector.title.text() == HAND
     assert inspector.joint.currentText() == "LeftHand"
     assert inspector.kind.currentText() == "Position"
-    assert inspector.point.value() == pytest.approx(np.round(c.goal["point"], 3))
+    assert inspector.goal_edits["position", "point"].value() == \
+        pytest.approx(np.round(c.goal["point"], 3))
     assert inspector.priority.value() == 1 and inspector.weight.value() == 1.0
     assert inspector.enabled.isChecked()
     timeline.select(0)
@@ -506,9 +507,17 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
     assert "automatic" in inspector.subtitle.text()
     timeline.select(1)
     assert inspector.kind.currentText() == "Plane: above"
-    assert inspector.plane_normal.value() == pytest.approx([0, 1, 0])
+    assert inspector.goal_edits["plane", "normal"].value() == pytest.approx([0, 1, 0])
     timeline.select(None)
     assert not inspector.form_widget.isVisibleTo(inspector)
+
+
+def test_the_inspector_lists_the_kinds_of_the_registry(inspector):
+    from engine.correction.constraints import KINDS
+    texts = [inspector.kind.itemText(i) for i in range(inspector.kind.count())]
+    assert texts == [k.choice_label(v) for k in KINDS.values() for v in k.variants]
+    assert sorted(inspector._page) == sorted(KINDS)
+    assert len(set(inspector._page.values())) == inspector.goal_pages.count() == len(KINDS)
 
 
 def test_inspector_edits_are_undoable(qtbot, inspector, doc):
@@ -517,7 +526,7 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     count = doc.undo_stack.count()
 
     # goal typed: one command, re-solved
-    _type(qtbot, inspector.point.spins[1], "0.25")
+    _type(qtbot, inspector.goal_edits["position", "point"].spins[1], "0.25")
     assert doc.scene.constraints[i].goal["point"][1] == pytest.approx(0.25)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Set point of {HAND}"
@@ -527,7 +536,7 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     assert np.linalg.norm(hand - doc.scene.constraints[i].goal["point"]) < 0.01   # solved
 
     # arrow steps preview and become one command after a pause
-    spin = inspector.point.spins[0]
+    spin = inspector.goal_edits["position", "point"].spins[0]
     x0 = spin.value()
     for _ in range(3):
         qtbot.keyClick(spin, Qt.Key.Key_Up)
@@ -560,9 +569,10 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     inspector.kind.setCurrentIndex(5)
     inspector.kind.activated.emit(5)
     assert doc.scene.constraints[i].kind == "orientation"
-    _type(qtbot, inspector.euler.spins[2], "30")
+    _type(qtbot, inspector.goal_edits["orientation", "quaternion"].spins[2], "30")
     q = doc.scene.constraints[i].goal["quaternion"]
-    assert inspector.euler.value()[2] == pytest.approx(30.0, abs=0.05)
+    assert inspector.goal_edits["orientation", "quaternion"].value()[2] == \
+        pytest.approx(30.0, abs=0.05)
     assert np.linalg.norm(q) == pytest.approx(1.0)
 
     # every step undoes, the widgets follow
@@ -570,7 +580,8 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
         doc.undo_stack.undo()
     assert doc.scene.constraints[i] is c0
     assert inspector.kind.currentText() == "Position"
-    assert inspector.point.value() == pytest.approx(np.round(c0.goal["point"], 3))
+    assert inspector.goal_edits["position", "point"].value() == \
+        pytest.approx(np.round(c0.goal["point"], 3))
     assert inspector.priority.value() == 1 and inspector.enabled.isChecked()
 
 
@@ -584,7 +595,8 @@ def test_take_from_pose_and_pick(qtbot, inspector, doc):
     qtbot.mouseClick(inspector.take_button, LEFT)
     assert doc.scene.constraints[i].goal["point"] == pytest.approx(expected)
     assert doc.undo_stack.text(count) == f"Take goal of {HAND} from pose at frame 410"
-    assert inspector.point.value() == pytest.approx(np.round(expected, 3))
+    assert inspector.goal_edits["position", "point"].value() == \
+        pytest.approx(np.round(expected, 3))
 
     # pick: the next target joint selected sets the joint, its position the goal
     expected = doc.pose("target").positions[410, sk.index["RightHand"]].copy()
@@ -639,7 +651,7 @@ def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, ti
     starts another edit (here: Duplicate)."""
     i = _row_of(doc, HAND)
     count = doc.undo_stack.count()
-    spin = inspector.point.spins[2]
+    spin = inspector.goal_edits["position", "point"].spins[2]
     z0 = doc.scene.constraints[i].goal["point"][2]
     qtbot.keyClick(spin, Qt.Key.Key_Up)
     qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)

@@ -117,6 +117,37 @@ def test_constraint_goals_are_drawn(view):
     assert not v.goals.visible()
 
 
+def test_each_kind_draws_its_goal_as_it_says(view):
+    """A trajectory draws its path and the point of the frame; an orientation the goal's
+    axes at the joint (x along the goal's x)."""
+    doc, v = view
+    from app.gui.commands import push_constraints
+    from app.gui.viewport import to_view
+    from engine.correction.constraints import Constraint
+    sk = doc.scene.target.skeleton
+    pos = doc.pose("target").positions
+    hand, head = sk.index["LeftHand"], sk.index["Head"]
+    turn = [0.0, np.sin(0.3), 0.0, np.cos(0.3)]
+    push_constraints(doc, [
+        Constraint("LeftHand", "trajectory", {"points": pos[290:311, hand] + [0, 0.1, 0]},
+                   280, 290, 310, 320),
+        Constraint("Head", "orientation", {"quaternion": turn}, 280, 290, 310, 320)])
+    assert v.paths.visible() and v.goals.visible() and v.axes.visible()
+    assert not v.planes.visible()
+    off = v.figures["target"].offset
+    # the GL items hold float32
+    np.testing.assert_allclose(v.goals.pos[0], to_view(pos[300, hand] + [0, 0.1, 0]) + off,
+                               atol=1e-5)
+    axes = v.axes.pos
+    assert axes.shape == (6, 3)
+    np.testing.assert_allclose(axes[0], to_view(pos[300, head]) + off, atol=1e-5)
+    x_axis = (axes[1] - axes[0]) / np.linalg.norm(axes[1] - axes[0])
+    np.testing.assert_allclose(x_axis, to_view(np.array([np.cos(0.6), 0, -np.sin(0.6)])),
+                               atol=1e-6)
+    doc.undo_stack.undo()
+    assert not v.axes.visible() and not v.paths.visible()
+
+
 def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot, tmp_path):
     require_gl()
     from conftest import clip_path, shared_path

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from engine.correction.constraints import KINDS
 from engine.correction.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
                                   solve_frames, task_error_and_jacobian)
 from engine.kinematics import fk_arrays
@@ -11,6 +12,7 @@ from engine.quaternions import qmul
 from ik_fixtures import walk_on_holden
 
 EPS = 1e-6
+POSITION, PLANE, ORIENTATION = KINDS["position"], KINDS["plane"], KINDS["orientation"]
 
 
 def _posture():
@@ -57,7 +59,7 @@ def test_position_jacobian(joint):
     sk, rot, tra = _posture()
     j = sk.index[joint]
     goal = _world(sk, rot, tra).positions[:, j] + [0.05, -0.02, 0.03]
-    task = Task("position", j, goal, np.ones(len(rot)))
+    task = Task(POSITION, j, goal, np.ones(len(rot)))
     _check(sk, [task], rot, tra)
 
 
@@ -67,8 +69,7 @@ def test_plane_jacobian(normal):
     j = sk.index["LeftToeBase"]
     n = np.array(normal, float) / np.linalg.norm(normal)
     above = _world(sk, rot, tra).positions[:, j] + 0.02 * n    # the toe is below: active
-    task = Task("plane", j, above, np.ones(len(rot)), np.tile(n, (len(rot), 1)),
-                np.zeros(len(rot), dtype=np.int8))
+    task = Task(PLANE, j, PLANE.task_goal(above, n, 0), np.ones(len(rot)))
     _check(sk, [task], rot, tra)
 
 
@@ -78,7 +79,7 @@ def test_orientation_jacobian(joint):
     j = sk.index[joint]
     # the goal is the current orientation: the error's map is linear to first order there
     goal = _world(sk, rot, tra).rotations[:, j]
-    task = Task("orientation", j, goal, np.ones(len(rot)))
+    task = Task(ORIENTATION, j, goal, np.ones(len(rot)))
     _check(sk, [task], rot, tra)
 
 
@@ -86,13 +87,13 @@ def test_several_tasks_stack_their_rows():
     sk, rot, tra = _posture()
     pose = _world(sk, rot, tra)
     B = len(rot)
-    tasks = [Task("position", sk.index["LeftFoot"], pose.positions[:, sk.index["LeftFoot"]] + 0.01,
+    tasks = [Task(POSITION, sk.index["LeftFoot"], pose.positions[:, sk.index["LeftFoot"]] + 0.01,
                   np.ones(B)),
-             Task("orientation", sk.index["RightHand"], pose.rotations[:, sk.index["RightHand"]],
+             Task(ORIENTATION, sk.index["RightHand"], pose.rotations[:, sk.index["RightHand"]],
                   np.ones(B)),
-             Task("plane", sk.index["RightToeBase"],
-                  pose.positions[:, sk.index["RightToeBase"]] + [0, 0.01, 0], np.ones(B),
-                  np.tile([0.0, 1.0, 0.0], (B, 1)), np.ones(B, dtype=np.int8))]
+             Task(PLANE, sk.index["RightToeBase"],
+                  PLANE.task_goal(pose.positions[:, sk.index["RightToeBase"]] + [0, 0.01, 0],
+                                  [0.0, 1.0, 0.0], 1), np.ones(B))]
     structure = _check(sk, tasks, rot, tra)
     assert structure.k == 7
 
@@ -101,8 +102,7 @@ def test_a_satisfied_one_sided_plane_has_no_rows():
     sk, rot, tra = _posture()
     j = sk.index["LeftToeBase"]
     below = _world(sk, rot, tra).positions[:, j] - [0, 0.05, 0]
-    task = Task("plane", j, below, np.ones(len(rot)), np.tile([0.0, 1.0, 0.0], (len(rot), 1)),
-                np.ones(len(rot), dtype=np.int8))
+    task = Task(PLANE, j, PLANE.task_goal(below, [0.0, 1.0, 0.0], 1), np.ones(len(rot)))
     structure = _Structure(sk, [task])
     err, jac = task_error_and_jacobian(sk, structure, rot, tra,
                                        {int(k): i for i, k in enumerate(sk.translated)})
@@ -113,7 +113,7 @@ def test_a_satisfied_task_gives_a_zero_step():
     sk, rot, tra = _posture()
     j = sk.index["LeftHand"]
     here = _world(sk, rot, tra).positions[:, j]
-    task = Task("position", j, here, np.ones(len(rot)))
+    task = Task(POSITION, j, here, np.ones(len(rot)))
     out_rot, out_tra, res, it = solve_frames(sk, [task], rot, tra, rot, tra[:, 0],
                                              IKOptions(scale=1.7))
     assert np.all(it == 0)
@@ -125,7 +125,7 @@ def test_the_error_strictly_decreases_on_a_reachable_goal():
     sk, rot, tra = _posture()
     j = sk.index["RightHand"]
     goal = _world(sk, rot, tra).positions[:, j] + [0.15, 0.10, -0.05]
-    task = Task("position", j, goal, np.ones(len(rot)))
+    task = Task(POSITION, j, goal, np.ones(len(rot)))
     errors = []
     for n in range(0, 12):
         _, _, res, _ = solve_frames(sk, [task], rot, tra, rot, tra[:, 0],

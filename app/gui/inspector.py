@@ -31,17 +31,16 @@ import numpy as np
 
 from app.gui.qt import QtCore, QtGui, QtWidgets
 from app.gui.live import live_solver
-from engine.correction.constraints import Constraint, ConstraintError
+from engine.correction.constraints import KINDS, Constraint, ConstraintError
 from engine.rotations import euler_to_quat, quat_to_euler
 
 __all__ = ["ConstraintInspector", "Vec3Edit", "KIND_CHOICES", "converted"]
 
 Qt = QtCore.Qt
 
-#: the kind combo: (kind, plane side, text)
-KIND_CHOICES = (("position", None, "Position"), ("trajectory", None, "Trajectory"),
-                ("plane", "above", "Plane: above"), ("plane", "on", "Plane: on"),
-                ("plane", "below", "Plane: below"), ("orientation", None, "Orientation"))
+#: the kind combo, from the registry: (kind, variant (a plane's side), text)
+KIND_CHOICES = tuple((kind.name, variant, kind.choice_label(variant))
+                     for kind in KINDS.values() for variant in kind.variants)
 #: a spin box's run of steps becomes one command after this long without a change
 COMMIT_IDLE_MS = 700
 EULER_ORDER = "XYZ"
@@ -66,32 +65,19 @@ def _label(c: Constraint) -> str:
     return c.name or c.joint
 
 
+def _suffix(unit: str) -> str:
+    """A spin box's suffix for ``unit``: a degree sign follows the number, a unit's name
+    after a space."""
+    return unit if unit in ("", "°") else f" {unit}"
+
+
 # ====================================================================== goal conversions
-def _point_of(c: Constraint, frame: int):
-    if c.kind in ("position", "plane"):
-        return np.array(c.goal["point"], dtype=float)
-    if c.kind == "trajectory":
-        return c.goal_point(np.array([min(max(frame, c.start), c.end)]))[0]
-    return None
-
-
 def converted(c: Constraint, kind: str, side: str | None, here, turn, frame: int
               ) -> Constraint:
-    """``c`` as another kind: a point carries over, a plane keeps its normal, a trajectory or
-    an orientation its goal; what is missing comes from the joint's world position ``here``
-    and rotation ``turn`` (x-y-z-w) at ``frame``."""
-    point = _point_of(c, frame)
-    if point is None:
-        point = np.asarray(here, dtype=float)
-    if kind == "position":
-        goal = {"point": point}
-    elif kind == "trajectory":
-        goal = c.goal if c.kind == "trajectory" else {"keys": [[c.start, *point]]}
-    elif kind == "plane":
-        normal = c.goal["normal"] if c.kind == "plane" else [0.0, 1.0, 0.0]
-        goal = {"point": point, "normal": normal, "side": side or "above"}
-    else:
-        goal = c.goal if c.kind == "orientation" else {"quaternion": np.asarray(turn)}
+    """``c`` as another kind (``side``: its variant): a point carries over, a plane keeps its
+    normal, a trajectory or an orientation its goal; what is missing comes from the joint's
+    world position ``here`` and rotation ``turn`` (x-y-z-w) at ``frame``."""
+    goal = KINDS[kind].converted_goal(c, side, here, turn, frame)
     return dataclasses.replace(c, kind=kind, goal=goal)
 
 
@@ -99,15 +85,7 @@ def from_pose(c: Constraint, joint: str, pose, frame: int, index: int) -> Constr
     """``c`` on ``joint`` (index ``index``) with its goal where the joint is at ``frame``: a
     position's point, a plane's point (the plane through the joint), an orientation's
     quaternion, a trajectory's points over the active range."""
-    if c.kind == "position":
-        goal = {"point": pose.positions[frame, index].copy()}
-    elif c.kind == "plane":
-        goal = {"point": pose.positions[frame, index].copy(), "normal": c.goal["normal"],
-                "side": c.goal["side"]}
-    elif c.kind == "orientation":
-        goal = {"quaternion": pose.rotations[frame, index].copy()}
-    else:
-        goal = {"points": pose.positions[c.start:c.end + 1, index].copy()}
+    goal = c.kind_object.goal_from_pose(c, pose.positions, pose.rotations, frame, index)
     return dataclasses.replace(c, joint=joint, goal=goal)
 
 
@@ -156,8 +134,10 @@ class ConstraintInspector(QtWidgets.QWidget):
     """The selected constraint's fields; every change one undoable command.
 
     Attributes: ``index`` (the constraint shown, ``None`` for none), the field widgets
-    (``joint``, ``kind``, ``point``, ``plane_point``, ``plane_normal``, ``euler``,
-    ``priority``, ``weight``, ``enabled``, ``name``, ``take_button``, ``pick_button``).
+    (``joint``, ``kind``, ``priority``, ``weight``, ``enabled``, ``name``, ``take_button``,
+    ``pick_button``), ``goal_edits`` (kind name, goal key) -> the widget of that goal value,
+    one page of ``goal_pages`` per kind (``_page``: kind name -> page index), built from each
+    kind's :attr:`~engine.correction.constraints.ConstraintKind.fields`.
     """
 
     def __init__(self, document, timeline=None, parent=None):
@@ -205,38 +185,20 @@ class ConstraintInspector(QtWidgets.QWidget):
             self.kind.addItem(text, (kind, side))
         self.kind.activated.connect(self._kind_chosen)
 
-        # goal pages
-        self.point = Vec3Edit(suffix=" m")
-        self.point.setToolTip("The goal position [m], world axes, +Y up")
-        self.plane_point = Vec3Edit(suffix=" m")
-        self.plane_point.setToolTip("A point of the plane [m]")
-        self.plane_normal = Vec3Edit(decimals=3, step=0.05, lo=-1.0, hi=1.0)
-        self.plane_normal.setToolTip("The plane's normal (normalised when stored); 'above' is "
-                                     "the side it points to")
-        self.euler = Vec3Edit(decimals=1, step=1.0, suffix="°", lo=-180.0, hi=180.0, wrap=True)
-        self.euler.setToolTip("The joint's world orientation as intrinsic XYZ Euler angles "
-                              "[deg] (stored as a quaternion)")
-        self.trajectory_label = QtWidgets.QLabel()
-        self.trajectory_label.setWordWrap(True)
+        # goal pages: one per kind, its fields as the kind describes them
         pages = QtWidgets.QStackedWidget()
         self.goal_pages = pages
         self._page = {}
-        for key, widgets in (
-                ("position", [("Point", self.point)]),
-                ("trajectory", [("Path", self.trajectory_label)]),
-                ("plane", [("Point", self.plane_point), ("Normal", self.plane_normal)]),
-                ("orientation", [("XYZ", self.euler)])):
+        self.goal_edits = {}
+        for kind in KINDS.values():
             page = QtWidgets.QWidget()
             form = QtWidgets.QFormLayout(page)
             form.setContentsMargins(0, 0, 0, 0)
-            for label, w in widgets:
-                form.addRow(label, w)
-            self._page[key] = pages.addWidget(page)
-        for edit, field in ((self.point, "point"), (self.plane_point, "plane point"),
-                            (self.plane_normal, "plane normal"), (self.euler, "orientation")):
-            edit.componentChanged.connect(
-                lambda k, v, f=field: self._goal_stepped(f, k, v))
-            edit.editingFinished.connect(self.commit_pending)
+            for goal_field in kind.fields:
+                edit = self._goal_edit(kind.name, goal_field)
+                self.goal_edits[kind.name, goal_field.key] = edit
+                form.addRow(goal_field.label, edit)
+            self._page[kind.name] = pages.addWidget(page)
 
         self.take_button = QtWidgets.QPushButton("Take from pose")
         self.take_button.setToolTip("The goal from where the joint is at the current frame")
@@ -303,6 +265,23 @@ class ConstraintInspector(QtWidgets.QWidget):
         layout.addWidget(self.status)
         layout.addStretch(1)
 
+    def _goal_edit(self, kind: str, goal_field) -> QtWidgets.QWidget:
+        """The widget of one goal value of ``kind`` (a :class:`~engine.correction.
+        constraints.base.GoalField`), wired to preview its steps and commit."""
+        if goal_field.editor == "summary":
+            label = QtWidgets.QLabel()
+            label.setWordWrap(True)
+            return label
+        lo, hi = goal_field.bounds
+        edit = Vec3Edit(decimals=goal_field.decimals, step=goal_field.step,
+                        suffix=_suffix(goal_field.unit), lo=lo, hi=hi,
+                        wrap=goal_field.editor == "euler")
+        edit.setToolTip(goal_field.tooltip)
+        edit.componentChanged.connect(
+            lambda k, v, f=goal_field: self._goal_stepped(kind, f, k, v))
+        edit.editingFinished.connect(self.commit_pending)
+        return edit
+
     # ------------------------------------------------------------------ model -> widgets
     @property
     def constraint(self) -> Constraint | None:
@@ -358,8 +337,7 @@ class ConstraintInspector(QtWidgets.QWidget):
         self.title.setText(_label(c))
         origin = "automatic" + (f" ({c.meta['source']})" if c.meta.get("source") else "") \
             if c.auto else "manual"
-        self.subtitle.setText(f"{origin} · {c.kind}" +
-                              (f" {c.goal['side']}" if c.kind == "plane" else "") +
+        self.subtitle.setText(f"{origin} · {c.kind_object.describe(c.goal)}" +
                               ("" if c.enabled else " · disabled"))
         widgets = (self.name, self.joint, self.kind, self.priority, self.weight, self.enabled)
         with _Blocked(*widgets):
@@ -375,39 +353,31 @@ class ConstraintInspector(QtWidgets.QWidget):
 
     @staticmethod
     def _kind_index(c: Constraint) -> int:
-        side = c.goal.get("side") if c.kind == "plane" else None
-        for i, (kind, s, _text) in enumerate(KIND_CHOICES):
-            if (kind, s) == (c.kind, side):
+        choice = (c.kind, c.kind_object.variant(c.goal))
+        for i, (kind, variant, _text) in enumerate(KIND_CHOICES):
+            if (kind, variant) == choice:
                 return i
         return 0
 
     def _show_goal(self, c: Constraint) -> None:
-        key = "plane" if c.kind == "plane" else c.kind
-        self.goal_pages.setCurrentIndex(self._page[key])
+        page = self._page[c.kind]
+        self.goal_pages.setCurrentIndex(page)
         ignored, preferred = (QtWidgets.QSizePolicy.Policy.Ignored,
                               QtWidgets.QSizePolicy.Policy.Preferred)
         for i in range(self.goal_pages.count()):      # the box as tall as the page shown
-            on = i == self._page[key]
-            self.goal_pages.widget(i).setSizePolicy(preferred, preferred if on else ignored)
+            self.goal_pages.widget(i).setSizePolicy(preferred,
+                                                    preferred if i == page else ignored)
         self.goal_pages.adjustSize()
-        if c.kind == "position":
-            self.point.setValue(c.goal["point"])
-        elif c.kind == "plane":
-            self.plane_point.setValue(c.goal["point"])
-            self.plane_normal.setValue(c.goal["normal"])
-        elif c.kind == "orientation":
-            self.euler.setValue(quat_to_euler(np.asarray(c.goal["quaternion"])[None],
-                                              EULER_ORDER, unwrap=False)[0])
-        else:
-            if "points" in c.goal:
-                n = len(c.goal["points"])
-                text = f"{n} points, one per frame from {c.start} to {c.end}"
+        kind = c.kind_object
+        for goal_field in kind.fields:
+            edit = self.goal_edits[c.kind, goal_field.key]
+            if goal_field.editor == "summary":
+                edit.setText(f"{kind.summary(c)}. {goal_field.tooltip}")
+            elif goal_field.editor == "euler":
+                edit.setValue(quat_to_euler(np.asarray(c.goal[goal_field.key])[None],
+                                            EULER_ORDER, unwrap=False)[0])
             else:
-                keys = np.asarray(c.goal["keys"])
-                text = (f"{len(keys)} key{'s' if len(keys) != 1 else ''} from frame "
-                        f"{keys[0, 0]:g} to {keys[-1, 0]:g}")
-            self.trajectory_label.setText(text + ". Take from pose records the joint's path "
-                                                 "over the active range.")
+                edit.setValue(c.goal[goal_field.key])
 
     def _show_range(self) -> None:
         c = self.constraint
@@ -485,8 +455,7 @@ class ConstraintInspector(QtWidgets.QWidget):
     def _kind_chosen(self, index: int) -> None:
         c = self.constraint
         kind, side = self.kind.itemData(index)
-        if c is None or (kind, side) == (c.kind, c.goal.get("side") if c.kind == "plane"
-                                          else None):
+        if c is None or (kind, side) == (c.kind, c.kind_object.variant(c.goal)):
             return
         pose, j = self._pose_and_index(c.joint)
         frame = self.doc.scene.viewer.current_frame
@@ -496,38 +465,29 @@ class ConstraintInspector(QtWidgets.QWidget):
         self._apply(lambda c: converted(c, kind, side, here, turn, frame),
                     f"Make {_label(c)} a {text} constraint")
 
-    def _goal_stepped(self, field: str, k: int, value: float) -> None:
-        """Component ``k`` of a goal vector set to ``value``; the other components keep their
-        stored values."""
+    def _goal_stepped(self, kind: str, goal_field, k: int, value: float) -> None:
+        """Component ``k`` of a goal value of ``kind`` set to ``value``; the other components
+        keep their stored values."""
         c = self._working()
-        if c is None:
+        if c is None or c.kind != kind:
             return
+        key = goal_field.key
 
         def replaced(v):
             v = np.array(v, dtype=float)
             v[k] = value
             return v
 
-        if field == "point":
+        if goal_field.editor == "euler":
             def make(c):
-                return dataclasses.replace(c, goal={"point": replaced(c.goal["point"])})
-        elif field == "plane point":
-            def make(c):
-                return dataclasses.replace(c, goal={**c.goal,
-                                                    "point": replaced(c.goal["point"])})
-        elif field == "plane normal":
-            def make(c):
-                normal = replaced(c.goal["normal"])
-                if np.linalg.norm(normal) < 1e-9:
-                    raise ValueError("the plane's normal must not be zero")
-                return dataclasses.replace(c, goal={**c.goal, "normal": normal})
-        else:
-            def make(c):
-                angles = quat_to_euler(np.asarray(c.goal["quaternion"])[None], EULER_ORDER,
+                angles = quat_to_euler(np.asarray(c.goal[key])[None], EULER_ORDER,
                                        unwrap=False)[0]
                 q = euler_to_quat(replaced(angles)[None], EULER_ORDER)[0]
-                return dataclasses.replace(c, goal={"quaternion": q})
-        self._apply(make, f"Set {field} of {_label(c)}", preview=True)
+                return dataclasses.replace(c, goal={**c.goal, key: q})
+        else:
+            def make(c):
+                return dataclasses.replace(c, goal={**c.goal, key: replaced(c.goal[key])})
+        self._apply(make, f"Set {goal_field.name} of {_label(c)}", preview=True)
 
     def _priority_stepped(self, value: int) -> None:
         c = self._working()

@@ -8,9 +8,12 @@ drag) orbits; Shift + drag or middle + Shift pans; the wheel or right drag zooms
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from app.gui.qt import QtCore, QtGui, QtWidgets
+from engine.quaternions import to_matrix
 
 import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
 
@@ -23,6 +26,9 @@ COLORS = {
 }
 SELECTED = (1.0, 1.0, 0.2, 1.0)
 VIRTUAL = (0.2, 1.0, 0.5, 1.0)
+#: an orientation goal's x, y, z axes (two vertices each)
+AXES = np.array([(1.0, 0.25, 0.25, 1.0)] * 2 + [(0.3, 1.0, 0.3, 1.0)] * 2 +
+                [(0.35, 0.5, 1.0, 1.0)] * 2)
 
 
 def to_view(points: np.ndarray) -> np.ndarray:
@@ -58,6 +64,17 @@ def bone_mesh(heads: np.ndarray, tails: np.ndarray, width: float):
          + _OCTA_V[None, :, 2:3] * length[:, None, None] * z[:, None, :])
     faces = (_OCTA_F[None, :, :] + 6 * np.arange(len(heads))[:, None, None]).reshape(-1, 3)
     return v.reshape(-1, 3), faces
+
+
+@dataclass
+class _Shapes:
+    """What the goals draw, in view space: points, path segments (starts and ends in turn),
+    plane quads (4 corners each) and frame axes (3 segments each)."""
+
+    points: list = field(default_factory=list)
+    lines: list = field(default_factory=list)
+    quads: list = field(default_factory=list)
+    axes: list = field(default_factory=list)
 
 
 class _Figure:
@@ -133,6 +150,9 @@ class Viewport(gl.GLViewWidget):
                                     smooth=False)
         self.planes.setVisible(False)
         self.addItem(self.planes)
+        self.axes = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=3, mode="lines")
+        self.axes.setVisible(False)
+        self.addItem(self.axes)
         self.skin = None                  # the target character's skinned mesh, when it has one
         self.active_constraint: int | None = None   # the constraint whose goal can be dragged
         self._goal_drag = None
@@ -295,28 +315,22 @@ class Viewport(gl.GLViewWidget):
         self.virtual.setVisible(True)
 
     def _refresh_goals(self, layout) -> None:
+        """The goals of the constraints acting at the current frame, each drawn as its kind
+        says (:attr:`~engine.correction.constraints.ConstraintKind.draw`)."""
         doc = self.doc
         if "target" not in layout or not doc.scene.constraints:
-            for item in (self.goals, self.paths, self.planes):
+            for item in (self.goals, self.paths, self.planes, self.axes):
                 item.setVisible(False)
             return
         off = layout["target"]
         f = doc.scene.viewer.current_frame
-        points, lines, quads = [], [], []
+        shapes = _Shapes()
         size = self._size()
         for c in doc.scene.constraints:
             if not c.enabled or not c.smooth_in <= f <= c.smooth_out:
                 continue                      # only what acts at this frame
-            if c.kind == "position":
-                points.append(to_view(c.goal["point"]) + off)
-            elif c.kind == "trajectory":
-                frames = np.arange(c.start, c.end + 1)
-                path = to_view(c.goal_point(frames)) + off
-                lines += [path[:-1], path[1:]]
-                if c.start <= f <= c.end:
-                    points.append(path[f - c.start])
-            elif c.kind == "plane" and c.smooth_in <= f <= c.smooth_out:
-                quads.append(self._plane_quad(c, off, size))
+            self._DRAW[c.kind_object.draw](self, c, shapes, off, f, size)
+        points, lines, quads, axes = shapes.points, shapes.lines, shapes.quads, shapes.axes
         active = self._active_goal()
         if active is not None:
             points.append(active[2])                       # the draggable goal, always shown
@@ -336,6 +350,37 @@ class Viewport(gl.GLViewWidget):
                                     for i in range(len(quads))])
             self.planes.setMeshData(vertexes=v, faces=faces, color=(0.3, 0.6, 1.0, 0.25))
         self.planes.setVisible(bool(quads))
+        if axes:
+            self.axes.setData(pos=np.concatenate(axes), color=np.tile(AXES, (len(axes), 1)),
+                              mode="lines")
+        self.axes.setVisible(bool(axes))
+
+    def _draw_point(self, c, shapes, off, f, size) -> None:
+        shapes.points.append(to_view(c.goal_point(np.array([f]))[0]) + off)
+
+    def _draw_path(self, c, shapes, off, f, size) -> None:
+        frames = np.arange(c.start, c.end + 1)
+        path = to_view(c.goal_point(frames)) + off
+        shapes.lines += [path[:-1], path[1:]]
+        if c.start <= f <= c.end:
+            shapes.points.append(path[f - c.start])
+
+    def _draw_plane(self, c, shapes, off, f, size) -> None:
+        shapes.quads.append(self._plane_quad(c, off, size))
+
+    def _draw_axes(self, c, shapes, off, f, size) -> None:
+        """The goal orientation's x, y, z axes at where the joint is now."""
+        data = self.skeleton_points("target")
+        sk = self.doc.scene.target.skeleton
+        if data is None or c.joint not in sk.index:
+            return
+        origin = data[0][sk.index[c.joint]]
+        tips = origin + 0.08 * size * to_matrix(np.asarray(c.goal["quaternion"])).T
+        shapes.axes.append(to_view(np.stack([origin, tips[0], origin, tips[1], origin,
+                                             tips[2]])) + off)
+
+    #: a kind's drawing (:data:`~engine.correction.constraints.base.DRAWINGS`) -> its drawer
+    _DRAW = {"point": _draw_point, "path": _draw_path, "plane": _draw_plane, "axes": _draw_axes}
 
     @staticmethod
     def _plane_quad(c, off, size):
@@ -417,15 +462,16 @@ class Viewport(gl.GLViewWidget):
         self.refresh()
 
     def _active_goal(self):
-        """(index, constraint, goal in view space) of a draggable position goal, or None."""
+        """(index, constraint, goal in view space, offset) of a draggable goal point (a kind
+        with a ``drag_key``: a position), or None."""
         i = self.active_constraint
         cons = self.doc.scene.constraints
-        if i is None or not 0 <= i < len(cons) or cons[i].kind != "position":
+        if i is None or not 0 <= i < len(cons) or cons[i].kind_object.drag_key is None:
             return None
         off = self._layout().get("target")
         if off is None:
             return None
-        return i, cons[i], to_view(cons[i].goal["point"]) + off, off
+        return i, cons[i], to_view(cons[i].goal[cons[i].kind_object.drag_key]) + off, off
 
     def _unproject(self, x: float, y: float, through: np.ndarray) -> np.ndarray:
         """The view-space point under pixel (x, y) on the plane through ``through`` facing
@@ -459,10 +505,11 @@ class Viewport(gl.GLViewWidget):
 
     def _dragged_goal(self, pos):
         i, c, off, _solver = self._goal_drag
-        point = self._unproject(pos.x(), pos.y(), to_view(c.goal["point"]) + off) - off
+        key = c.kind_object.drag_key
+        point = self._unproject(pos.x(), pos.y(), to_view(c.goal[key]) + off) - off
         engine = np.array([point[0], point[2], -point[1]])        # view (Z up) -> engine (Y up)
         import dataclasses
-        moved = dataclasses.replace(c, goal={"point": engine})
+        moved = dataclasses.replace(c, goal={**c.goal, key: engine})
         constraints = list(self.doc.scene.constraints)
         constraints[i] = moved
         return constraints, engine

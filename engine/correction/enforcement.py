@@ -11,7 +11,8 @@ the key postures. Pass two, as section 3.3 says:
 
 * input ramp ``[smooth_in, start)``: the effector's goal moves along the line from where the
   effector was at ``smooth_in`` (pass one) to the goal at ``start`` (Cartesian smoothing; a
-  plane slides along its normal, an orientation turns along the shortest arc);
+  plane slides along its normal, an orientation turns along the shortest arc: each kind's
+  ``ramp_goal``);
 * active range: the goal itself;
 * output ramp ``(end, smooth_out]``: the joint values of the constrained joint's chain, from
   the effector up to the root, are interpolated between the pass-one postures at ``end`` and at
@@ -26,6 +27,10 @@ paper does; both converge to the same posture, the posture nearest the attractio
 the tasks (a test checks it), and the batch is many times faster.
 
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
+
+The steps, in order: :func:`_check` (the constraints that apply), :func:`_pass_one` (key
+postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two`, and
+:func:`_correction` (the displacement and the corrected motion).
 """
 from __future__ import annotations
 
@@ -35,12 +40,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constraints import Constraint, ConstraintError
+from .constraints import ConstraintError
 from .displacement import DisplacementMap
 from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
+from ..errors import MotionComposerError
 from ..kinematics import fk_arrays
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qnormalize, qpow, qpow_many
+from ..quaternions import qconj, qmul, qnormalize, qpow_many
 
 __all__ = ["Correction", "enforce", "describe_residuals"]
 
@@ -74,7 +80,8 @@ class Correction:
                                           translation_tolerance=translation_tolerance)
 
 
-def _check(constraints, composed: Motion):
+def _check(constraints, composed: Motion) -> list:
+    """The enabled constraints, each on a joint of the target and within the clip."""
     sk = composed.skeleton
     F = composed.num_frames
     out = []
@@ -91,59 +98,220 @@ def _check(constraints, composed: Motion):
     return out
 
 
-_SIDES = {"above": 1, "on": 0, "below": -1}
-
-
-def _kind(c: Constraint) -> str:
-    return "position" if c.kind in ("position", "trajectory") else c.kind
-
-
-def _goals(c: Constraint, frames: np.ndarray) -> np.ndarray:
-    """Per-frame goals of ``c`` on its active frames."""
-    if c.kind in ("position", "trajectory"):
-        return c.goal_point(frames)
-    if c.kind == "plane":
-        return np.broadcast_to(c.goal["point"], (len(frames), 3)).copy()
-    return np.broadcast_to(c.goal["quaternion"], (len(frames), 4)).copy()
-
-
 def _assign_slots(entries, cons, sk, F) -> list[dict]:
-    """Task slots: entries on the same joint, kind and priority share a slot unless their
-    frames overlap. Each slot holds per-frame goal, weight, plane normal and side, and the
-    index of the constraint that owns each frame."""
+    """Task slots: entries on the same joint, task kind and priority share a slot unless their
+    frames overlap. Each slot holds the per-frame task goal and weight, and the index of the
+    constraint that owns each frame."""
     slots: list[dict] = []
     for i, frames, goals in entries:
         if len(frames) == 0:
             continue
         c = cons[i]
-        kind = _kind(c)
+        kind = c.kind_object.task_kind
         j = sk.index[c.joint]
         home = None
         for sl in slots:
-            if (sl["joint"], sl["kind"], sl["priority"]) == (j, kind, c.priority) and \
+            if sl["joint"] == j and sl["kind"] is kind and sl["priority"] == c.priority and \
                     not np.any(sl["weight"][frames] > 0):
                 home = sl
                 break
         if home is None:
-            dim = 4 if kind == "orientation" else 3
-            goal0 = np.zeros((F, dim))
-            if dim == 4:
-                goal0[:, 3] = 1.0
-            home = {"joint": j, "kind": kind, "priority": c.priority, "goal": goal0,
-                    "weight": np.zeros(F), "normal": np.tile([0.0, 1.0, 0.0], (F, 1)),
-                    "side": np.zeros(F, dtype=np.int8), "owner": np.full(F, -1)}
+            home = {"joint": j, "kind": kind, "priority": c.priority,
+                    "goal": np.tile(kind.neutral_goal(), (F, 1)), "weight": np.zeros(F),
+                    "owner": np.full(F, -1)}
             slots.append(home)
         home["goal"][frames] = goals
         home["weight"][frames] = c.weight
         home["owner"][frames] = i
-        if kind == "plane":
-            home["normal"][frames] = c.goal["normal"]
-            home["side"][frames] = _SIDES[c.goal["side"]]
     return slots
 
 
 def _chain(sk, joint: int) -> np.ndarray:
     return np.array(sorted(sk.ancestors(joint) + [joint]), dtype=np.intp)
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """What every solve of one :func:`enforce` shares: the composed motion (the attraction
+    posture), the enabled constraints, the settings and the caller's hooks."""
+
+    composed: Motion
+    cons: list
+    options: IKOptions
+    warm_start: bool
+    progress: object
+    cancel: object
+
+    @property
+    def skeleton(self):
+        return self.composed.skeleton
+
+    @property
+    def num_frames(self) -> int:
+        return self.composed.num_frames
+
+    def check_cancel(self) -> None:
+        if self.cancel is not None and self.cancel():
+            raise MotionComposerError("the correction was cancelled")
+
+
+def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
+    """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
+    task goals). Entries share task slots where they do not overlap in time, so all frames
+    form one batch. Returns rot, tra, residual per constraint, iterations."""
+    sk, F = problem.skeleton, problem.num_frames
+    rot = attraction_rot.copy()
+    tra = attraction_tra.copy()
+    residual = {i: np.full(F, np.nan) for i in range(len(problem.cons))}
+    iters = np.zeros(F, dtype=np.intp)
+    slots = _assign_slots(entries, problem.cons, sk, F)
+    if not slots:
+        return rot, tra, residual, iters
+    covered = np.zeros(F, dtype=bool)
+    for slot in slots:
+        covered |= slot["weight"] > 0
+    frames = np.flatnonzero(covered)
+    tasks = [Task(sl["kind"], sl["joint"], sl["goal"][frames], sl["weight"][frames],
+                  sl["priority"])
+             for sl in slots]
+    if problem.warm_start:
+        res, it = _solve_in_time_order(problem, tasks, frames, rot, tra, attraction_rot,
+                                       attraction_tra)
+    else:
+        r, t, res, it = solve_frames(sk, tasks, rot[frames], tra[frames],
+                                     attraction_rot[frames], attraction_tra[frames, 0],
+                                     problem.options)
+        rot[frames], tra[frames] = r, t
+    iters[frames] = it
+    for col, sl in enumerate(slots):
+        owner = sl["owner"][frames]
+        for i in np.unique(owner[owner >= 0]):
+            sel = owner == i
+            residual[int(i)][frames[sel]] = res[sel, col]
+    problem.check_cancel()
+    return rot, tra, residual, iters
+
+
+def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
+                         attraction_tra):
+    """The paper's scheme: ``frames`` one by one, each from the solution at t - 1 where there
+    is one; ``rot`` and ``tra`` are updated in place. Returns residuals and iterations."""
+    res = np.zeros((len(frames), len(tasks)))
+    it = np.zeros(len(frames), dtype=np.intp)
+    for k, f in enumerate(frames):
+        if k and frames[k - 1] == f - 1:
+            r0 = rot[f - 1:f].copy()
+            t0 = tra[f:f + 1].copy()
+            t0[:, 0] = tra[f - 1, 0]
+        else:
+            r0, t0 = rot[f:f + 1], tra[f:f + 1]
+        r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
+            problem.skeleton, [task.take([k]) for task in tasks], r0, t0,
+            attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options)
+        rot[f], tra[f] = r[0], t[0]
+        if problem.cancel is not None and k % 64 == 0:
+            problem.check_cancel()
+        if problem.progress is not None and k % 64 == 0:
+            problem.progress(k / len(frames))
+    return res, it
+
+
+def _active_entries(cons) -> list:
+    """(constraint index, frames, task goals) of every constraint over ``[start, end]``."""
+    entries = []
+    for i, c in enumerate(cons):
+        frames = np.arange(c.start, c.end + 1)
+        entries.append((i, frames, c.kind_object.task_goals(c, frames)))
+    return entries
+
+
+def _pass_one(problem: _Problem):
+    """The key postures: every frame inside an active range, with no smoothing."""
+    composed = problem.composed
+    rot1, tra1, _, _ = _solve(problem, _active_entries(problem.cons), composed.rotations,
+                              composed.translations)
+    return rot1, tra1
+
+
+def _input_ramps(problem: _Problem, rot1, tra1) -> list:
+    """Per constraint, the entry of its input ramp ``(smooth_in, start)`` (``None`` for none):
+    the goal moves from where the effector was at ``smooth_in`` in pass one to the goal at
+    ``start`` (the kind's :meth:`~engine.correction.constraints.ConstraintKind.ramp_goal`)."""
+    sk = problem.skeleton
+    need = sorted({c.smooth_in for c in problem.cons if c.smooth_in < c.start})
+    effector_at = {}
+    if need:
+        pose = fk_arrays(sk, rot1[need], tra1[need], end_sites=False)
+        for k, f in enumerate(need):
+            effector_at[f] = (pose.positions[k], pose.rotations[k])
+    entries = []
+    for i, c in enumerate(problem.cons):
+        if c.smooth_in < c.start - 1:
+            j = sk.index[c.joint]
+            pos, wrot = effector_at[c.smooth_in]
+            frames = np.arange(c.smooth_in + 1, c.start)
+            u = (frames - c.smooth_in) / (c.start - c.smooth_in)
+            goals = np.array([c.kind_object.ramp_goal(c, pos[j], wrot[j], x) for x in u])
+            entries.append((i, frames, goals))
+        else:
+            entries.append(None)
+    return entries
+
+
+def _output_ramps(problem: _Problem, rot1, tra1):
+    """The attraction posture over the output ramps ``(end, smooth_out)``: the constrained
+    joint's chain interpolated between the pass-one postures at ``end`` and ``smooth_out``.
+    Returns the attraction rotations and translations and the frames they changed."""
+    sk, F = problem.skeleton, problem.num_frames
+    attraction_rot = problem.composed.rotations.copy()
+    attraction_tra = problem.composed.translations.copy()
+    touched = np.zeros(F, dtype=bool)
+    for c in problem.cons:
+        if c.smooth_out > c.end + 1:
+            chain = _chain(sk, sk.index[c.joint])
+            frames = np.arange(c.end + 1, c.smooth_out)
+            u = ((frames - c.end) / (c.smooth_out - c.end))[:, None]
+            a, b = rot1[c.end, chain], rot1[c.smooth_out, chain]
+            steps = qpow_many(qmul(b, qconj(a)), u[:, 0])                     # (n, C, 4)
+            attraction_rot[frames[:, None], chain[None, :]] = qnormalize(qmul(steps, a))
+            root_a, root_b = tra1[c.end, 0], tra1[c.smooth_out, 0]
+            attraction_tra[frames, 0] = root_a + (root_b - root_a) * u
+            touched[frames] = True
+    return attraction_rot, attraction_tra, touched
+
+
+def _pass_two(problem: _Problem, rot1, tra1):
+    """The result: the active ranges and the input ramps solved against the attraction
+    posture that the output ramps shape. Returns rot, tra, residuals, iterations and the
+    frames it changed."""
+    entries = []
+    for active, ramp in zip(_active_entries(problem.cons), _input_ramps(problem, rot1, tra1)):
+        entries += [active] if ramp is None else [active, ramp]
+    attraction_rot, attraction_tra, touched = _output_ramps(problem, rot1, tra1)
+    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+    changed = touched.copy()
+    for _, frames, _ in entries:
+        changed[frames] = True
+    return rot2, tra2, residual, iters, changed
+
+
+def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings) -> Correction:
+    """The displacement from the composed motion to the pass-two result on the ``changed``
+    frames (exactly zero elsewhere) and the corrected motion."""
+    sk = composed.skeleton
+    base_rot = composed.rotations
+    base_tra = composed.translations
+    rot = base_rot.copy()
+    tra = base_tra.copy()
+    rot[changed] = rot2[changed]
+    tra[changed, 0] = tra2[changed, 0]
+    rotvecs = np.zeros((composed.num_frames, sk.num_joints, 3))
+    moved = np.any(rot != base_rot, axis=-1)                       # (F, J), bit for bit
+    rotvecs[moved] = quat_to_rotvec(qmul(rot[moved], qconj(base_rot[moved])))
+    root = tra[:, 0] - base_tra[:, 0]
+    motion = _apply_dense(composed, rotvecs, root, moved)
+    return Correction(motion=motion, rotvecs=rotvecs, root=root, residual=residual,
+                      iterations=iters, seconds=timings)
 
 
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
@@ -162,135 +330,24 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             :class:`~engine.errors.MotionComposerError`.
     """
     from ..describe import stature
-    from ..errors import MotionComposerError
 
-    sk = composed.skeleton
-    F = composed.num_frames
     cons = _check(constraints, composed)
     options = options if options is not None else IKOptions()
     if options.scale is None:
         options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
-    base_rot = composed.rotations
-    base_tra = composed.translations
+    problem = _Problem(composed, cons, options, warm_start, progress, cancel)
     timings = {}
-
-    def check_cancel():
-        if cancel is not None and cancel():
-            raise MotionComposerError("the correction was cancelled")
-
-    def run(entries, attraction_rot, attraction_tra):
-        """Solve the frames that ``entries`` cover: a list of (constraint index, frames,
-        per-frame goals). Entries share task slots where they do not overlap in time, so all
-        frames form one batch. Returns rot, tra, residual per constraint, iterations."""
-        rot = attraction_rot.copy()
-        tra = attraction_tra.copy()
-        residual = {i: np.full(F, np.nan) for i in range(len(cons))}
-        iters = np.zeros(F, dtype=np.intp)
-        slots = _assign_slots(entries, cons, sk, F)
-        if not slots:
-            return rot, tra, residual, iters
-        covered = np.zeros(F, dtype=bool)
-        for slot in slots:
-            covered |= slot["weight"] > 0
-        frames = np.flatnonzero(covered)
-        tasks = [Task(sl["kind"], sl["joint"], sl["goal"][frames], sl["weight"][frames],
-                      sl["normal"][frames], sl["side"][frames], sl["priority"])
-                 for sl in slots]
-        if warm_start:
-            res = np.zeros((len(frames), len(tasks)))
-            it = np.zeros(len(frames), dtype=np.intp)
-            for k, f in enumerate(frames):
-                if k and frames[k - 1] == f - 1:
-                    r0 = rot[f - 1:f].copy()
-                    t0 = tra[f:f + 1].copy()
-                    t0[:, 0] = tra[f - 1, 0]
-                else:
-                    r0, t0 = rot[f:f + 1], tra[f:f + 1]
-                r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
-                    sk, [task.take([k]) for task in tasks], r0, t0,
-                    attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], options)
-                rot[f], tra[f] = r[0], t[0]
-                if cancel is not None and k % 64 == 0:
-                    check_cancel()
-                if progress is not None and k % 64 == 0:
-                    progress(k / len(frames))
-        else:
-            r, t, res, it = solve_frames(sk, tasks, rot[frames], tra[frames],
-                                         attraction_rot[frames], attraction_tra[frames, 0],
-                                         options)
-            rot[frames], tra[frames] = r, t
-        iters[frames] = it
-        for col, sl in enumerate(slots):
-            owner = sl["owner"][frames]
-            for i in np.unique(owner[owner >= 0]):
-                sel = owner == i
-                residual[int(i)][frames[sel]] = res[sel, col]
-        check_cancel()
-        return rot, tra, residual, iters
-
-    # ---------------------------------------------------------------- pass one
     t0 = time.perf_counter()
-    entries1 = []
-    for i, c in enumerate(cons):
-        frames = np.arange(c.start, c.end + 1)
-        entries1.append((i, frames, _goals(c, frames)))
-    rot1, tra1, _, _ = run(entries1, base_rot, base_tra)
+    rot1, tra1 = _pass_one(problem)
     timings["pass one"] = time.perf_counter() - t0
     if progress is not None:
         progress(0.5)
-
-    # ---------------------------------------------------------------- pass two
     t0 = time.perf_counter()
-    need = sorted({c.smooth_in for c in cons if c.smooth_in < c.start})
-    effector_at = {}
-    if need:
-        pose = fk_arrays(sk, rot1[need], tra1[need], end_sites=False)
-        for k, f in enumerate(need):
-            effector_at[f] = (pose.positions[k], pose.rotations[k])
-    attraction_rot = base_rot.copy()
-    attraction_tra = base_tra.copy()
-    touched = np.zeros(F, dtype=bool)
-    entries2 = []
-    for i, c in enumerate(cons):
-        j = sk.index[c.joint]
-        frames = np.arange(c.start, c.end + 1)
-        entries2.append((i, frames, _goals(c, frames)))
-        if c.smooth_in < c.start - 1:
-            pos, wrot = effector_at[c.smooth_in]
-            frames = np.arange(c.smooth_in + 1, c.start)
-            u = (frames - c.smooth_in) / (c.start - c.smooth_in)
-            entries2.append((i, frames, np.array([_ramp_goal(c, pos[j], wrot[j], x)
-                                                  for x in u])))
-        if c.smooth_out > c.end + 1:
-            chain = _chain(sk, j)
-            frames = np.arange(c.end + 1, c.smooth_out)
-            u = ((frames - c.end) / (c.smooth_out - c.end))[:, None]
-            a, b = rot1[c.end, chain], rot1[c.smooth_out, chain]
-            steps = qpow_many(qmul(b, qconj(a)), u[:, 0])                     # (n, C, 4)
-            attraction_rot[frames[:, None], chain[None, :]] = qnormalize(qmul(steps, a))
-            root_a, root_b = tra1[c.end, 0], tra1[c.smooth_out, 0]
-            attraction_tra[frames, 0] = root_a + (root_b - root_a) * u
-            touched[frames] = True
-    rot2, tra2, residual, iters = run(entries2, attraction_rot, attraction_tra)
+    rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1)
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
-
-    # ---------------------------------------------------------------- displacement
-    changed = touched.copy()
-    for _, frames, _ in entries2:
-        changed[frames] = True
-    rot = base_rot.copy()
-    tra = base_tra.copy()
-    rot[changed] = rot2[changed]
-    tra[changed, 0] = tra2[changed, 0]
-    rotvecs = np.zeros((F, sk.num_joints, 3))
-    moved = np.any(rot != base_rot, axis=-1)                       # (F, J), bit for bit
-    rotvecs[moved] = quat_to_rotvec(qmul(rot[moved], qconj(base_rot[moved])))
-    root = tra[:, 0] - base_tra[:, 0]
-    motion = _apply_dense(composed, rotvecs, root, moved)
-    return Correction(motion=motion, rotvecs=rotvecs, root=root, residual=residual,
-                      iterations=iters, seconds=timings)
+    return _correction(composed, rot2, tra2, changed, residual, iters, timings)
 
 
 def _apply_dense(composed: Motion, rotvecs, root, moved) -> Motion:
@@ -305,38 +362,16 @@ def _apply_dense(composed: Motion, rotvecs, root, moved) -> Motion:
                            composed.name)
 
 
-def _ramp_goal(c: Constraint, pos: np.ndarray, wrot: np.ndarray, u: float):
-    """The goal at fraction ``u`` of the input ramp, from where the effector was at
-    ``smooth_in`` (``pos``, world rotation ``wrot``) to the goal at ``start``."""
-    if c.kind in ("position", "trajectory"):
-        end = c.goal_point(np.array([c.start]))[0]
-        return pos + (end - pos) * u
-    if c.kind == "plane":
-        n = c.goal["normal"]
-        point = c.goal["point"]
-        s = float((pos - point) @ n)
-        side = c.goal["side"]
-        # the plane starts where the effector is (if it is on the wrong side) and slides to its
-        # place at start
-        if side == "above":
-            s = min(s, 0.0)
-        elif side == "below":
-            s = max(s, 0.0)
-        return point + n * s * (1.0 - u)
-    g = c.goal["quaternion"]
-    d = qmul(g, qconj(wrot))
-    return qnormalize(qmul(qpow(d, u), wrot))
-
-
 def describe_residuals(correction: Correction, constraints) -> list[dict]:
-    """Per constraint: the largest and mean residual over its active range, and its range."""
+    """Per constraint: the largest and mean residual over its active range (in the kind's
+    ``residual_unit``: metres, radians for orientation), and its range."""
     out = []
     active = [c for c in constraints if c.enabled]
     for i, c in enumerate(active):
         res = correction.residual.get(i)
         window = res[c.start:c.end + 1] if res is not None else np.array([np.nan])
         out.append({"constraint": c.name or c.joint, "joint": c.joint, "kind": c.kind,
-                    "range": list(c.range),
+                    "range": list(c.range), "residual_unit": c.kind_object.residual_unit,
                     "max_residual": float(np.nanmax(window)) if np.any(np.isfinite(window))
                     else None,
                     "mean_residual": float(np.nanmean(window)) if np.any(np.isfinite(window))

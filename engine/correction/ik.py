@@ -13,6 +13,10 @@ Each joint's increment is a rotation vector ``r`` in its parent's frame, applied
 ``local' = exp(r) * local`` (the displacement map's own convention), so the Jacobian block of
 joint ``a`` for a point task on joint ``e`` is ``-[p_e - p_a]x R_parent(a)``.
 
+The solver is generic: a task's error rows and their Jacobian come from its constraint kind
+(:mod:`engine.correction.constraints`, one module per kind) given the joint's
+:class:`TaskState`; the solver stacks them by priority.
+
 Everything is vectorised over a *batch* of frames that share the same tasks (their goals
 differ per frame). :func:`solve_frames` iterates a batch to a tolerance or a cap; frames that
 converge leave the batch.
@@ -23,6 +27,7 @@ import math
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,8 +35,11 @@ from ..errors import IKOptionsError
 from ..quaternions import qconj, qmul, qnormalize, qrot, to_matrix
 from ..skeleton import Skeleton
 
-__all__ = ["Task", "IKOptions", "solve_frames", "rotvec_to_quat", "quat_to_rotvec",
-           "task_error_and_jacobian"]
+if TYPE_CHECKING:
+    from .constraints import ConstraintKind
+
+__all__ = ["Task", "TaskState", "IKOptions", "solve_frames", "rotvec_to_quat",
+           "quat_to_rotvec", "task_error_and_jacobian"]
 
 
 def rotvec_to_quat(v: np.ndarray) -> np.ndarray:
@@ -70,6 +78,35 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class TaskState:
+    """The kinematics of one task's joint for a batch of ``B`` frames, at the current posture.
+
+    Attributes:
+        position: ``(B, 3)`` [m] the joint's world position.
+        rotation: ``(B, 4)`` its world rotation (x, y, z, w).
+        pivots: ``C`` arrays ``(B, 3)`` [m] world positions of the chain's joints (those whose
+            rotation moves the task, in column order).
+        frames: ``C`` arrays ``(B, 3, 3)`` the world rotation of each chain joint's parent: the
+            frame its rotation-vector increment is expressed in.
+    """
+
+    position: np.ndarray
+    rotation: np.ndarray
+    pivots: list
+    frames: list
+
+    @property
+    def batch(self) -> int:
+        return self.position.shape[0]
+
+    def point_jacobian(self) -> np.ndarray:
+        """``(B, 3, 3 + 3C)`` d(joint position) / d(root translation, chain rotation vectors):
+        the identity for the root, ``-[p - p_a]x R_parent(a)`` for chain joint ``a``."""
+        B = self.batch
+        blocks = [np.broadcast_to(np.eye(3), (B, 3, 3))]
+        blocks += [-_skew(self.position - pa) @ m for pa, m in zip(self.pivots, self.frames)]
+        return np.concatenate(blocks, axis=2)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,35 +116,31 @@ class Task:
     still share one batch.
 
     Attributes:
-        kind: ``"position"``, ``"plane"`` or ``"orientation"``.
+        kind: the :class:`~engine.correction.constraints.ConstraintKind` whose error and
+            Jacobian rows the task is.
         joint: the constrained joint's index.
-        goal: ``(B, 3)`` points (position; for a plane, a point on it) or ``(B, 4)``
-            quaternions (orientation).
+        goal: ``(B, kind.goal_size)`` the kind's task goal per frame (a point, a quaternion,
+            a plane).
         weight: ``(B,)`` scales the task's rows within its level; 0 switches it off.
-        normal: ``(B, 3)`` the plane's unit normal (plane only).
-        side: ``(B,)`` +1 above (one-sided), 0 on, -1 below (one-sided) (plane only).
         priority: 1 is the highest.
         label: for reports.
     """
 
-    kind: str
+    kind: ConstraintKind
     joint: int
     goal: np.ndarray
     weight: np.ndarray
-    normal: np.ndarray | None = None
-    side: np.ndarray | None = None
     priority: int = 1
     label: str = ""
 
     @property
     def rows(self) -> int:
-        return 1 if self.kind == "plane" else 3
+        return self.kind.rows
 
     def take(self, index) -> "Task":
         """The task on a subset of the batch's frames."""
-        return Task(self.kind, self.joint, self.goal[index], self.weight[index],
-                    None if self.normal is None else self.normal[index],
-                    None if self.side is None else self.side[index], self.priority, self.label)
+        return Task(self.kind, self.joint, self.goal[index], self.weight[index], self.priority,
+                    self.label)
 
 
 @dataclass(frozen=True)
@@ -235,8 +268,7 @@ class _Structure:
         moving: set[int] = set()
         chains = []
         for t in tasks:
-            anc = skeleton.ancestors(t.joint)
-            chain = sorted(anc + [t.joint]) if t.kind == "orientation" else sorted(anc)
+            chain = t.kind.chain(skeleton, t.joint)
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
@@ -276,10 +308,12 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
                             tra: np.ndarray, slot: dict, select=None, sticky=None):
     """Errors ``(B, K)`` and Jacobians ``(B, K, N)`` of the tasks at the current posture.
 
-    Columns: root translation (3), then 3 per unknown joint (rotation vector in its parent's
-    frame). Rows of a satisfied one-sided plane are zero. Weights are not applied here.
+    Each task's rows are its kind's error and Jacobian at the posture. Columns: root
+    translation (3), then 3 per unknown joint (rotation vector in its parent's frame). Rows
+    of a task that is off or not active (a satisfied one-sided plane) are zero. Weights are
+    not applied here.
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
-    ``sticky``: ``(B, T)`` one-sided planes already activated in this solve stay active (held
+    ``sticky``: ``(B, T)`` one-sided tasks already activated in this solve stay active (held
     on the plane) so that the attraction cannot pull them back through it on every other
     iteration; the array is updated in place.
     """
@@ -293,8 +327,6 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
         e = task.joint
         if select is not None:
             task = task.take(select)
-        goal = task.goal
-        on = task.weight > 0
         mats = []
         for a in chain:
             a = int(a)
@@ -303,37 +335,18 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
                 parent_m[a] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if p < 0
                                else to_matrix(wq[p]))
             mats.append(parent_m[a])
-        cols = np.concatenate([np.arange(structure.col[int(a)], structure.col[int(a)] + 3)
-                               for a in chain]) if len(chain) else np.zeros(0, dtype=np.intp)
-        if task.kind == "orientation":
-            err[:, r0:r0 + 3] = np.where(on[:, None],
-                                         quat_to_rotvec(qmul(goal, qconj(wq[e]))), 0.0)
-            if len(chain):
-                jac[:, r0:r0 + 3, cols] = np.concatenate(mats, axis=2) * on[:, None, None]
-            continue
-        pe = wp[e]
-        if len(chain):
-            blocks = [-_skew(pe - wp[int(a)]) @ m for a, m in zip(chain, mats)]
-            jpos = np.concatenate(blocks, axis=2)                      # (B, 3, 3C)
-        if task.kind == "position":
-            err[:, r0:r0 + 3] = np.where(on[:, None], goal - pe, 0.0)
-            jac[:, r0:r0 + 3, 0:3] = np.eye(3) * on[:, None, None]
-            if len(chain):
-                jac[:, r0:r0 + 3, cols] = jpos * on[:, None, None]
-        else:                                                           # plane
-            n = task.normal                                              # (B, 3)
-            s = np.sum((pe - goal) * n, axis=1)                          # signed distance
-            side = task.side
-            active = on & ((side == 0) | ((side > 0) & (s < 0)) | ((side < 0) & (s > 0)))
-            if sticky is not None:
-                active |= on & sticky[:, ti]
-                sticky[:, ti] |= active
-            err[:, r0] = np.where(active, -s, 0.0)
-            row = np.zeros((B, structure.n))
-            row[:, 0:3] = n
-            if len(chain):
-                row[:, cols] = np.einsum("bi,bij->bj", n, jpos)
-            jac[:, r0] = np.where(active[:, None], row, 0.0)
+        cols = np.concatenate([np.arange(0, 3)] + [
+            np.arange(structure.col[int(a)], structure.col[int(a)] + 3) for a in chain])
+        state = TaskState(wp[e], wq[e], [wp[int(a)] for a in chain], mats)
+        on = task.weight > 0
+        active = on & task.kind.active(task.goal, state)
+        if sticky is not None:
+            active |= on & sticky[:, ti]
+            sticky[:, ti] |= active
+        rows = slice(r0, r0 + task.rows)
+        err[:, rows] = np.where(active[:, None], task.kind.error(task.goal, state), 0.0)
+        jac[:, rows, cols] = np.where(active[:, None, None],
+                                      task.kind.jacobian(task.goal, state), 0.0)
     return err, jac
 
 
@@ -362,8 +375,8 @@ class _Rows:
         self.task = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
         self.levels = [np.flatnonzero([tasks[i].priority == lvl for i in self.task])
                        for lvl in structure.levels]
-        is_orient = np.concatenate([[t.kind == "orientation"] * t.rows for t in tasks])
-        self.tol = np.where(is_orient, options.tolerance / options.scale, options.tolerance)
+        angular = np.concatenate([[t.kind.angular] * t.rows for t in tasks])
+        self.tol = np.where(angular, options.tolerance / options.scale, options.tolerance)
 
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,

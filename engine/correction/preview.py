@@ -83,16 +83,7 @@ def retimed(c, rng: tuple, shift: int | None = None):
     """``c`` over the range ``rng`` (smooth_in, start, end, smooth_out). A trajectory given
     per frame becomes keys at the same frames (its length is tied to the old range);
     ``shift`` (a whole-range move) moves a trajectory's keys along."""
-    goal = c.goal
-    if c.kind == "trajectory":
-        if "points" in goal:
-            pts = np.asarray(goal["points"])
-            frames = np.arange(c.start, c.start + len(pts), dtype=float)
-            goal = {"keys": np.column_stack([frames, pts])}
-        if shift:
-            keys = np.array(goal["keys"], dtype=float)
-            keys[:, 0] += shift
-            goal = {"keys": keys}
+    goal = c.kind_object.retimed_goal(c, shift)
     return dataclasses.replace(c, goal=goal, smooth_in=int(rng[0]), start=int(rng[1]),
                                end=int(rng[2]), smooth_out=int(rng[3]))
 

@@ -418,8 +418,8 @@ def _constraint(data, where: str) -> Constraint:
     except (ConstraintError, TypeError, ValueError) as exc:
         message = str(exc)
         message = message[len(label):] if message.startswith(label) else message
-        sub = ("goal" if "goal" in message else
-               "range" if "time range" in message or "smooth" in message else None)
+        sub = getattr(exc, "field", None)          # "goal.point" is reported as the goal
+        sub = sub.partition(".")[0] if sub else None
         raise _Invalid(f"{where}.{sub}" if sub else where, message) from None
 
 

@@ -1,14 +1,17 @@
 """Cartesian constraints (the paper's section 3.2): a joint, a goal, a kind and a time range.
 
-Kinds and goals (positions in metres, internal axes: +Y up):
+Kinds and goals (positions in metres, internal axes: +Y up), one module each; :data:`KINDS`
+maps a kind's name to the object that says what the kind does (:mod:`.base`):
 
-* ``position``: ``goal = {"point": [x, y, z]}``.
-* ``trajectory``: ``goal = {"points": [[x, y, z], ...]}`` one point per frame from ``start``
-  to ``end``, or ``goal = {"keys": [[frame, x, y, z], ...]}`` a path through keys (linear
-  between them, held beyond the ends).
-* ``plane``: ``goal = {"point": [...], "normal": [...], "side": "above" | "on" | "below"}``.
-  ``above`` and ``below`` are one-sided: no pull while satisfied. The floor is a plane.
-* ``orientation``: ``goal = {"quaternion": [x, y, z, w]}`` the joint's world orientation.
+* ``position`` (:mod:`.position`): ``goal = {"point": [x, y, z]}``.
+* ``trajectory`` (:mod:`.trajectory`): ``goal = {"points": [[x, y, z], ...]}`` one point per
+  frame from ``start`` to ``end``, or ``goal = {"keys": [[frame, x, y, z], ...]}`` a path
+  through keys (linear between them, held beyond the ends).
+* ``plane`` (:mod:`.plane`): ``goal = {"point": [...], "normal": [...], "side": "above" |
+  "on" | "below"}``. ``above`` and ``below`` are one-sided: no pull while satisfied. The floor
+  is a plane.
+* ``orientation`` (:mod:`.orientation`): ``goal = {"quaternion": [x, y, z, w]}`` the joint's
+  world orientation.
 
 The time range ``smooth_in <= start <= end <= smooth_out`` (frames): active on
 ``[start, end]``, eased in over ``[smooth_in, start]`` and out over ``[end, smooth_out]``. A
@@ -23,37 +26,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import MotionComposerError
+from . import orientation, plane, position, trajectory
+from .base import ConstraintError, ConstraintKind
 
-__all__ = ["Constraint", "ConstraintError", "KINDS", "PLANE_SIDES", "constraints_to_json",
-           "constraints_from_json", "floor_constraint"]
+__all__ = ["Constraint", "ConstraintError", "ConstraintKind", "KINDS", "PLANE_SIDES",
+           "constraints_to_json", "constraints_from_json", "floor_constraint"]
 
-KINDS = ("position", "trajectory", "plane", "orientation")
-PLANE_SIDES = ("above", "on", "below")
-
-
-class ConstraintError(MotionComposerError):
-    """A constraint that cannot be used; the message names the constraint and the field."""
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    """``v`` scaled to length 1; a vector already of unit length (within 1e-12) is kept bit for
-    bit, so that a constraint read back from a file is the constraint that was written."""
-    big = np.abs(v).max()
-    if big > 1e150:                           # the norm would overflow to inf
-        v = v / big
-    norm = np.linalg.norm(v)
-    return v if abs(norm - 1.0) <= 1e-12 else v / norm
-
-
-def _vec(value, n, what, label):
-    try:
-        arr = np.array(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ConstraintError(f"{label}: {what} must be {n} numbers, not {value!r}") from None
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise ConstraintError(f"{label}: {what} must be {n} finite numbers, not {value!r}")
-    return arr
+#: kind name -> kind, in the order the GUI lists them
+KINDS: dict[str, ConstraintKind] = {k.name: k for k in (position.KIND, trajectory.KIND,
+                                                        plane.KIND, orientation.KIND)}
+PLANE_SIDES = plane.KIND.variants
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,77 +59,47 @@ class Constraint:
     def __post_init__(self):
         label = f"constraint {self.name or self.joint!r}"
         if not isinstance(self.joint, str) or not self.joint:
-            raise ConstraintError(f"{label}: 'joint' must name a target joint")
-        if self.kind not in KINDS:
+            raise ConstraintError(f"{label}: 'joint' must name a target joint", "joint")
+        if not isinstance(self.kind, str) or self.kind not in KINDS:
             raise ConstraintError(f"{label}: kind must be one of {', '.join(KINDS)}, not "
-                                  f"{self.kind!r}")
+                                  f"{self.kind!r}", "kind")
         times = []
         for key in ("smooth_in", "start", "end", "smooth_out"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) and not (
                     isinstance(value, float) and value.is_integer()):
                 raise ConstraintError(f"{label}: {key} must be a whole frame number, not "
-                                      f"{value!r}")
+                                      f"{value!r}", "range")
             object.__setattr__(self, key, int(value))
             times.append(int(value))
         if not times[0] <= times[1] <= times[2] <= times[3]:
             raise ConstraintError(
                 f"{label}: the time range must satisfy smooth_in <= start <= end <= "
-                f"smooth_out, got {times[0]}, {times[1]}, {times[2]}, {times[3]}")
+                f"smooth_out, got {times[0]}, {times[1]}, {times[2]}, {times[3]}", "range")
         if times[0] < 0:
-            raise ConstraintError(f"{label}: smooth_in must be frame 0 or later, not {times[0]}")
+            raise ConstraintError(f"{label}: smooth_in must be frame 0 or later, not {times[0]}",
+                                  "range")
         if isinstance(self.priority, bool) or not isinstance(self.priority, (int, np.integer)) \
                 or self.priority < 1:
             raise ConstraintError(f"{label}: priority must be a whole number from 1 (highest), "
-                                  f"not {self.priority!r}")
+                                  f"not {self.priority!r}", "priority")
         if not (isinstance(self.weight, (int, float)) and math.isfinite(self.weight)
                 and self.weight > 0):
             raise ConstraintError(f"{label}: weight must be a positive number, not "
-                                  f"{self.weight!r}")
+                                  f"{self.weight!r}", "weight")
         if not isinstance(self.goal, dict):
-            raise ConstraintError(f"{label}: goal must be an object, not {self.goal!r}")
-        goal = dict(self.goal)
-        if self.kind == "position":
-            goal = {"point": _vec(goal.get("point"), 3, "goal.point", label)}
-        elif self.kind == "trajectory":
-            if "points" in goal:
-                pts = np.array(goal["points"], dtype=float)
-                n = self.end - self.start + 1
-                if pts.ndim != 2 or pts.shape != (n, 3) or not np.all(np.isfinite(pts)):
-                    raise ConstraintError(f"{label}: goal.points must hold one [x, y, z] per "
-                                          f"frame from start to end ({n} points), got shape "
-                                          f"{pts.shape}")
-                goal = {"points": pts}
-            elif "keys" in goal:
-                keys = np.array(goal["keys"], dtype=float)
-                if keys.ndim != 2 or keys.shape[1] != 4 or len(keys) < 1 or \
-                        not np.all(np.isfinite(keys)) or np.any(np.diff(keys[:, 0]) <= 0):
-                    raise ConstraintError(f"{label}: goal.keys must be [[frame, x, y, z], ...] "
-                                          "with increasing frames")
-                goal = {"keys": keys}
-            else:
-                raise ConstraintError(f"{label}: a trajectory goal needs 'points' (one per "
-                                      "frame) or 'keys' ([frame, x, y, z] ...)")
-        elif self.kind == "plane":
-            normal = _vec(goal.get("normal", [0, 1, 0]), 3, "goal.normal", label)
-            if np.linalg.norm(normal) < 1e-9:
-                raise ConstraintError(f"{label}: goal.normal must not be zero")
-            side = goal.get("side", "above")
-            if side not in PLANE_SIDES:
-                raise ConstraintError(f"{label}: goal.side must be one of "
-                                      f"{', '.join(PLANE_SIDES)}, not {side!r}")
-            goal = {"point": _vec(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
-                    "normal": _unit(normal), "side": side}
-        else:
-            q = _vec(goal.get("quaternion"), 4, "goal.quaternion", label)
-            if np.linalg.norm(q) < 1e-9:
-                raise ConstraintError(f"{label}: goal.quaternion must not be zero")
-            goal = {"quaternion": _unit(q)}
+            raise ConstraintError(f"{label}: goal must be an object, not {self.goal!r}", "goal")
+        goal = self.kind_object.validate(dict(self.goal), self.start, self.end, label)
         for v in goal.values():
             if isinstance(v, np.ndarray):
                 v.setflags(write=False)
         object.__setattr__(self, "goal", goal)
         object.__setattr__(self, "weight", float(self.weight))
+
+    @property
+    def kind_object(self) -> ConstraintKind:
+        """What the constraint's kind does (``KINDS[kind]``)."""
+        return KINDS[self.kind]
 
     # ------------------------------------------------------------------ time
     @property
@@ -162,21 +114,12 @@ class Constraint:
 
     def goal_point(self, frames: np.ndarray) -> np.ndarray:
         """``(n, 3)`` goal positions at ``frames`` for position and trajectory kinds."""
-        frames = np.asarray(frames)
-        if self.kind == "position":
-            return np.broadcast_to(self.goal["point"], (len(frames), 3)).copy()
-        if self.kind == "trajectory":
-            if "points" in self.goal:
-                idx = np.clip(frames - self.start, 0, len(self.goal["points"]) - 1)
-                return self.goal["points"][idx]
-            keys = self.goal["keys"]
-            return np.stack([np.interp(frames, keys[:, 0], keys[:, k]) for k in (1, 2, 3)], 1)
-        raise ConstraintError(f"a {self.kind} constraint has no goal point")
+        return self.kind_object.goal_point(self, np.asarray(frames))
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict:
-        goal = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.goal.items()}
-        data = {"joint": self.joint, "kind": self.kind, "goal": goal,
+        data = {"joint": self.joint, "kind": self.kind,
+                "goal": self.kind_object.goal_to_json(self.goal),
                 "range": [self.smooth_in, self.start, self.end, self.smooth_out],
                 "priority": self.priority, "weight": self.weight}
         if self.name:
@@ -196,11 +139,11 @@ class Constraint:
             raise ConstraintError(f"{label}: expected an object, not {type(data).__name__}")
         for key in ("joint", "kind", "goal", "range"):
             if key not in data:
-                raise ConstraintError(f"{label}: the field {key!r} is missing")
+                raise ConstraintError(f"{label}: the field {key!r} is missing", key)
         rng = data["range"]
         if not isinstance(rng, (list, tuple)) or len(rng) != 4:
             raise ConstraintError(f"{label}: 'range' must be [smooth_in, start, end, "
-                                  f"smooth_out], not {rng!r}")
+                                  f"smooth_out], not {rng!r}", "range")
         unknown = set(data) - {"joint", "kind", "goal", "range", "priority", "weight", "name",
                                "enabled", "auto", "meta"}
         if unknown:
@@ -231,7 +174,7 @@ def constraints_from_json(text: str, path=None) -> list[Constraint]:
         try:
             out.append(Constraint.from_dict(item, i))
         except ConstraintError as exc:
-            raise ConstraintError(f"{where}{exc}") from None
+            raise ConstraintError(f"{where}{exc}", exc.field) from None
     return out
 
 
