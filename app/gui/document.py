@@ -105,15 +105,17 @@ class Document(QtCore.QObject):
 
     @property
     def character(self):
-        """The target's glTF character (mesh and skin), or None for a BVH target."""
+        """The target's glTF character (mesh and skin), or None for a BVH target (or one
+        embedded in the project whose file is gone)."""
         path = self.target_path
-        if path is None or Path(path).suffix.lower() not in (".glb", ".gltf"):
+        if path is None:
             return None
         cached = getattr(self, "_character", None)
         if cached is None or cached[0] != str(path):
-            from engine.formats.gltf import read_gltf
+            from engine.formats import read_character
             try:
-                self._character = (str(path), read_gltf(path))
+                self._character = (str(path),
+                                   read_character(path) if Path(path).is_file() else None)
             except MotionComposerError as exc:
                 self.errorRaised.emit(str(exc))
                 self._character = (str(path), None)

@@ -59,7 +59,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..formats.bvh import _decode, parse_bvh, read_bvh
+from ..formats.bvh import _decode, parse_bvh
 from ..correction.constraints import KINDS, Constraint, ConstraintError
 from ..correction.contacts import ContactOptions
 from ..correction.enforcement import Correction
@@ -284,22 +284,19 @@ def _read_source(source: Source, role: str, path) -> Motion:
         present = False
     if not present:
         raise MissingSourceError(role, os.path.abspath(source.path), path)
-    if Path(source.path).suffix.lower() in (".glb", ".gltf"):
-        # a glTF character (the file's suffix says which reader; no format change needed):
-        # its bind pose is the target, its skinned mesh is drawn by the window
-        from ..formats.gltf import read_gltf
-        from ..errors import GLTFError
-        try:
-            return read_gltf(source.path).rest_motion()
-        except GLTFError as exc:
-            raise ProjectError(f"the {role} character cannot be read: {exc}", path,
-                               f"{role}.path") from None
+    # the file's content says which reader (a glTF character's bind pose is the target)
+    from ..errors import FileFormatError, GLTFError
+    from ..formats import read_motion
     try:
-        return read_bvh(source.path, **options)
+        return read_motion(source.path, **options)
     except BVHError as exc:
         if _about_position_mode(exc):
             raise ProjectError(exc.problem, path, f"{role}.position_mode") from None
         raise ProjectError(f"the {role} clip cannot be read: {exc}", path,
+                           f"{role}.path") from None
+    except FileFormatError as exc:
+        what = "character" if isinstance(exc, GLTFError) else "clip"
+        raise ProjectError(f"the {role} {what} cannot be read: {exc}", path,
                            f"{role}.path") from None
 
 
