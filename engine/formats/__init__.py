@@ -169,8 +169,9 @@ def _unknown(head: bytes, path) -> UnknownFormatError:
         return UnknownFormatError(f"the file is empty; expected a motion file ({_known()})",
                                   path)
     if b"\x00" in head:
-        return UnknownFormatError(f"this is a binary file of no format read here (it contains "
-                                  f"NUL bytes); expected a motion file ({_known()})", path)
+        return UnknownFormatError(f"this is a binary file in no format this application "
+                                  f"reads (it contains NUL bytes); expected a motion file "
+                                  f"({_known()})", path)
     body = head.removeprefix(_BOM)
     start = len(body) - len(body.lstrip(_ASCII_SPACE))
     line = body[:start].replace(b"\r\n", b"\n").replace(b"\r", b"\n").count(b"\n") + 1
