@@ -10,7 +10,7 @@ import json
 import os
 import sys
 
-from engine import MotionComposerError, read_bvh
+from engine import MotionComposerError
 from engine.describe import describe_motion, joint_tree_lines
 from engine.units import AXES, UNITS
 
@@ -100,17 +100,8 @@ def ik_options_from_args(args, base):
         raise MotionComposerError(f"{flags[exc.field]}: {exc.problem}") from None
 
 
-GLTF_SUFFIXES = (".glb", ".gltf")
-
-
-def _is_gltf(path) -> bool:
-    import os
-    return os.path.splitext(str(path))[1].lower() in GLTF_SUFFIXES
-
-
-def _gltf_info(args):
-    """The character of a glTF file, its motion shown by ``info`` and the extra figures."""
-    from engine.formats.gltf import read_gltf
+def _gltf_info(args, character):
+    """The motion ``info`` shows of a glTF ``character`` and the extra figures."""
     given = [flag for flag, value in (("--units", args.units), ("--scale", args.scale),
                                       ("--up-axis", args.up_axis),
                                       ("--position-mode", args.position_mode))
@@ -118,7 +109,6 @@ def _gltf_info(args):
     if given:
         raise MotionComposerError(f"{args.file}: {', '.join(given)} apply to BVH files only; "
                                   "glTF is metres and +Y up by definition")
-    character = read_gltf(args.file)
     motion = character.motions[0] if character.motions else character.rest_motion()
     extra = {
         "character": character.name,
@@ -135,10 +125,12 @@ def _gltf_info(args):
 
 
 def cmd_info(args) -> int:
-    if _is_gltf(args.file):
-        motion, extra = _gltf_info(args)
+    from engine.formats import read_character, read_motion
+    character = read_character(args.file)
+    if character is not None:
+        motion, extra = _gltf_info(args, character)
     else:
-        motion, extra = read_bvh(args.file, **_reader_options(args)), None
+        motion, extra = read_motion(args.file, **_reader_options(args)), None
     info = describe_motion(motion)
     if extra is not None:
         info.update(extra)
@@ -202,7 +194,8 @@ def _reference(text: str):
 def cmd_retarget(args) -> int:
     import time
 
-    from engine.formats.bvh import write_bvh
+    from engine.formats import output_format, read_character, read_motion, read_performer
+    from engine.formats import write_motion
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
@@ -214,14 +207,10 @@ def cmd_retarget(args) -> int:
 
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
-    performer = read_bvh(args.performer)
-    character = None
-    if Path(args.target).suffix.lower() in (".glb", ".gltf"):
-        from engine.formats.gltf import read_gltf
-        character = read_gltf(args.target)           # its bind pose is the target
-        target = character.rest_motion()
-    else:
-        target = read_bvh(args.target)
+    output_format(args.output)                       # an unwritable suffix fails before work
+    performer = read_performer(args.performer)
+    character = read_character(args.target)          # a glTF's bind pose is the target
+    target = character.rest_motion() if character is not None else read_motion(args.target)
     if args.map:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
@@ -250,11 +239,7 @@ def cmd_retarget(args) -> int:
         constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor,
         ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
-    if Path(args.output).suffix.lower() in (".glb", ".gltf"):
-        from engine.formats.gltf import write_gltf
-        write_gltf(result.motion, character, args.output)   # mesh and skin when the target has
-    else:
-        write_bvh(result.motion, args.output)
+    write_motion(result.motion, args.output, character)  # mesh and skin when the target has
     if args.save_map:
         correspondence.save(args.save_map)
     if args.save_project:
@@ -280,20 +265,22 @@ def cmd_retarget(args) -> int:
 
 
 def cmd_export(args) -> int:
-    """``export P.mcp -o OUT.bvh``: evaluate a saved project headless and write its motion."""
+    """``export P.mcp -o OUT.bvh``: evaluate a saved project headless and write its motion
+    (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
-    from engine.formats.bvh import write_bvh
+    from engine.formats import output_format, write_motion
     from engine.scene import Scene
 
     started = time.perf_counter()
+    fmt = output_format(args.output)                 # an unwritable suffix fails before work
     scene = Scene.open(args.project)
     if args.solve:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
     scene.check()
     motion = scene.motion
-    write_bvh(motion, args.output)
+    write_motion(motion, args.output, scene.character if fmt.mesh else None)
     print(f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:.6g} fps onto "
           f"{motion.skeleton.num_joints} joints ({len(scene.constraints)} constraints, "
           f"{len(scene.displacement)} displacement curves) in "
@@ -356,7 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "units, up axis, stature, channel layout; for glTF also "
                                       "skins, meshes and animations (the first animation is "
                                       "the motion shown, or the bind pose when there is none).")
-    info.add_argument("file", help="a .bvh, .glb or .gltf file")
+    info.add_argument("file", help="a BVH file or a glTF character (.glb, .gltf, .vrm); the "
+                                   "content says which, not the name")
     info.add_argument("--json", action="store_true", help="print JSON for machines")
     _add_reader_options(info)
     info.set_defaults(func=cmd_info)
@@ -433,7 +421,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "conversion plus the saved correction) and write the "
                                     "result.")
     ex.add_argument("project", help="the project (.mcp)")
-    ex.add_argument("-o", "--output", required=True, help="the .bvh to write")
+    ex.add_argument("-o", "--output", required=True,
+                    help="the file to write: .bvh, or .glb/.gltf (with the target character's "
+                         "mesh and skin when it has them)")
     ex.add_argument("--solve", action="store_true",
                     help="solve the project's constraints with IK again instead of using the "
                          "saved correction (hand edits to the curves are then replaced)")

@@ -23,7 +23,8 @@ class Recipe:
     """What to do to every clip.
 
     Attributes:
-        target_path: the character (.bvh, or .glb/.gltf when engine.formats.gltf is present).
+        target_path: the character, any file :func:`engine.formats.read_motion` reads (a
+            BVH, or a glTF character's bind pose).
         pairs: the correspondence, target joint -> performer joint; empty means automatic
             mapping for each clip (clips from different skeletons then work too).
         bind: BindOptions fields; root: RootOptions fields.
@@ -64,20 +65,13 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
                   ik=dataclasses.asdict(project.ik_options))
 
 
-def _read_character(path: str, options: dict):
-    from .formats.bvh import read_bvh
-    if Path(path).suffix.lower() in (".glb", ".gltf"):
-        from .formats.gltf import read_gltf  # noqa: PLC0415 - optional until present
-        return read_gltf(path).rest_motion()
-    return read_bvh(path, **options)
-
-
 def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     """Retarget one clip with ``recipe`` and write ``out_dir/<stem><suffix>.bvh``.
 
     Never raises: a failure is reported in the summary with its reason.
     """
-    from .formats.bvh import read_bvh, write_bvh
+    from .formats import read_motion, read_performer
+    from .formats.bvh import write_bvh
     from .conversion.correspondence import Correspondence
     from .errors import MotionComposerError
     from .conversion.binding import BindOptions
@@ -89,8 +83,8 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     started = time.perf_counter()
     summary = {"clip": str(clip), "status": "failed", "output": None, "reason": ""}
     try:
-        performer = read_bvh(clip)
-        target = _read_character(recipe.target_path, recipe.target_reader)
+        performer = read_performer(clip)
+        target = read_motion(recipe.target_path, **recipe.target_reader)
         if recipe.pairs:
             corr = Correspondence(recipe.pairs)
             corr.validate(target.skeleton, performer.skeleton)

@@ -14,6 +14,8 @@ __all__ = [
     "FileFormatError",
     "BVHError",
     "GLTFError",
+    "UnknownFormatError",
+    "UnsupportedFormatError",
     "ExportError",
     "SkeletonError",
     "MappingError",
@@ -62,6 +64,17 @@ class GLTFError(FileFormatError):
         self.where = where
         super().__init__(f"{where}: {problem}" if where else problem, path)
         self.problem = problem
+
+
+class UnknownFormatError(FileFormatError):
+    """A file whose content is none of the formats the application reads (see
+    :mod:`engine.formats`); the message names the formats it knows."""
+
+
+class UnsupportedFormatError(FileFormatError):
+    """A file in a format that is recognised but not read or written (FBX), an output path
+    whose suffix no writer writes, or a file used where its format cannot serve (a glTF
+    character as the performer)."""
 
 
 class ExportError(MotionComposerError):

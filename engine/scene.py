@@ -22,6 +22,7 @@ through a scene, so a result never depends on which of them asked for it.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
@@ -311,9 +312,10 @@ class Scene:
 
     @property
     def character(self):
-        """The target's character with its mesh and skin (glTF), or None."""
+        """The target's character with its mesh and skin (a glTF target), or None (a BVH
+        target, or one embedded in the project whose file is gone)."""
         path = self.project.target.path
-        if path is None or self.project.target.embedded is not None:
+        if path is None or not os.path.isfile(path):
             return None
         from .formats import read_character
         return self.derived.get("character", path, lambda: read_character(path))

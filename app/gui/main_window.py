@@ -245,8 +245,9 @@ class MainWindow(QtWidgets.QMainWindow):
         return ok
 
     def _locate(self, role: str, missing: str) -> str:
+        from engine.formats import open_filters
         return self.ask_open_path(f"The {role} clip {missing} has moved: where is it?",
-                                  "Motion files (*.bvh *.glb *.gltf);;All (*)")
+                                  open_filters())
 
     def save(self) -> bool:
         if self.doc.path is None:
@@ -278,26 +279,20 @@ class MainWindow(QtWidgets.QMainWindow):
             self.statusBar().showMessage(f"Autosave failed: {exc}", 10000)
 
     def import_dialog(self, side: str) -> None:
-        path = self.ask_open_path(f"Import {side}",
-                                  "Motion files (*.bvh *.glb *.gltf);;All (*)")
+        from engine.formats import open_filters
+        path = self.ask_open_path(f"Import {side}", open_filters())
         if path:
             self.import_file(side, path)
 
     def import_file(self, side: str, path) -> bool:
         """Import a performer or a target: one command, which also redoes the map (pairs set
         by hand that still fit are kept, the rest auto-mapped)."""
+        from engine.formats import read_motion, read_performer
         from engine.project import Source
 
         def load():
-            if Path(path).suffix.lower() in (".glb", ".gltf"):
-                if side != "target":
-                    raise MotionComposerError(f"{path}: a glTF file is a character; import it "
-                                              "as the target")
-                from engine.formats.gltf import read_gltf
-                motion = read_gltf(path).rest_motion()
-            else:
-                from engine.formats.bvh import read_bvh
-                motion = read_bvh(path)
+            # the file's content says its format; a glTF character can only be the target
+            motion = read_performer(path) if side == "performer" else read_motion(path)
             self.doc.set_source(side, motion, Source(path=str(Path(path).resolve())),
                                 f"Import {side} {Path(path).name}")
             self.viewport.frame_all()
@@ -308,22 +303,16 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_error("Nothing to export yet: import a performer and a target and map "
                             "them first.")
             return
-        filters = "BVH (*.bvh);;glTF binary (*.glb);;glTF (*.gltf)"
-        path = self.ask_save_path("Export", filters)
+        from engine.formats import save_filters, with_output_suffix
+        path = self.ask_save_path("Export", save_filters())
         if path:
-            if not path.lower().endswith((".bvh", ".glb", ".gltf")):
-                path += ".bvh"
-            self.export_bvh(path)
+            self.export_bvh(with_output_suffix(path))
 
     def export_bvh(self, path) -> bool:
-        """Write the final motion: BVH, or glTF (.glb/.gltf) with the character's mesh and
-        skin when the target is a glTF character."""
-        from engine.formats.bvh import write_bvh
-        if str(path).lower().endswith((".glb", ".gltf")):
-            from engine.formats.gltf import write_gltf
-            ok = self._guard(write_gltf, self.doc.motion, self.doc.scene.character, path)
-        else:
-            ok = self._guard(write_bvh, self.doc.motion, path)
+        """Write the final motion in the format ``path``'s suffix names: BVH, or glTF
+        (.glb/.gltf) with the character's mesh and skin when the target is a glTF character."""
+        from engine.formats import write_motion
+        ok = self._guard(write_motion, self.doc.motion, path, self.doc.scene.character)
         if ok:
             self.statusBar().showMessage(f"Exported {path}", 5000)
         return ok

@@ -329,9 +329,8 @@ def _parse_container(data: bytes, path) -> tuple[dict, bytes | None]:
                         path)
     if data[:4] == _GLB_MAGIC:
         return _parse_glb(data, path)
-    suffix = Path(path).suffix.lower() if path else ""
     looks_json = data.removeprefix(b"\xef\xbb\xbf").lstrip()[:1] == b"{"
-    if suffix == ".glb" or not looks_json:
+    if not looks_json:
         raise GLTFError(f"bad magic {data[:4]!r}: a binary glTF (.glb) starts with b'glTF' and "
                         "a .gltf file is JSON starting with '{'", path, "GLB header")
     return _parse_json(data, path, "JSON"), None

@@ -15,7 +15,7 @@ from ..correction.displacement import ROOT, DisplacementMap
 from ..correction.enforcement import Correction
 from ..errors import BVHError, MappingError
 from ..fileio import FileWriteError, atomic_write
-from ..formats.bvh import _decode, parse_bvh, read_bvh
+from ..formats.bvh import _decode, parse_bvh
 from ..motion import Motion
 from .json import _sub, project_from_json, project_to_json
 from .model import (ROLES, MissingSourceError, OpenedProject, Project, ProjectError, Source,
@@ -106,22 +106,19 @@ def _read_source(source: Source, role: str, path) -> Motion:
         present = False
     if not present:
         raise MissingSourceError(role, os.path.abspath(source.path), path)
-    if Path(source.path).suffix.lower() in (".glb", ".gltf"):
-        # a glTF character (the file's suffix says which reader; no format change needed):
-        # its bind pose is the target, its skinned mesh is drawn by the window
-        from ..formats.gltf import read_gltf
-        from ..errors import GLTFError
-        try:
-            return read_gltf(source.path).rest_motion()
-        except GLTFError as exc:
-            raise ProjectError(f"the {role} character cannot be read: {exc}", path,
-                               f"{role}.path") from None
+    # the file's content says which reader (a glTF character's bind pose is the target)
+    from ..errors import FileFormatError, GLTFError
+    from ..formats import read_motion
     try:
-        return read_bvh(source.path, **options)
+        return read_motion(source.path, **options)
     except BVHError as exc:
         if _about_position_mode(exc):
             raise ProjectError(exc.problem, path, f"{role}.position_mode") from None
         raise ProjectError(f"the {role} clip cannot be read: {exc}", path,
+                           f"{role}.path") from None
+    except FileFormatError as exc:
+        what = "character" if isinstance(exc, GLTFError) else "clip"
+        raise ProjectError(f"the {role} {what} cannot be read: {exc}", path,
                            f"{role}.path") from None
 
 

@@ -1,0 +1,74 @@
+"""The window imports and exports through engine.formats: by content, with its dialog filters."""
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from app.gui.qt import QtCore
+from conftest import clip_path, shared_path
+from engine.formats import open_filters, read_character, read_motion, save_filters, sniff
+
+WALK = clip_path("cmu_131_01_walk.bvh")
+TPOSE = clip_path("cmu_rest_tpose.bvh")
+
+
+@pytest.fixture()
+def window(qtbot, tmp_path, monkeypatch):
+    from app.gui.main_window import MainWindow
+    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
+    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
+                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    w = MainWindow()
+    w.errors = []
+    w.show_error = w.errors.append
+    w.ask_unsaved = lambda: "discard"
+    qtbot.addWidget(w)
+    return w
+
+
+def test_the_dialogs_get_the_registry_filters(window, tmp_path):
+    asked = []
+    window.ask_open_path = lambda caption, filters: asked.append(filters) or ""
+    window.import_dialog("performer")
+    assert asked == [open_filters()]
+    window.import_file("performer", WALK)
+    window.import_file("target", TPOSE)
+    window.ask_save_path = lambda caption, filters: asked.append(filters) or str(tmp_path / "take")
+    window.export_dialog()
+    assert asked[-1] == save_filters()
+    assert read_motion(tmp_path / "take.bvh").num_frames == 994    # no suffix typed: BVH
+
+
+def test_files_import_by_content_whatever_their_name(window, tmp_path):
+    clip = tmp_path / "walk.txt"
+    shutil.copy(WALK, clip)
+    avatar = tmp_path / "robot.vrm"
+    shutil.copy(shared_path("target_robot_expressive.glb"), avatar)
+    assert window.import_file("performer", clip), window.errors
+    assert window.import_file("target", avatar), window.errors
+    doc = window.doc
+    assert doc.scene.performer.num_frames == 994 and doc.scene.ready
+    assert doc.scene.character is not None and doc.scene.character.meshes
+    out = tmp_path / "onto.glb"
+    assert window.export_bvh(out), window.errors
+    assert sniff(out).mesh and read_character(out).num_vertices == doc.scene.character.num_vertices
+
+
+def test_a_gltf_performer_and_fbx_are_refused_with_a_message(window, tmp_path):
+    robot = shared_path("target_robot_expressive.glb")
+    assert not window.import_file("performer", robot)
+    assert "character" in window.errors[-1] and "target" in window.errors[-1]
+    rig = tmp_path / "rig.fbx"
+    rig.write_bytes(b"Kaydara FBX Binary  \x00\x1a\x00" + bytes(64))
+    assert not window.import_file("target", rig)
+    assert "FBX is not supported yet" in window.errors[-1]
+
+
+def test_an_export_to_an_unknown_suffix_is_refused(window, tmp_path):
+    window.import_file("performer", WALK)
+    window.import_file("target", TPOSE)
+    out = tmp_path / "take.txt"
+    assert not window.export_bvh(out)
+    assert "cannot write" in window.errors[-1] and not out.exists()
