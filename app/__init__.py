@@ -1,1 +1,1 @@
-"""Motion Composer's application layer: the command line and (later) the Qt window."""
+"""Motion Composer's application layer: the command line (`app.cli`) and the Qt window (`app.gui`)."""

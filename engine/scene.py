@@ -306,10 +306,6 @@ class Scene:
         value = self._raw("motion")
         return value.message if isinstance(value, _Failed) else ""
 
-    def _ik_options(self, composed):
-        # the project's settings; their scale (None) is the character's stature per run
-        return self.project.ik_options
-
     @property
     def character(self):
         """The target's character with its mesh and skin (a glTF target), or None (a BVH
@@ -374,7 +370,7 @@ class Scene:
         correction = None
         if any(c.enabled for c in chosen):
             t0 = time.perf_counter()
-            options = ik_options if ik_options is not None else self._ik_options(composed)
+            options = ik_options if ik_options is not None else self.project.ik_options
             correction = enforce(composed, chosen, options=options,
                                  progress=progress, cancel=cancel, warm_start=warm_start)
             timings["ik_s"] = time.perf_counter() - t0
@@ -396,7 +392,7 @@ class Scene:
         composed = self.composed
         if composed is None:
             raise MotionComposerError("nothing to preview: the scene has no direct conversion")
-        options = self._ik_options(composed)
+        options = self.project.ik_options
         window = (None if base_constraints is None or base_motion is None
                   else _preview.changed_window(base_constraints, constraints))
         if whole or window is None:

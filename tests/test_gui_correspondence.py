@@ -359,7 +359,9 @@ def test_table_combo_edits_the_performer(panel, doc, qtbot):
     combo.activated.emit(i)
     assert doc.scene.correspondence.pairs["LeftArm"] == "LeftCollar"
     assert "LeftShoulder" not in doc.scene.correspondence.pairs          # taken from it: one to one
-    assert doc.undo_stack.undoText() == "Map LeftArm to LeftCollar"
+    # the pair it replaces is named
+    assert doc.undo_stack.undoText() == \
+        "Map LeftArm to LeftCollar (replaces LeftShoulder -> LeftCollar)"
     qtbot.waitUntil(lambda: panel.table.findChild(QtWidgets.QComboBox) is None
                     or not panel.table.findChild(QtWidgets.QComboBox).isVisible())
     # "(unmapped)" unmaps

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from app.gui.commands import push_correspondence
 from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.conversion.correspondence import Correspondence
+from engine.conversion.correspondence import BY_HAND, Correspondence
 from engine.errors import MotionComposerError
 
 __all__ = ["CorrespondencePanel", "JointTree", "LinkView", "MappingModel", "MappingTable",
@@ -89,16 +89,22 @@ def required_joints(skeleton) -> dict[str, str]:
 def _map_command(doc, target: str, performer: str | None) -> bool:
     """Push "Map <target> to <performer>" (or "Unmap <target>"): one undoable command. A
     performer joint already driving another target joint is taken from it. The pair's note
-    says it was set by hand (``with_pair`` would keep a stale auto-mapping note)."""
+    says it was set by hand (``with_pair`` would keep a stale auto-mapping note); a pair the
+    map loses that way is named in the command and in a note for the status bar."""
     corr = doc.scene.correspondence
     if corr.performer_of(target) == performer:
         return False
     new = corr.with_pair(target, performer)
     notes = dict(new.notes)
     if performer is not None:
-        notes[target] = "set by hand"
-    push_correspondence(doc, Correspondence(new.pairs, notes),
-                        f"Map {target} to {performer}" if performer else f"Unmap {target}")
+        notes[target] = BY_HAND
+    text = f"Map {target} to {performer}" if performer else f"Unmap {target}"
+    previous = corr.target_of(performer) if performer is not None else None
+    if previous is not None and previous != target:
+        # one to one: the other target joint loses this performer joint; say so
+        text += f" (replaces {previous} -> {performer})"
+        doc.noted.emit(f"{performer} drove {previous}; {previous} is now unmapped")
+    push_correspondence(doc, Correspondence(new.pairs, notes), text)
     return True
 
 
@@ -765,7 +771,8 @@ class CorrespondencePanel(QtWidgets.QWidget):
         missing = self.unmapped_required()
         n_target = len(self.target_tree.items)
         if n_target:
-            self.summary_label.setText(f"{len(corr)} of {n_target} target joints mapped")
+            mapped = sum(1 for t in corr.pairs if t in self.target_tree.items)
+            self.summary_label.setText(f"{mapped} of {n_target} target joints mapped")
         else:
             self.summary_label.setText("Import a target and a performer to map their joints")
         if missing:
