@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip("PySide6")
 
 from app.gui.qt import QtCore  # noqa: E402
-from app.gui.binding_panel import BindingPanel  # noqa: E402
+from app.gui.ik_panel import IKPanel  # noqa: E402
 from engine.correction.constraints import Constraint  # noqa: E402
 from engine.correction.ik import IKOptions  # noqa: E402
 from gui_support import demo_document  # noqa: E402
@@ -25,11 +25,11 @@ def doc(qtbot):
 
 @pytest.fixture
 def panel(qtbot, doc):
-    w = BindingPanel(doc)
+    w = IKPanel(doc)
     qtbot.addWidget(w)
     w.show()
     qtbot.waitExposed(w)
-    return w.ik
+    return w
 
 
 def _type(qtbot, edit, text):

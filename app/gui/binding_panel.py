@@ -186,10 +186,6 @@ class BindingPanel(QtWidgets.QWidget):
         form.addRow("", scale_row)
         outer.addWidget(root)
 
-        from app.gui.ik_panel import IKPanel
-        self.ik = IKPanel(self.doc)
-        outer.addWidget(self.ik)
-
         self.notes = QtWidgets.QLabel()
         self.notes.setWordWrap(True)
         self.notes.setTextInteractionFlags(QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)

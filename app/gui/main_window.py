@@ -55,11 +55,18 @@ class MainWindow(QtWidgets.QMainWindow):
         self.binding_panel = BindingPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self.curve_editor = CurveEditor(self.doc)
+        from app.gui.ik_panel import IKPanel
+        self.ik_panel = IKPanel(self.doc)
+        ik_page = QtWidgets.QWidget()
+        ik_box = QtWidgets.QVBoxLayout(ik_page)
+        ik_box.addWidget(self.ik_panel)
+        ik_box.addStretch(1)
         docks = [
             ("Correspondence", self.correspondence_panel,
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
             ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea,
              "binding"),
+            ("IK", ik_page, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, "ik"),
             ("Curves", self.curve_editor, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
              "curves"),
         ]
@@ -92,9 +99,10 @@ class MainWindow(QtWidgets.QMainWindow):
         box.addWidget(self.viewport, 1)
         box.addWidget(self.playback)
         self.setCentralWidget(central)
+        self.tabifyDockWidget(self.binding_dock, self.ik_dock)
         if getattr(self, "inspector_dock", None) is not None:
             self.tabifyDockWidget(self.binding_dock, self.inspector_dock)
-            self.binding_dock.raise_()
+        self.binding_dock.raise_()
         self.playback.install_shortcuts(self)
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
