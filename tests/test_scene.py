@@ -9,7 +9,6 @@ and that :func:`~engine.scene.remap` keeps the pairs set by hand.
 """
 from __future__ import annotations
 
-import dataclasses
 import tracemalloc
 from collections import Counter
 
@@ -23,7 +22,7 @@ from engine.conversion.automap import automap
 from engine.conversion.correspondence import BY_HAND, Correspondence
 from engine.correction.constraints import Constraint
 from engine.correction.displacement import Curve, DisplacementMap
-from engine.formats import read_motion, read_performer
+from engine.formats import read_motion, read_performer, write_motion
 from engine.motion import Motion
 from engine.project import Project, Source, open_project, save_project
 from engine.scene import Scene, evaluate_project, remap
@@ -175,8 +174,8 @@ def test_solve_is_the_command_line_and_a_saved_project(tmp_path):
     constraints, the same written motion; the saved solved project evaluates to the scene's
     motion bit for bit."""
     out, saved = tmp_path / "cli.bvh", tmp_path / "cli.mcp"
-    assert cli_main(["retarget", str(WALK), "--target", str(TPOSE), "-o", str(out), "--auto-contacts",
-                     "--floor", "0", "--save-project", str(saved)]) == 0
+    assert cli_main(["retarget", str(WALK), "--target", str(TPOSE), "-o", str(out),
+                     "--auto-contacts", "--floor", "0", "--save-project", str(saved)]) == 0
 
     performer, target = read_performer(WALK), read_motion(TPOSE)
     project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
@@ -184,7 +183,6 @@ def test_solve_is_the_command_line_and_a_saved_project(tmp_path):
                       auto_contacts=True, floor=0.0)
     solution = Scene.from_project(project).solve(regenerate=True)
 
-    from engine.formats import write_motion
     mine = tmp_path / "scene.bvh"
     write_motion(solution.motion, mine)
     assert mine.read_bytes() == out.read_bytes()
@@ -206,8 +204,9 @@ def test_solve_is_the_command_line_and_a_saved_project(tmp_path):
 
 # --------------------------------------------------------------------------- remap
 def hand_and_auto_map(target, performer) -> Correspondence:
-    """The automatic map with three hand edits: a pair without a note, one noted "set by
-    hand", and one naming a performer joint the automatic map gave another target joint."""
+    """The automatic map with hand edits: a pair without a note naming a performer joint the
+    automatic map gave another target joint, one noted "set by hand", and the left toe (a
+    pair without a note) left as the automatic map had it."""
     auto = automap(target.skeleton, performer.skeleton)
     pairs = dict(auto.pairs)
     notes = dict(auto.notes)
@@ -217,6 +216,7 @@ def hand_and_auto_map(target, performer) -> Correspondence:
     notes.pop("Neck", None)
     notes.pop("Neck1", None)
     notes["Head"] = BY_HAND
+    notes.pop("LeftToeBase")
     return Correspondence(pairs, notes)
 
 
@@ -266,6 +266,8 @@ def test_replacing_the_target_by_another_convention_remaps(name):
         if scene.correspondence.set_by_hand(t) and t in other.skeleton.index:
             assert corr.pairs.get(t) == p, t
     assert all(t in other.skeleton.index for t in corr.pairs)
+    assert "LeftToeBase" not in corr.pairs               # a hand pair whose joint is gone
+    assert "LeftToe" in corr.pairs.values()              # its performer joint auto-mapped
     assert len(corr) >= 12 and one_to_one(corr)
     corr.validate(other.skeleton, performer.skeleton)
     assert moved.evaluation_error == ""
