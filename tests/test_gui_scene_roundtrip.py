@@ -21,7 +21,8 @@ from engine.correction.contacts import ContactOptions
 from engine.correction.displacement import ROOT, Curve, DisplacementMap
 from engine.correction.ik import IKOptions
 from engine.formats import read_motion
-from engine.project import Project, Source, ViewerState, project_to_json, save_project
+from engine.project import (Project, Source, ViewerState, embed_sources, project_to_json,
+                            save_project)
 from ik_fixtures import MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")
@@ -105,6 +106,29 @@ def test_every_field_is_away_from_its_default():
                       "them a value here and make the window carry them")
 
 
+#: the option classes inside a project, by the project fields that hold them
+PARTS = {("performer", "target"): Source, ("bind_options",): BindOptions, ("root",): RootOptions,
+         ("contact_options",): ContactOptions, ("ik_options",): IKOptions,
+         ("viewer",): ViewerState}
+#: never part of a project (each solve takes the character's stature)
+NOT_SAVED = {(IKOptions, "scale")}
+
+
+def test_every_option_is_away_from_its_default():
+    """Each field of each option class, in the project with paths or with embedded clips."""
+    variants = [full_project(), embed_sources(full_project())]
+    kept = []
+    for names, cls in PARTS.items():
+        for f in dataclasses.fields(cls):
+            if (cls, f.name) in NOT_SAVED:
+                continue
+            base = getattr(cls(), f.name)
+            if not any(getattr(getattr(v, n), f.name) != base for v in variants for n in names):
+                kept.append(f"{'/'.join(names)}.{f.name}")
+    assert not kept, (f"{kept} keep their default in full_project(): give them a value here "
+                      "and make the window carry them")
+
+
 def edits(doc, project: Project):
     """``(field, edit)`` for every field: an undoable change of it through the document (the
     viewer, outside the history, is changed and set back)."""
@@ -126,9 +150,11 @@ def edits(doc, project: Project):
 
 
 # --------------------------------------------------------------------------- the document
-@pytest.fixture
-def saved(tmp_path):
+@pytest.fixture(params=["paths", "embedded"])
+def saved(tmp_path, request):
     project = full_project()
+    if request.param == "embedded":
+        project = embed_sources(project)
     path = tmp_path / "full.mcp"
     save_project(project, path)
     return project, path
