@@ -244,10 +244,26 @@ class _Resolver:
         self._bindings: dict[str, dict] = {}
 
     def bindings(self, module: str) -> dict[str, str]:
+        """The module's import bindings, ``from X import *`` expanded (X's public names)."""
         if module not in self._bindings:
+            is_package = module in self.packages
             tree = ast.parse(self.modules[module], module)
-            self._bindings[module] = import_bindings(tree, module, module in self.packages)
+            bound = self._bindings[module] = import_bindings(tree, module, is_package)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and any(a.name == "*" for a in node.names):
+                    base = _absolute(module, is_package, node.level, node.module)
+                    for name in self._public(base):
+                        bound.setdefault(name, f"{base}.{name}")
         return self._bindings[module]
+
+    def _public(self, module: str) -> list[str]:
+        import importlib
+        if module in self.modules:
+            return list(self.bindings(module))
+        if module.split(".", 1)[0] != "engine":
+            return []
+        mod = importlib.import_module(module)
+        return list(getattr(mod, "__all__", [n for n in vars(mod) if not n.startswith("_")]))
 
     def resolve(self, dotted: str, depth: int = 0) -> str | None:
         """``module.qualname`` of the function ``dotted`` names, or None."""
@@ -334,6 +350,7 @@ def test_app_asks_the_scene_for_every_derived_stage():
     "from engine import conversion as c\nc.composer.compose(b, p, 0.01)",
     "import importlib\nimportlib.import_module('engine.conversion.composer').compose(b, p, 1)",
     "from engine.correction import enforcement\njobs.run(enforcement.enforce)",
+    "from engine.conversion import *\nconvert(b, p)",
 ])
 def test_the_stage_check_sees_planted_calls(source):
     assert stage_calls({"app.gui.planted": source}), source
