@@ -7,6 +7,10 @@ Two checks, because each misses what the other sees:
   (this catches an indirect import through some third-party package);
 * statically, no file under ``engine/`` has an import statement naming one of them, parsed with
   :mod:`ast` (this catches an import inside a function that the run-time check never calls).
+
+And the other way round: nothing under ``app/`` runs the engine's derived stages (binding,
+conversion, composition, enforcement, the IK solver) itself; it asks the scene. Checked
+statically, each name resolved through the module's imports.
 """
 from __future__ import annotations
 
@@ -154,3 +158,222 @@ def test_the_static_check_sees_gui_imports(source):
 ])
 def test_the_static_check_leaves_other_imports(source):
     assert gui_imports(source) == [], source
+
+
+# --------------------------------------------------------------------------- app asks the scene
+# Nothing under app/ binds, converts, composes, enforces or runs the IK solver itself: the
+# window and the command line ask the scene (engine/scene.py), so a result never depends on
+# who asked and every derived stage is cached in one place. Each reference is resolved through
+# the module's own imports (aliases, ``import a.b as x``, relative imports, re-exports by the
+# engine's packages and by other app modules), so ``from engine.conversion import bind as b``
+# and ``import engine.correction.enforcement as e; e.enforce(...)`` are seen alike.
+#
+# ``automap`` stays allowed: it proposes a *choice* (a correspondence from two skeletons, which
+# the user then edits and which becomes part of the project), not a derived stage; the Auto-map
+# button and the command line without ``--map`` call it, and the scene's own remap uses it.
+APP = REPO / "app"
+
+
+def _qualified(obj) -> str:
+    return f"{obj.__module__}.{obj.__qualname__}"
+
+
+def _stages():
+    from engine.conversion import bind, compose, convert, retarget
+    from engine.correction.enforcement import enforce
+    from engine.correction.ik import solve_frames
+    return {_qualified(f): f.__name__ for f in (bind, convert, compose, retarget, enforce,
+                                                solve_frames)}
+
+
+def _absolute(module: str, is_package: bool, level: int, name: str | None) -> str:
+    """The absolute module of ``from <level dots><name> import ...`` written in ``module``."""
+    if level == 0:
+        return name or ""
+    parts = module.split(".") if is_package else module.split(".")[:-1]
+    parts = parts[:len(parts) - (level - 1)]
+    return ".".join(parts + ([name] if name else []))
+
+
+def import_bindings(tree: ast.AST, module: str, is_package: bool = False) -> dict[str, str]:
+    """Local name -> the dotted name an import statement anywhere in the module binds it to."""
+    bound = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.asname:
+                    bound[a.asname] = a.name
+                else:
+                    top = a.name.split(".", 1)[0]
+                    bound[top] = top
+        elif isinstance(node, ast.ImportFrom):
+            base = _absolute(module, is_package, node.level, node.module)
+            for a in node.names:
+                if a.name != "*":
+                    bound[a.asname or a.name] = f"{base}.{a.name}" if base else a.name
+    return bound
+
+
+def _dotted(node: ast.AST, bound: dict[str, str]) -> str | None:
+    """The dotted name an expression reaches through imports (``eb.bind`` ->
+    ``engine.conversion.binding.bind``), or None."""
+    attrs = []
+    while isinstance(node, ast.Attribute):
+        attrs.append(node.attr)
+        node = node.value
+    if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load) and node.id in bound:
+        base = bound[node.id]
+    elif (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+          and isinstance(node.args[0].value, str)
+          and (getattr(node.func, "attr", None) or getattr(node.func, "id", None))
+          in ("import_module", "__import__")):
+        base = node.args[0].value
+        if getattr(node.func, "id", None) == "__import__":
+            base = base.split(".", 1)[0]
+    else:
+        return None
+    return ".".join([base] + attrs[::-1])
+
+
+class _Resolver:
+    """Dotted names to the engine functions they are: engine names by importing the engine
+    (no GUI toolkit), app names through the app module's own imports (read from its AST)."""
+
+    def __init__(self, modules: dict[str, str], packages: frozenset):
+        self.modules, self.packages = modules, packages
+        self._bindings: dict[str, dict] = {}
+
+    def bindings(self, module: str) -> dict[str, str]:
+        """The module's import bindings, ``from X import *`` expanded (X's public names)."""
+        if module not in self._bindings:
+            is_package = module in self.packages
+            tree = ast.parse(self.modules[module], module)
+            bound = self._bindings[module] = import_bindings(tree, module, is_package)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and any(a.name == "*" for a in node.names):
+                    base = _absolute(module, is_package, node.level, node.module)
+                    for name in self._public(base):
+                        bound.setdefault(name, f"{base}.{name}")
+        return self._bindings[module]
+
+    def _public(self, module: str) -> list[str]:
+        import importlib
+        if module in self.modules:
+            return list(self.bindings(module))
+        if module.split(".", 1)[0] != "engine":
+            return []
+        mod = importlib.import_module(module)
+        return list(getattr(mod, "__all__", [n for n in vars(mod) if not n.startswith("_")]))
+
+    def resolve(self, dotted: str, depth: int = 0) -> str | None:
+        """``module.qualname`` of the function ``dotted`` names, or None."""
+        import importlib
+        parts = dotted.split(".")
+        if depth > 20:
+            return None
+        if parts[0] == "app":
+            for i in range(len(parts) - 1, 0, -1):
+                module = ".".join(parts[:i])
+                if module in self.modules:
+                    target = self.bindings(module).get(parts[i])
+                    return (self.resolve(".".join([target] + parts[i + 1:]), depth + 1)
+                            if target else None)
+            return None
+        if parts[0] != "engine":
+            return None
+        for i in range(len(parts), 0, -1):
+            try:
+                obj = importlib.import_module(".".join(parts[:i]))
+            except ImportError:
+                continue
+            try:
+                for attr in parts[i:]:
+                    obj = getattr(obj, attr)
+            except AttributeError:
+                return None
+            return _qualified(obj) if callable(obj) and hasattr(obj, "__qualname__") else None
+        return None
+
+
+def stage_calls(modules: dict[str, str], packages=frozenset()) -> list[str]:
+    """``module:line: what`` for every import or use, in ``modules`` (name -> source), of a
+    function the scene derives through (binding, conversion, composition, enforcement, IK)."""
+    stages = _stages()
+    resolver = _Resolver(modules, frozenset(packages))
+    found = set()
+    for module, source in modules.items():
+        tree = ast.parse(source, module)
+        bound = resolver.bindings(module)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = _absolute(module, module in packages, node.level, node.module)
+                for a in node.names:
+                    name = stages.get(resolver.resolve(f"{base}.{a.name}") or "")
+                    if name:
+                        found.add((module, node.lineno, f"imports {name} "
+                                                        f"(from {base} import {a.name})"))
+            elif isinstance(node, (ast.Name, ast.Attribute)):
+                dotted = _dotted(node, bound)
+                name = stages.get(resolver.resolve(dotted) or "") if dotted else None
+                if name:
+                    found.add((module, node.lineno, f"uses {name} (as {dotted})"))
+    return [f"{m}:{line}: {what}" for m, line, what in sorted(found)]
+
+
+def app_modules() -> tuple[dict[str, str], frozenset]:
+    modules, packages = {}, set()
+    for path in sorted(APP.rglob("*.py")):
+        parts = list(path.relative_to(REPO).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+            packages.add(".".join(parts))
+        modules[".".join(parts)] = path.read_text(encoding="utf-8")
+    return modules, frozenset(packages)
+
+
+def test_app_asks_the_scene_for_every_derived_stage():
+    modules, packages = app_modules()
+    assert {"app.cli", "app.gui.document", "app.gui.main_window"} <= set(modules)
+    problems = stage_calls(modules, packages)
+    assert not problems, ("app/ must ask the scene (engine.scene.Scene: binding, composed, "
+                          "motion, solve, preview) instead of running the engine's stages "
+                          "itself:\n" + "\n".join(problems))
+
+
+@pytest.mark.parametrize("source", [
+    "from engine.conversion import bind as b\nb(p, t, c)",
+    "import engine.conversion.binding as eb\neb.bind(p, t, c)",
+    "import engine.correction.enforcement\nengine.correction.enforcement.enforce(m, [])",
+    "import engine\nengine.conversion.retarget(p, t, c)",
+    "def f():\n    from engine.correction.ik import solve_frames\n    return solve_frames",
+    "from engine.conversion import converter\nrun = converter.convert",
+    "from engine import conversion as c\nc.composer.compose(b, p, 0.01)",
+    "import importlib\nimportlib.import_module('engine.conversion.composer').compose(b, p, 1)",
+    "from engine.correction import enforcement\njobs.run(enforcement.enforce)",
+    "from engine.conversion import *\nconvert(b, p)",
+])
+def test_the_stage_check_sees_planted_calls(source):
+    assert stage_calls({"app.gui.planted": source}), source
+
+
+def test_the_stage_check_follows_app_reexports_and_relative_imports():
+    modules = {"app.gui": "", "app.gui.helpers": "from engine.conversion import bind as run\n",
+               "app.gui.panel": "from .helpers import run\nrun(p, t, c)\n",
+               "app.gui.other": "from app.gui import helpers\nhelpers.run(p, t, c)\n"}
+    found = stage_calls(modules, {"app.gui"})
+    assert any(f.startswith("app.gui.panel:2: uses bind") for f in found), found
+    assert any(f.startswith("app.gui.other:2: uses bind") for f in found), found
+    assert any(f.startswith("app.gui.helpers:1: imports bind") for f in found), found
+
+
+@pytest.mark.parametrize("source", [
+    "from engine.conversion import automap\ncorr = automap(t.skeleton, p.skeleton)",
+    "from engine.conversion import BindOptions, RootOptions\nBindOptions()",
+    "from engine.scene import Scene\nScene.empty().solve()",
+    "import engine.scene as es\nes.evaluate_project(project).motion",
+    "bind = lambda *a: a\nbind(1)",                    # a local name, not the engine's
+    "def convert(x):\n    return x\nconvert(1)",
+    "from app.gui.qt import QtCore",
+])
+def test_the_stage_check_leaves_other_calls(source):
+    assert stage_calls({"app.gui.planted": source}) == [], source

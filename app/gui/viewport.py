@@ -159,6 +159,8 @@ class Viewport(gl.GLViewWidget):
         self._skin_key = None
         self._press = None
         self._framed = False
+        #: the camera state last set (as the project held it) and the view it made
+        self._camera_set: tuple[dict, dict] | None = None
         self.setCameraPosition(distance=5.0, elevation=15, azimuth=-90)
         document.frameChanged.connect(lambda _f: self.refresh())
         document.motionChanged.connect(self._motion_changed)
@@ -415,6 +417,16 @@ class Viewport(gl.GLViewWidget):
         self.update()
 
     def camera_state(self) -> dict:
+        """The camera for the project's viewer state: the state last set, as it was given,
+        while the view has not moved since (the view holds its centre in single precision,
+        so reading it back would change a saved project that was only opened); else the
+        view's camera."""
+        view = self._view_camera()
+        if self._camera_set is not None and self._camera_set[1] == view:
+            return dict(self._camera_set[0])
+        return view
+
+    def _view_camera(self) -> dict:
         c = self.opts["center"]
         return {"center": [c.x(), c.y(), c.z()], "distance": float(self.opts["distance"]),
                 "elevation": float(self.opts["elevation"]),
@@ -427,6 +439,7 @@ class Viewport(gl.GLViewWidget):
                                distance=state.get("distance", 5.0),
                                elevation=state.get("elevation", 15.0),
                                azimuth=state.get("azimuth", -90.0))
+        self._camera_set = (dict(state), self._view_camera())
         self._framed = True
 
     # ------------------------------------------------------------------ picking
