@@ -123,6 +123,7 @@ def _crash(project: str, settings: Path, state: Path, done) -> str:
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
+        proc.stdout.close()
     assert proc.returncode == -signal.SIGKILL
     return line[1]
 
@@ -390,6 +391,7 @@ def test_a_killed_saves_leftover_goes_at_the_next_save_once_stale(tmp_path):
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
+        proc.stdout.close()
     # killed: a file written just now stays (a writer may be between creating and locking it)
     os.utime(path.parent / left)
     save_project(project, path)
