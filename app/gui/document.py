@@ -28,8 +28,9 @@ from app.gui.qt import QtCore, QtGui
 from engine.errors import MotionComposerError
 from engine.kinematics import WorldPose, forward_kinematics
 from engine.motion import Motion
-from engine.project import (MissingSourceError, discard_autosave, find_autosave,
-                            project_from_json, save_project, write_autosave)
+from engine.project import (MissingSourceError, autosave_path, check_project, find_autosave,
+                            load_project, new_session, project_from_json, read_sources,
+                            remove_autosave_file, save_project, write_autosave)
 from engine.scene import Scene
 
 __all__ = ["Document"]
@@ -89,6 +90,11 @@ class Document(QtCore.QObject):
         self._solving: Scene | None = None
         #: [s] how long the last solve that landed took (None before one did)
         self.solve_seconds: float | None = None
+        #: names this session's autosave while the project was never saved
+        self.session = new_session()
+        #: autosave files that hold the current work: the ones this document wrote and the
+        #: one it was recovered from (removed when the work is saved or discarded)
+        self._autosaves: set[Path] = set()
 
     def _stack_changed(self, *_args) -> None:
         self.changed.emit()
@@ -167,6 +173,7 @@ class Document(QtCore.QObject):
         self.cancel_solve()
         self._pending.clear()
         self.undo_stack.clear()
+        self._autosaves = set()     # the previous work's autosaves stay on disk, to be offered
         self.path = Path(path) if path is not None else None
         self.selection = ("", "")
         self._preview = None
@@ -299,19 +306,23 @@ class Document(QtCore.QObject):
 
     def recover(self, autosave, project_path=None, locate=None) -> None:
         """Open the autosave ``autosave`` as the project at ``project_path`` (or unsaved), with
-        its work still to be saved."""
-        scene, _moved = _open_scene(Path(autosave), locate)
+        its work still to be saved. A map still half done opens as it was (the conversion
+        says what it lacks). The autosave file stays until that work is saved, discarded, or
+        this document's own autosave holds it."""
+        autosave = Path(autosave)
+        scene, _moved = _open_scene(autosave, locate, check_map=False)
         self.load_scene(scene, project_path, modified=True)
+        self._autosaves = {autosave}
 
     def save(self, path) -> None:
-        """Save the scene's project at ``path`` (atomic, with a backup) and drop the
-        autosaves of the old and new place."""
+        """Save the scene's project at ``path`` (atomic, with a backup), then drop the
+        autosaves of the work saved and the one of the new place (older than the file now).
+        A failed save raises and leaves every autosave in place."""
         path = Path(path)
         save_project(self._scene.project, path)
-        discard_autosave(self.path)
         self.path = path
         self.undo_stack.setClean()
-        discard_autosave(self.path)
+        self._drop_autosaves(autosave_path(path))
         self.changed.emit()
 
     def close(self) -> None:
@@ -324,11 +335,31 @@ class Document(QtCore.QObject):
         """An empty, unsaved document."""
         self.load_scene(Scene.empty())
 
-    def autosave(self) -> Path:
-        return write_autosave(self._scene.project, self.path)
+    def autosave(self) -> Path | None:
+        """Write the current project to this document's autosave (beside the project file,
+        or this session's unsaved one) atomically and return it; None when the project cannot
+        be written yet (a performer or target still missing). Once written, an autosave this
+        document was recovered from is superseded and removed. Raises
+        :class:`~engine.fileio.FileWriteError`."""
+        project = self._scene.project
+        if not all(getattr(project, role).path or getattr(project, role).embedded
+                   for role in ("performer", "target")):
+            return None
+        written = write_autosave(project, self.path, self.session)
+        for superseded in self._autosaves - {written}:
+            remove_autosave_file(superseded)
+        self._autosaves = {written}
+        return written
 
     def discard_autosave(self) -> None:
-        discard_autosave(self.path)
+        """Remove the autosaves holding the current work (the user discarded it). Autosaves
+        of other work, e.g. a crashed session's not offered yet, are left alone."""
+        self._drop_autosaves()
+
+    def _drop_autosaves(self, *also: Path) -> None:
+        for path in self._autosaves.union(also):
+            remove_autosave_file(path)
+        self._autosaves = set()
 
     @staticmethod
     def recovery_candidate(project_path=None):
@@ -350,9 +381,13 @@ def _same(a, b) -> bool:
         return False
 
 
-def _open_scene(path: Path, locate) -> tuple[Scene, bool]:
+def _open_scene(path: Path, locate, *, check_map: bool = True) -> tuple[Scene, bool]:
+    """The scene of the project file at ``path`` and whether a moved clip was located.
+    ``check_map=False``: a map the conversion cannot use yet is let through."""
     try:
-        return Scene.open(path), False
+        if check_map:
+            return Scene.open(path), False
+        return _scene_of(load_project(path, check_sources=False), path, False), False
     except MissingSourceError as exc:
         if locate is None:
             raise
@@ -370,6 +405,14 @@ def _open_scene(path: Path, locate) -> tuple[Scene, bool]:
                                      path=str(Path(new).resolve()))
         project = project.replace(**{missing.role: source})
         try:
-            return Scene.from_project(project, path=path), True
+            return _scene_of(project, path, check_map), True
         except MissingSourceError as again:
             missing = again
+
+
+def _scene_of(project, path: Path, check_map: bool) -> Scene:
+    if check_map:
+        return Scene.from_project(project, path=path)
+    performer, target = read_sources(project, path=path)
+    check_project(project, performer, target, path=path, check_map=False)
+    return Scene(project, performer, target)

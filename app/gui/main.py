@@ -57,11 +57,7 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     window = MainWindow()
     _set_icon(app, window)
     window.show()
-    path = demo_project() if demo else project
-    if path is not None:
-        window.open_project(path)
-    else:
-        window.offer_recovery()
+    start(window, project, demo=demo)
     if frame is not None:
         window.doc.set_frame(frame)
     if screenshot is not None:
@@ -74,6 +70,17 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     elif quit_after_ms is not None:
         QtCore.QTimer.singleShot(quit_after_ms, app.quit)
     return app.exec()
+
+
+def start(window, project: str | None = None, *, demo: bool = False) -> bool:
+    """What the window shows first: ``project`` (or the demo) through
+    :meth:`~app.gui.main_window.MainWindow.open_project`, which offers its autosave when that
+    is newer; with no project, the autosave of an unsaved session that crashed, if any.
+    True when something opened."""
+    path = demo_project() if demo else project
+    if path is not None:
+        return window.open_project(path)
+    return window.offer_recovery()
 
 
 # ---------------------------------------------------------------------------- self-test

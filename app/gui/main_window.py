@@ -11,6 +11,8 @@ from engine.errors import MotionComposerError
 __all__ = ["MainWindow"]
 
 MAX_RECENT = 8
+#: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
+#: a crash loses at most this much work
 AUTOSAVE_MS = 60_000
 
 
@@ -279,7 +281,9 @@ class MainWindow(QtWidgets.QMainWindow):
         return ok
 
     def autosave(self) -> None:
-        if not self.doc.modified or not self.doc.scene.ready:
+        """Autosave a modified project (the timer calls this), ready or not: a half-done
+        mapping is work too. A project without both clips yet has nothing to write."""
+        if not self.doc.modified:
             return
         try:
             self.doc.autosave()
@@ -327,14 +331,15 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def offer_recovery(self, project_path=None) -> bool:
         """If an autosave newer than the project (or of an unsaved one) exists, offer it.
-        Declined, it is deleted; accepted, it opens with its work still to be saved."""
+        Declined, it is deleted; accepted, it opens as that project with its work still to be
+        saved (it is deleted once saved or discarded). False when nothing was recovered."""
         auto = self.doc.recovery_candidate(project_path)
         if auto is None:
             return False
         if not self.ask_yes_no(f"Motion Composer found unsaved work from an earlier session "
                                f"({auto}). Recover it?"):
-            from engine.project import discard_autosave
-            discard_autosave(project_path)
+            from engine.project import remove_autosave_file
+            remove_autosave_file(auto)
             return False
         ok = self._guard(self.doc.recover, auto, project_path, self._locate)
         if ok:
@@ -407,6 +412,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.doc.cancel_solve()
             self.doc.jobs.wait()
             if self.maybe_save():
+                # saved, discarded (a decline) or unchanged: the autosaves of this work go;
+                # the ones of other work (another session's, another project's) stay
                 self.doc.discard_autosave()
                 self.autosave_timer.stop()
                 event.accept()

@@ -53,7 +53,8 @@ The package: :mod:`.model` (the data, constants, errors), :mod:`.json` (the file
 """
 from __future__ import annotations
 
-from .autosave import autosave_path, discard_autosave, find_autosave, write_autosave
+from .autosave import (autosave_path, discard_autosave, find_autosave, new_session,
+                       remove_autosave_file, write_autosave)
 from .files import (backup_path, check_project, correction_keys, embed_sources, load_project,
                     open_project, read_sources, save_project)
 from .json import project_from_json, project_to_json
@@ -67,4 +68,4 @@ __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceErr
            "project_from_json", "save_project", "load_project", "open_project", "read_sources",
            "check_project", "correction_keys",
            "embed_sources", "autosave_path", "write_autosave", "find_autosave",
-           "discard_autosave", "backup_path"]
+           "discard_autosave", "remove_autosave_file", "new_session", "backup_path"]

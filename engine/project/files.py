@@ -127,16 +127,19 @@ def _about_position_mode(exc: BVHError) -> bool:
     return exc.line is None and "position mode" in exc.problem
 
 
-def check_project(project: Project, performer: Motion, target: Motion, *, path=None) -> None:
+def check_project(project: Project, performer: Motion, target: Motion, *, path=None,
+                  check_map: bool = True) -> None:
     """Raise :class:`ProjectError` naming the field unless every joint the project names
-    exists in its skeleton and every frame number lies in the clips."""
+    exists in its skeleton and every frame number lies in the clips. ``check_map=False``
+    lets through a map the conversion cannot use yet (the root not mapped...): an autosave
+    of a mapping half done."""
     try:
-        _check(project, performer, target)
+        _check(project, performer, target, check_map)
     except _Invalid as exc:
         raise ProjectError(exc.problem, path, exc.field) from None
 
 
-def _check(project: Project, performer: Motion, target: Motion) -> None:
+def _check(project: Project, performer: Motion, target: Motion, check_map: bool) -> None:
     tsk, psk = target.skeleton, performer.skeleton
     F = performer.num_frames                  # the composed motion has the performer's frames
     for t, p in project.correspondence.pairs.items():
@@ -146,7 +149,8 @@ def _check(project: Project, performer: Motion, target: Motion) -> None:
         if p not in psk.index:
             raise _Invalid(where, _not_a_joint(p, psk, "performer"))
     try:
-        project.correspondence.validate(tsk, psk)
+        if check_map:
+            project.correspondence.validate(tsk, psk)
     except MappingError as exc:
         raise _Invalid("correspondence", exc.problem) from None
     for key, motion in (("performer_reference", performer), ("target_reference", target)):
