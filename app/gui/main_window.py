@@ -249,10 +249,14 @@ class MainWindow(QtWidgets.QMainWindow):
         ok = self._guard(self.doc.open, path, self._locate)
         if ok:
             self._add_recent(str(path))
-            self.viewport.set_camera_state(self.doc.scene.viewer.camera)
-            if not self.doc.scene.viewer.camera:
-                self.viewport.frame_all()
+            self._show_camera()
         return ok
+
+    def _show_camera(self) -> None:
+        """The opened project's camera, or everything framed when it has none."""
+        self.viewport.set_camera_state(self.doc.scene.viewer.camera)
+        if not self.doc.scene.viewer.camera:
+            self.viewport.frame_all()
 
     def _locate(self, role: str, missing: str) -> str:
         from engine.formats import open_filters
@@ -343,7 +347,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return False
         ok = self._guard(self.doc.recover, auto, project_path, self._locate)
         if ok:
-            self.viewport.frame_all()
+            self._show_camera()
         return ok
 
     # ------------------------------------------------------------------ recent files
