@@ -805,10 +805,12 @@ def _fingers_by_geometry(tree: _Tree, info, hand: int, pos: np.ndarray) -> dict[
     shorter one (fewer joints, then less reach: CMU's ``LThumb`` beside
     ``LeftFingerBase > LFingers``). The other digits are ordered across the hand (in the
     plane normal to the fingers' mean direction from the wrist), by their position along the
-    line from the thumb to the digit farthest from it: index, middle, ring, pinky. A finger chain of four joints or more whose first bone (from the hand) is
-    shorter than its second starts with a metacarpal (number 0: Rokoko's ``LeftInHandIndex``);
-    otherwise the joints are numbered 1, 2, ... from the hand (Mixamo's ``Index1``, whose
-    first bone crosses the palm). A single digit, or more than five, says nothing: no roles.
+    line from the thumb to the digit farthest from it: index, middle, ring, pinky. A finger
+    chain of four joints or more whose first bone (from the hand) is shorter than its second
+    starts with a metacarpal (number 0: Rokoko's ``LeftInHandIndex``); otherwise the joints
+    are numbered 1, 2, ... from the hand (Mixamo's ``Index1``, whose first bone crosses the
+    palm). A single digit, or more than five, says nothing: no roles. A hand whose fingers
+    hang from the forearm (RobotExpressive's palms) gets none this way.
     """
     chains = _finger_chains(tree, info, hand)
     if not 2 <= len(chains) <= 5:
