@@ -191,11 +191,56 @@ def _reference(text: str):
                                      f"not {text!r}")
 
 
+def _frame_range(text: str):
+    """``A:B`` (0-based, inclusive; either end may be left out) for ``--frames``."""
+    from engine.motion import parse_frame_range
+    try:
+        return parse_frame_range(text)
+    except MotionComposerError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _fps(text: str) -> float:
+    """A frame rate in (0, 1000] for ``--fps``."""
+    from engine.motion import MAX_FPS
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= MAX_FPS:
+        raise argparse.ArgumentTypeError(f"expected frames per second in (0, {MAX_FPS:g}], "
+                                         f"not {text!r}")
+    return value
+
+
+def _add_output_options(parser) -> None:
+    group = parser.add_argument_group("output")
+    group.add_argument("--frames", type=_frame_range, metavar="A:B",
+                       help="write only frames A to B (0-based, inclusive; A: or :B for the "
+                            "rest of the clip); checked against the clip")
+    group.add_argument("--fps", type=_fps, metavar="N",
+                       help="resample to N frames per second (slerp per joint, linear for "
+                            "translations); default: the motion's own rate")
+    group.add_argument("--rotation-only", action="store_true",
+                       help="BVH: rotation channels only on every joint but the root (many "
+                            "DCC importers expect that); default: each joint's own channels")
+
+
+def _write_output(args, motion, character):
+    """Select frames, resample and write ``motion`` as the output options say; returns what
+    was written."""
+    from engine.formats import write_motion
+    from engine.motion import export_selection
+    motion = export_selection(motion, args.frames, args.fps)
+    write_motion(motion, args.output, character,
+                 channels="rotation" if args.rotation_only else "all")
+    return motion
+
+
 def cmd_retarget(args) -> int:
     import time
 
     from engine.formats import output_format, read_character, read_motion, read_performer
-    from engine.formats import write_motion
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
@@ -209,6 +254,8 @@ def cmd_retarget(args) -> int:
     ik_options = ik_options_from_args(args, IKOptions())
     output_format(args.output)                       # an unwritable suffix fails before work
     performer = read_performer(args.performer)
+    if args.frames:
+        performer.excerpt(*args.frames)              # a range outside the clip fails first
     character = read_character(args.target)          # a glTF's bind pose is the target
     target = character.rest_motion() if character is not None else read_motion(args.target)
     if args.map:
@@ -239,7 +286,7 @@ def cmd_retarget(args) -> int:
         constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor,
         ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
-    write_motion(result.motion, args.output, character)  # mesh and skin when the target has
+    written = _write_output(args, result.motion, character)  # mesh and skin when it has
     if args.save_map:
         correspondence.save(args.save_map)
     if args.save_project:
@@ -258,8 +305,8 @@ def cmd_retarget(args) -> int:
                     default=0.0)
         note = (f", {len(result.constraints)} constraints (largest residual "
                 f"{worst * 1000:.2f} mm)")
-    print(f"wrote {args.output}: {result.motion.num_frames} frames at "
-          f"{result.motion.fps:.6g} fps onto {result.motion.skeleton.num_joints} joints "
+    print(f"wrote {args.output}: {written.num_frames} frames at "
+          f"{written.fps:.6g} fps onto {written.skeleton.num_joints} joints "
           f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")
     return 0
 
@@ -269,7 +316,7 @@ def cmd_export(args) -> int:
     (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
-    from engine.formats import output_format, write_motion
+    from engine.formats import output_format
     from engine.scene import Scene
 
     started = time.perf_counter()
@@ -279,8 +326,7 @@ def cmd_export(args) -> int:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
     scene.check()
-    motion = scene.motion
-    write_motion(motion, args.output, scene.character if fmt.mesh else None)
+    motion = _write_output(args, scene.motion, scene.character if fmt.mesh else None)
     print(f"wrote {args.output}: {motion.num_frames} frames at {motion.fps:.6g} fps onto "
           f"{motion.skeleton.num_joints} joints ({len(scene.constraints)} constraints, "
           f"{len(scene.displacement)} displacement curves) in "
@@ -395,6 +441,7 @@ def build_parser() -> argparse.ArgumentParser:
     proj.add_argument("--embed-sources", action="store_true",
                       help="embed both clips in the project so that it can be sent on its own")
     _add_ik_options(rt, "the solver's defaults; --save-project stores them")
+    _add_output_options(rt)
     rt.set_defaults(func=cmd_retarget)
 
     bt = sub.add_parser("batch", help="apply one project's rules to many clips",
@@ -428,6 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="solve the project's constraints with IK again instead of using the "
                          "saved correction (hand edits to the curves are then replaced)")
     _add_ik_options(ex, "the project's; they apply with --solve")
+    _add_output_options(ex)
     ex.set_defaults(func=cmd_export)
     return parser
 

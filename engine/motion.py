@@ -6,10 +6,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import MotionComposerError
+from .errors import ExportError, MotionComposerError
+from .quaternions import qslerp
 from .skeleton import Skeleton
 
-__all__ = ["Motion"]
+__all__ = ["Motion", "parse_frame_range", "export_selection"]
+
+#: output rates accepted by :meth:`Motion.resampled` [frames per second]
+MAX_FPS = 1000.0
+#: a rate ratio this close (relatively) to a whole number is that number: files write their
+#: frame time rounded (CMU's 0.0083333 s is 1/120 s), so 120 fps -> 30 fps takes every 4th frame
+_WHOLE_RATIO = 1e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,3 +118,88 @@ class Motion:
         """The sub-motion at a slice or index array of frames."""
         return self.replace(rotations=self.rotations[selection],
                             translations=self.translations[selection])
+
+    def excerpt(self, first: int | None, last: int | None) -> "Motion":
+        """Frames ``first`` to ``last`` inclusive (0-based, as the timeline counts them;
+        ``None``: the clip's first or last frame).
+
+        Raises:
+            ExportError: when the range is empty or reaches outside the clip.
+        """
+        F = self.num_frames
+        first = 0 if first is None else int(first)
+        last = F - 1 if last is None else int(last)
+        if not (0 <= first <= last < F):
+            raise ExportError(f"frames {first}:{last} lie outside the clip, which has frames "
+                              f"0:{F - 1} (a range is first:last, inclusive, first <= last)")
+        return self.frames(slice(first, last + 1))
+
+    def resampled(self, fps: float) -> "Motion":
+        """The motion at ``fps`` frames per second over the same span of time: rotations
+        interpolated by slerp per joint, translations linearly.
+
+        Output frame ``k`` is at ``k / fps`` seconds, i.e. at source frame ``k * r`` with
+        ``r = fps_source / fps``; the last output frame is the last one not after the source's
+        last frame. Where ``r`` is within 1e-4 (relatively) of a whole number ``n`` it is
+        taken as ``n``, so the output is every ``n``-th source frame exactly (120 -> 30 fps).
+
+        Raises:
+            ExportError: for a rate that is not a number in (0, 1000].
+        """
+        try:
+            fps = float(fps)
+        except (TypeError, ValueError):
+            raise ExportError(f"the output frame rate must be a number, not {fps!r}") from None
+        if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
+            raise ExportError(f"the output frame rate must be in (0, {MAX_FPS:g}] frames per "
+                              f"second, not {fps!r}")
+        ratio = (1.0 / fps) / self.frame_time
+        if abs(ratio - round(ratio)) <= _WHOLE_RATIO * ratio:
+            ratio = float(round(ratio))
+        count = int(np.floor((self.num_frames - 1) / ratio + 1e-9)) + 1
+        at = np.arange(count) * ratio                              # source frame of each
+        lo = np.minimum(np.floor(at).astype(int), self.num_frames - 1)
+        hi = np.minimum(lo + 1, self.num_frames - 1)
+        u = at - lo                                                # (K,) in [0, 1)
+        rot = qslerp(self.rotations[lo], self.rotations[hi], u[:, None])
+        exact = u == 0.0
+        rot[exact] = self.rotations[lo[exact]]
+        tra = self.translations[lo] + u[:, None, None] * (self.translations[hi] -
+                                                          self.translations[lo])
+        return Motion(self.skeleton, rot, tra, 1.0 / fps, self.name)
+
+
+def parse_frame_range(text: str) -> tuple[int | None, int | None]:
+    """``"A:B"`` -> ``(A, B)``, first and last frame (0-based, inclusive); either may be left
+    out (``"100:"``, ``":250"``) and is then ``None`` (the clip's first or last frame).
+
+    Raises:
+        ExportError: for anything else (the message shows the expected form).
+    """
+    parts = str(text).strip().split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        first, last = (int(p) if p.strip() else None for p in parts)
+    except ValueError:
+        raise ExportError(f"a frame range is FIRST:LAST (0-based, inclusive, e.g. 0:239 or "
+                          f"120:), not {text!r}") from None
+    if (first is not None and first < 0) or (last is not None and last < 0):
+        raise ExportError(f"frame numbers start at 0, not {text!r}")
+    return first, last
+
+
+def export_selection(motion: Motion, frames: tuple[int | None, int | None] | None = None,
+                     fps: float | None = None) -> Motion:
+    """What an export writes: frames ``frames = (first, last)`` (inclusive, see
+    :meth:`Motion.excerpt`; ``None``: all), then resampled to ``fps`` (``None``: the
+    motion's own rate, untouched).
+
+    Raises:
+        ExportError: for a range outside the clip or a rate out of (0, 1000].
+    """
+    if frames is not None:
+        motion = motion.excerpt(*frames)
+    if fps is not None:
+        motion = motion.resampled(fps)
+    return motion

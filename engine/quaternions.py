@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
-           "twist_about", "qpow", "about_axis", "qpow_many", "to_matrix"]
+           "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -180,6 +180,25 @@ def qpow(q: np.ndarray, fraction: float) -> np.ndarray:
     out[..., 3] = np.cos(half)
     out[s <= 1e-12] = (0.0, 0.0, 0.0, 1.0)
     return out
+
+
+def qslerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Shortest-path spherical interpolation from unit ``q0`` to unit ``q1`` (``(..., 4)``) at
+    fractions ``u`` (``(...)``, broadcasting): ``q0`` at 0, ``q1`` (or ``-q1``) at 1, at a
+    constant angular rate between. Nearly equal pairs interpolate linearly, renormalised."""
+    q0 = np.asarray(q0, dtype=float)
+    q1 = np.asarray(q1, dtype=float)
+    u = np.asarray(u, dtype=float)[..., None]
+    d = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(d < 0, -q1, q1)
+    d = np.minimum(np.abs(d), 1.0)
+    near = d > 0.9995
+    theta = np.arccos(d)
+    sin = np.where(near, 1.0, np.sin(theta))
+    a = np.where(near, 1.0 - u, np.sin((1.0 - u) * theta) / sin)
+    b = np.where(near, u, np.sin(u * theta) / sin)
+    out = a * q0 + b * q1
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
 def about_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:

@@ -5,6 +5,7 @@ import shutil
 
 import pytest
 
+from app.gui.export_dialog import ExportOptions
 from app.gui.qt import QtCore
 from conftest import clip_path, shared_path
 from engine.formats import open_filters, read_character, read_motion, save_filters, sniff
@@ -24,6 +25,7 @@ def window(qtbot, tmp_path, monkeypatch):
     w.errors = []
     w.show_error = w.errors.append
     w.ask_unsaved = lambda: "discard"
+    w.ask_export_options = lambda motion: ExportOptions()      # File > Export's defaults
     qtbot.addWidget(w)
     return w
 

@@ -5,9 +5,9 @@ import itertools
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
-from engine.quaternions import axis_angle, from_euler, qconj, qmul, qrot
+from engine.quaternions import axis_angle, from_euler, qconj, qmul, qrot, qslerp
 from engine.rotations import euler_to_quat, quat_to_euler
 
 RNG_SEED = 20240611
@@ -121,3 +121,17 @@ def test_quat_to_euler_gives_back_the_rotation(order):
     back = quat_to_euler(q, order, unwrap=False)
     assert back.shape == angles.shape
     _same_up_to_sign(Rotation.from_euler(order, back, degrees=True).as_quat(), q, atol=1e-10)
+
+
+def test_qslerp_matches_scipys_slerp():
+    rng = _rng(80)
+    q0, q1 = _unit_quats(rng), _unit_quats(rng)
+    q1[:10] = q0[:10]                              # equal pairs take the linear branch
+    q1[10:20] = -q0[10:20]                         # the same rotation, other hemisphere
+    u = rng.uniform(0.0, 1.0, size=len(q0))
+    got = qslerp(q0, q1, u)
+    for k in (0, 5, 10, 15, 100, 500, len(q0) - 1):
+        want = Slerp([0.0, 1.0], Rotation.from_quat([q0[k], q1[k]]))([u[k]]).as_quat()
+        _same_up_to_sign(got[k:k + 1], want, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(qslerp(q0, q1, np.zeros(len(q0))), q0, rtol=0, atol=1e-15)

@@ -206,6 +206,13 @@ class MainWindow(QtWidgets.QMainWindow):
                 QtWidgets.QMessageBox.StandardButton.Discard: "discard"}.get(
             QtWidgets.QMessageBox.StandardButton(answer), "cancel")
 
+    def ask_export_options(self, motion):
+        """File > Export's options for ``motion`` (an :class:`ExportOptions`), or ``None`` when
+        the dialog is cancelled."""
+        from .export_dialog import ExportOptionsDialog
+        dialog = ExportOptionsDialog(motion, self)
+        return dialog.options() if dialog.exec() else None
+
     def ask_yes_no(self, question: str) -> bool:
         return QtWidgets.QMessageBox.question(self, "Motion Composer", question) == \
             QtWidgets.QMessageBox.StandardButton.Yes
@@ -321,14 +328,26 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         from engine.formats import save_filters, with_output_suffix
         path = self.ask_save_path("Export", save_filters())
-        if path:
-            self.export_bvh(with_output_suffix(path))
+        if not path:
+            return
+        options = self.ask_export_options(self.doc.motion)
+        if options is not None:
+            self.export_bvh(with_output_suffix(path), options)
 
-    def export_bvh(self, path) -> bool:
+    def export_bvh(self, path, options=None) -> bool:
         """Write the final motion in the format ``path``'s suffix names: BVH, or glTF
-        (.glb/.gltf) with the character's mesh and skin when the target is a glTF character."""
+        (.glb/.gltf) with the character's mesh and skin when the target is a glTF character;
+        ``options`` (:class:`~app.gui.export_dialog.ExportOptions`) choose frames, frame rate
+        and channels (default: all frames, as they are)."""
         from engine.formats import write_motion
-        ok = self._guard(write_motion, self.doc.motion, path, self.doc.scene.character)
+        from engine.motion import export_selection
+        from .export_dialog import ExportOptions
+        options = options or ExportOptions()
+
+        def write():
+            motion = export_selection(self.doc.motion, options.frames, options.fps)
+            write_motion(motion, path, self.doc.scene.character, channels=options.channels)
+        ok = self._guard(write)
         if ok:
             self.statusBar().showMessage(f"Exported {path}", 5000)
         return ok

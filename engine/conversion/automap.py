@@ -53,7 +53,14 @@ thigh). So identification is structural, with names as evidence:
    one.
 6. *Fingers* are found by name under the forearm (so a thumb hanging from the forearm, as on
    RobotExpressive, counts) and numbered per finger from the hand outwards; metacarpals
-   (``LeftInHandIndex``) are number 0.
+   (``LeftInHandIndex``, ``index_metacarpal_l``) are number 0. Conventions: Mixamo
+   ``LeftHandThumb1``, CC3 ``CC_Base_L_Thumb1``, Unreal ``thumb_01_l``, Unity
+   ``LeftThumbProximal``, 3ds Max Biped ``Finger0`` (thumb) ... ``Finger4``, and MakeHuman
+   ``finger1-1.L`` (``finger1`` the thumb ... ``finger5`` the little finger, ``-1``/``-2``/``-3``
+   the phalanges; ``metacarpal1.L`` the index finger's metacarpal ... ``metacarpal4.L`` the
+   little finger's). A hand with no finger names gets its fingers from its shape
+   (:func:`_fingers_by_geometry`: the thumb is the digit set apart from the others, the
+   rest are ordered across the hand).
 
 Structural fallback (joints whose names say nothing, e.g. ``joint_0`` ... ``joint_N``): helper
 leaves aside, the shortest limb ends (thumbs, fingers, toes, face joints) are pruned until five
@@ -239,8 +246,12 @@ def _parse(name: str) -> tuple[NameInfo, str | None]:
             break
         s = s2
     s = re.sub(r"_\d+$", "", s) if re.search(r"[A-Za-z]", re.sub(r"_\d+$", "", s)) else s
+    # MakeHuman fingers: finger1-1 = the thumb's first phalanx ... finger5-3 = the little
+    # finger's last; metacarpal1 = the index finger's metacarpal ... metacarpal4 = the little's
+    makehuman = re.search(r"finger([1-5])-(\d)", s, re.I)
+    mh_metacarpal = re.fullmatch(r"metacarpal([1-4])\W*[LRlr]?", s)
     # 3ds Max Biped fingers: Finger0 = thumb ... Finger4 = pinky, Finger01 its second joint
-    biped = re.search(r"finger(\d)(\d?)", s, re.I)
+    biped = None if makehuman else re.search(r"finger(\d)(\d?)", s, re.I)
     words = [w.lower() for w in _WORDS.findall(s)]
     sides = set()
     kept: list[str] = []
@@ -272,6 +283,12 @@ def _parse(name: str) -> tuple[NameInfo, str | None]:
         finger = FINGERS[min(int(biped.group(1)), 4)]
         numbers = (int(biped.group(2)) + 1 if biped.group(2) else 1,)
         roles = frozenset()
+    if makehuman and not helper:
+        finger = FINGERS[int(makehuman.group(1)) - 1]
+        numbers = (int(makehuman.group(2)),)
+        roles = frozenset()
+    if mh_metacarpal and not helper:
+        finger, meta = FINGERS[int(mh_metacarpal.group(1))], True
     return NameInfo(side, core, numbers, helper, roles, finger, meta), trunk
 
 
@@ -478,9 +495,13 @@ def identify(skeleton: Skeleton, positions=None) -> Roles:
     for side, k in zip(SIDES, order_arms):
         arm = arms[k]
         base = arm.get("forearm", arm.get("hand"))
-        for key, j in _fingers(tree, info, base, set(arm.values()), side).items():
+        fingers, finger_how = _fingers(tree, info, base, set(arm.values()), side), "name"
+        if not fingers and "hand" in arm:
+            fingers, finger_how = _fingers_by_geometry(tree, info, arm["hand"], pos), \
+                "hand geometry"
+        for key, j in fingers.items():
             joints[f"{key}_{side}"] = sk.names[j]
-            how[f"{key}_{side}"] = "name"
+            how[f"{key}_{side}"] = finger_how
     return Roles(joints, tuple(sk.names[j] for j in spine),
                  tuple(sk.names[j] for j in neck_chain), how, method, side_method)
 
@@ -754,6 +775,72 @@ def _fingers(tree: _Tree, info, base: int, skip: set, side: str) -> dict[str, in
                 key = f"{finger}{n}"
                 n += 1
             out.setdefault(key, j)
+    return out
+
+
+def _finger_chains(tree: _Tree, info, hand: int) -> list[list[int]]:
+    """The digit chains of a hand: from each non-helper child of ``hand`` down its longest
+    branch."""
+    chains = []
+    for c in tree.children[hand]:
+        if info[c].helper:
+            continue
+        chain = [c]
+        while True:
+            kids = [k for k in tree.children[chain[-1]] if not info[k].helper]
+            if not kids:
+                break
+            chain.append(max(kids, key=lambda k: (tree.bone[k] + _reach(tree, info, k), -k)))
+        chains.append(chain)
+    return chains
+
+
+def _fingers_by_geometry(tree: _Tree, info, hand: int, pos: np.ndarray) -> dict[str, int]:
+    """Finger roles of a hand whose joints have no finger names, from its shape in ``pos``
+    (``(J, 3)`` reference positions).
+
+    Each child chain of the hand is a digit, stood for by the centroid of its joints. With
+    three digits or more, the **thumb** is the digit farthest from the centroid of the others
+    (it leaves the palm towards its front, the fingers lie side by side); with two, the
+    shorter one (fewer joints, then less reach: CMU's ``LThumb`` beside
+    ``LeftFingerBase > LFingers``). The other digits are ordered across the hand (in the
+    plane normal to the fingers' mean direction from the wrist), by their position along the
+    line from the thumb to the digit farthest from it: index, middle, ring, pinky. A finger
+    chain of four joints or more whose first bone (from the hand) is shorter than its second
+    starts with a metacarpal (number 0: Rokoko's ``LeftInHandIndex``); otherwise the joints
+    are numbered 1, 2, ... from the hand (Mixamo's ``Index1``, whose first bone crosses the
+    palm). A single digit, or more than five, says nothing: no roles. A hand whose fingers
+    hang from the forearm (RobotExpressive's palms) gets none this way.
+    """
+    chains = _finger_chains(tree, info, hand)
+    if not 2 <= len(chains) <= 5:
+        return {}
+    centres = np.array([pos[chain].mean(axis=0) for chain in chains])
+    if len(chains) == 2:
+        thumb = min(range(2), key=lambda i: (len(chains[i]),
+                                             tree.bone[chains[i][0]] +
+                                             _reach(tree, info, chains[i][0])))
+    else:
+        apart = [np.linalg.norm(centres[i] - np.delete(centres, i, axis=0).mean(axis=0))
+                 for i in range(len(chains))]
+        thumb = int(np.argmax(apart))
+    rest = [i for i in range(len(chains)) if i != thumb]
+    # across the hand: in the plane normal to the fingers' direction (the wrist to their
+    # centroid), so that how far each finger reaches does not count
+    along = centres[rest].mean(axis=0) - pos[hand]
+    along = along / max(float(np.linalg.norm(along)), 1e-12)
+    flat = centres - centres[thumb]
+    flat = flat - np.outer(flat @ along, along)
+    far = max(rest, key=lambda i: float(np.linalg.norm(flat[i])))
+    rest.sort(key=lambda i: float(np.dot(flat[i], flat[far])))
+    out = {}
+    for finger, i in zip(FINGERS, [thumb] + rest):
+        chain = chains[i]
+        if finger != "thumb" and len(chain) >= 4 and tree.bone[chain[0]] < tree.bone[chain[1]]:
+            out[f"{finger}0"] = chain[0]
+            chain = chain[1:]
+        for n, j in enumerate(chain, start=1):
+            out[f"{finger}{n}"] = j
     return out
 
 

@@ -24,7 +24,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import FileFormatError, GLTFError, UnknownFormatError, UnsupportedFormatError
+from ..errors import (ExportError, FileFormatError, GLTFError, UnknownFormatError,
+                      UnsupportedFormatError)
 from ..motion import Motion
 from .bvh import read_bvh, write_bvh
 from .gltf import Character, read_gltf, write_gltf
@@ -58,8 +59,10 @@ class Format:
         read_motion: ``read_motion(path, **bvh_overrides) -> Motion``.
         read_character: ``read_character(path) -> Character``, or ``None`` for a format that
             holds no mesh.
-        write: ``write(motion, path, character)``; ``character`` (may be ``None``) gives the
-            mesh and skin of a format that holds them and is ignored by one that does not.
+        write: ``write(motion, path, character, channels)``; ``character`` (may be ``None``)
+            gives the mesh and skin of a format that holds them and is ignored by one that
+            does not; ``channels`` is :func:`~engine.formats.bvh.format_bvh`'s (``"all"`` or
+            ``"rotation"``), BVH's only.
         motion: the format holds an animation.
         mesh: the format holds a character with a skinned mesh; its :attr:`read_motion` is
             the character's bind pose (``Character.rest_motion()``), a target, not a capture.
@@ -72,7 +75,7 @@ class Format:
     sniff: Callable[[bytes], bool]
     read_motion: Callable[..., Motion]
     read_character: Callable[[str], Character] | None
-    write: Callable[[Motion, str, Character | None], None]
+    write: Callable[[Motion, str, Character | None, str], None]
     motion: bool
     mesh: bool
 
@@ -116,11 +119,14 @@ def _gltf_rest_motion(path, **bvh_overrides) -> Motion:
     return read_gltf(path).rest_motion()
 
 
-def _write_bvh(motion: Motion, path, character: Character | None) -> None:
-    write_bvh(motion, path)
+def _write_bvh(motion: Motion, path, character: Character | None, channels: str) -> None:
+    write_bvh(motion, path, channels=channels)
 
 
-def _write_gltf(motion: Motion, path, character: Character | None) -> None:
+def _write_gltf(motion: Motion, path, character: Character | None, channels: str) -> None:
+    if channels != "all":
+        raise ExportError(f"rotation-only channels are a BVH option; a glTF file "
+                          f"({Path(path).name}) animates every joint by its own node")
     write_gltf(motion, character, path)
 
 
@@ -256,17 +262,19 @@ def output_format(path: str | os.PathLike) -> Format:
 
 
 def write_motion(motion: Motion, path: str | os.PathLike,
-                 character: Character | None = None) -> None:
+                 character: Character | None = None, *, channels: str = "all") -> None:
     """Write ``motion`` to ``path`` in the format its suffix names, atomically.
 
     ``character`` gives a glTF output the character's meshes and skin (``None``: a
-    skeleton-only file); BVH ignores it.
+    skeleton-only file); BVH ignores it. ``channels="rotation"`` writes a BVH file with
+    rotation channels only on every joint but the root (see
+    :func:`~engine.formats.bvh.format_bvh`); glTF refuses it.
 
     Raises:
         UnsupportedFormatError: for a suffix no format writes (nothing is written).
         ExportError: when the motion cannot be written in that format.
     """
-    output_format(path).write(motion, path, character)
+    output_format(path).write(motion, path, character, channels)
 
 
 def with_output_suffix(path: str | os.PathLike, default: Format = BVH) -> str:

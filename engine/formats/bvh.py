@@ -33,7 +33,7 @@ from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
 
 __all__ = ["BVHRecord", "parse_bvh_text", "read_bvh", "parse_bvh", "record_to_motion",
-           "format_bvh", "write_bvh", "detect_position_modes"]
+           "format_bvh", "write_bvh", "detect_position_modes", "CHANNEL_CHOICES"]
 
 _KNOWN_CHANNELS = ROTATION_CHANNELS + POSITION_CHANNELS
 _CHANNEL_CANON = {c.lower(): c for c in _KNOWN_CHANNELS}
@@ -709,9 +709,13 @@ def _fmt(value: float, decimals: int) -> str:
     return "0" + text[2:] if text.startswith("-0") and float(text) == 0 else text
 
 
+#: the ``channels`` choices of :func:`format_bvh`
+CHANNEL_CHOICES = ("all", "rotation")
+
+
 def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                position_modes: str | Mapping[str, str] | None = None,
-               decimals: int = 6) -> str:
+               decimals: int = 6, channels: str = "all") -> str:
     """The BVH text of ``motion``.
 
     Args:
@@ -720,8 +724,22 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         position_modes: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or per joint name; the skeleton's own by default.
         decimals: digits after the decimal point.
+        channels: ``"all"``: every joint's own channels (a glTF character's joints have six
+            each); ``"rotation"``: the root keeps its channels and every other joint writes
+            its rotation channels only (what many DCC importers expect), its bone in its
+            OFFSET (the constant translation its position channels held).
+
+    Raises:
+        ExportError: for an unknown ``channels``, or, with ``"rotation"``, a non-root joint
+            whose position channels really move it (its bone changes length).
     """
+    if channels not in CHANNEL_CHOICES:
+        raise ExportError(f"channels must be one of {', '.join(CHANNEL_CHOICES)}, not "
+                          f"{channels!r}")
     sk = motion.skeleton
+    written = list(sk.channels) if channels == "all" else [
+        tuple(c for c in chans if j == 0 or c in ROTATION_CHANNELS)
+        for j, chans in enumerate(sk.channels)]
     src = source or sk.source
     C = src.rotation
     s = src.scale
@@ -750,8 +768,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                            Rotation.from_quat(rotations[:, 0])).as_quat()
 
     # channel values
-    rot_cols, pos_cols = _column_layout(sk.channels)
-    values = np.zeros((F, sk.num_channels))
+    rot_cols, pos_cols = _column_layout(written)
+    values = np.zeros((F, sum(len(c) for c in written)))
     by_order: dict[str, list[int]] = {}
     for j, order in enumerate(sk.rotation_orders):
         by_order.setdefault(order, []).append(j)
@@ -780,7 +798,15 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         cols = pos_cols[j]
         t = translations[:, k]
         if not cols:
-            if np.any(np.abs(t - offsets[j]) > 1e-6 * max(1.0, np.abs(offsets[j]).max())):
+            tol = 1e-6 * max(1.0, np.abs(offsets[j]).max())
+            if written[j] != sk.channels[j] and F and np.all(np.ptp(t, axis=0) <= tol):
+                offsets[j] = t[0]             # a constant translation is the joint's bone
+                continue
+            if np.any(np.abs(t - offsets[j]) > tol):
+                if written[j] != sk.channels[j]:
+                    raise ExportError(f"joint {sk.names[j]!r} moves over the clip (its position "
+                                      "channels change), so it cannot be written with rotation "
+                                      "channels only; export it with all channels")
                 raise ExportError(f"joint {sk.names[j]!r} moves, but it has no position "
                                   "channels to write the movement in")
             continue
@@ -801,8 +827,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{pad}{{")
         out.append(f"{pad}\tOFFSET {off(offsets[j])}")
-        out.append(f"{pad}\tCHANNELS {len(sk.channels[j])}"
-                   + "".join(" " + c for c in sk.channels[j]))
+        out.append(f"{pad}\tCHANNELS {len(written[j])}"
+                   + "".join(" " + c for c in written[j]))
         for child in sk.children[j]:
             emit(child, depth + 1)
         for site in sites_of.get(j, ()):

@@ -53,6 +53,7 @@ import binascii
 import json
 import math
 import os
+import re
 import struct
 import urllib.parse
 from dataclasses import dataclass
@@ -375,6 +376,12 @@ def _is_index(value) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
+#: a URI scheme (RFC 3986: a letter, then letters, digits, ``+``, ``-`` or ``.``, then ``:``)
+_URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
+#: a Windows drive (``C:\\``, ``C:/``, ``C:``)
+_WINDOWS_DRIVE = re.compile(r"^[A-Za-z]:(?:[/\\]|$)")
+
+
 class _Doc:
     """The JSON with checked access, the buffers and decoded accessors (cached)."""
 
@@ -434,6 +441,43 @@ class _Doc:
                                                f"{str(v)[:80]}")
         return arr
 
+    # ------------------------------------------------------------------ external files
+    def check_references(self) -> None:
+        """Refuse, before anything is read, every buffer or image URI that is not a ``data:``
+        URI or a relative file inside the file's own folder (see :meth:`local_file`)."""
+        for name in ("buffers", "images"):
+            for i, obj in enumerate(self.array(name)):
+                if isinstance(obj, dict) and "uri" in obj:
+                    uri = obj["uri"]
+                    where = f"{name}[{i}].uri"
+                    if not isinstance(uri, str):
+                        raise self.error(where, f"expected a string, found {uri!r}")
+                    if not uri.startswith("data:"):
+                        self.local_file(uri, where)
+
+    def local_file(self, uri: str, where: str) -> str:
+        """The path of a relative file URI, refused (a :class:`GLTFError` naming ``where``)
+        when it is absolute (``/etc/hostname``, ``C:\\x``), names a URL or any scheme
+        (``file:``, ``http:``; nothing is ever fetched), or leaves the file's own folder
+        (``../x.bin``, ``%2e%2e/x.bin``, or a symlink pointing out of it)."""
+        if _URI_SCHEME.match(uri) and not _WINDOWS_DRIVE.match(uri):
+            scheme = uri.partition(":")[0]
+            raise self.error(where, f"{uri[:80]!r} names a {scheme}: URL; only data: URIs and "
+                                    "files beside the glTF file are read (nothing is fetched)")
+        rel = urllib.parse.unquote(uri)
+        if "\0" in rel:
+            raise self.error(where, f"{uri[:80]!r} contains a NUL character")
+        unified = rel.replace("\\", "/")
+        if unified.startswith("/") or _WINDOWS_DRIVE.match(unified):
+            raise self.error(where, f"{uri[:80]!r} is an absolute path; a glTF file may refer "
+                                    "only to files in its own folder, by a relative path")
+        folder = os.path.realpath(self.folder)
+        file = os.path.realpath(os.path.join(folder, unified))
+        if os.path.commonpath([folder, file]) != folder:
+            raise self.error(where, f"{uri[:80]!r} leads out of the glTF file's folder "
+                                    f"({folder}); a glTF file may refer only to files inside it")
+        return file
+
     # ------------------------------------------------------------------ binary data
     def buffer(self, index, where: str) -> np.ndarray:
         b = self.item("buffers", index, where)
@@ -462,8 +506,7 @@ class _Doc:
             else:
                 data = urllib.parse.unquote_to_bytes(payload)
         else:
-            rel = urllib.parse.unquote(uri)
-            file = os.path.join(self.folder, rel)
+            file = self.local_file(uri, f"{bw}.uri")
             try:
                 data = Path(file).read_bytes()
             except FileNotFoundError:
@@ -805,7 +848,9 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
     """
     path = os.fspath(path)
     js, binary = _parse_container(_read_bytes(path), path)
-    return _build(_Doc(path, js, binary), skin=skin, fps=fps)
+    doc = _Doc(path, js, binary)
+    doc.check_references()
+    return _build(doc, skin=skin, fps=fps)
 
 
 def _build(doc: _Doc, *, skin, fps) -> Character:
