@@ -13,15 +13,19 @@ joints are expressed in their parent's local frame, which the change of up axis 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["UNITS", "AXES", "SourceFrame", "up_axis_rotation", "detect_units"]
+__all__ = ["UNITS", "AXES", "SourceFrame", "up_axis_rotation", "detect_units",
+           "HUMAN_STATURE"]
 
-#: metres per file unit. ``cmu`` is the CMU ASF length unit: 1/0.45 inch.
+#: metres per file unit. ``cmu`` is the CMU ASF length unit: 1/0.45 inch; ``dm`` is
+#: MakeHuman's BVH unit.
 UNITS: dict[str, float] = {
     "m": 1.0,
+    "dm": 0.1,
     "cm": 0.01,
     "mm": 0.001,
     "in": 0.0254,
@@ -61,6 +65,13 @@ class SourceFrame:
         up_axis: one of :data:`AXES`.
         detected: ``True`` when units and up axis were inferred rather than given.
         reason: one sentence saying how they were decided (shown by ``info``).
+        doubt: one sentence when a detected figure is not to be trusted (a human stature
+            outside :data:`HUMAN_STATURE`, no unit that fits, an up axis the body does not
+            show), else ``""``. Readers never print it: the caller shows it as one warning
+            line naming the override (:attr:`overrides`).
+        overrides: the overrides that would settle the doubt, as ``(option, suggested
+            value)`` pairs: ``("units", "cm")``, ``("up_axis", "+Z")``; the value is ``""``
+            when there is no suggestion.
     """
 
     units: str = "m"
@@ -68,6 +79,8 @@ class SourceFrame:
     up_axis: str = "+Y"
     detected: bool = False
     reason: str = ""
+    doubt: str = ""
+    overrides: tuple[tuple[str, str], ...] = ()
 
     @property
     def rotation(self) -> np.ndarray:
@@ -83,27 +96,54 @@ class SourceFrame:
         return (np.asarray(points, dtype=float) / self.scale) @ self.rotation
 
 
-def detect_units(stature: float, *, cmu_names: bool) -> tuple[str, str]:
-    """Guess a file's length unit from a human stature measured in that unit.
+#: (low, high) metres: the statures a human figure is believed at
+HUMAN_STATURE = (0.5, 2.5)
+#: the stature [m] a unit is judged by when several put a figure in :data:`HUMAN_STATURE`
+_TYPICAL_STATURE = 1.7
+#: the units a stature can tell apart (feet are never guessed: a person of 5.6 units is far
+#: more often a decimetre file than a file in feet)
+_DETECTED = ("m", "dm", "cm", "mm", "in")
 
-    Returns ``(units, reason)``. The CMU skeleton's joint names decide between CMU units and
-    inches, whose statures overlap; otherwise the ranges are: under 3.5 metres, 15 to 100
-    inches, 100 to 300 centimetres, 300 to 3000 millimetres. Outside those the unit is
-    unknown and metres are assumed (the user can override).
+
+def detect_units(stature: float, *, cmu_names: bool,
+                 humanoid: bool = True) -> tuple[str, str, str]:
+    """Guess a file's length unit from the stature of the figure measured in that unit.
+
+    Returns ``(units, reason, doubt)``. The candidates are metres, decimetres, centimetres,
+    millimetres and inches (and CMU units when the CMU skeleton's joint names are there: its
+    statures overlap those of inches and decimetres); the unit chosen is the one that puts
+    the stature in :data:`HUMAN_STATURE` nearest (by ratio) to 1.7 m. When none does, the
+    nearest one is still chosen and ``doubt`` says so (for a ``humanoid``: a stature outside
+    the human range; for another figure only when no unit gives 5 cm to 50 m).
     """
     s = float(stature)
     shown = f"{s:.4g}"
-    if cmu_names and 15.0 <= s < 50.0:
-        return "cmu", f"stature {shown} file units with CMU joint names: CMU units"
-    if 0.3 <= s < 3.5:
-        return "m", f"stature {shown} file units: metres"
-    if 15.0 <= s < 100.0:
-        return "in", f"stature {shown} file units: inches (a person of {s * 0.0254:.2f} m)"
-    if 100.0 <= s < 300.0:
-        return "cm", f"stature {shown} file units: centimetres"
-    if 300.0 <= s < 3000.0:
-        return "mm", f"stature {shown} file units: millimetres"
-    return "m", f"stature {shown} file units fits no known unit: metres assumed"
+    candidates = list(_DETECTED) + (["cmu"] if cmu_names else [])
+    low, high = HUMAN_STATURE if humanoid else (0.05, 50.0)
+
+    def distance(unit):
+        return abs(math.log(s * UNITS[unit] / _TYPICAL_STATURE)) if s > 0 else math.inf
+
+    fitting = [u for u in candidates if low <= s * UNITS[u] <= high]
+    if cmu_names and "cmu" in fitting:
+        fitting = ["cmu"]                     # CMU names with a CMU stature: CMU units
+    units = min(fitting or candidates, key=distance)
+    metres = s * UNITS[units]
+    reason = (f"stature {shown} file units" + (" with CMU joint names" if units == "cmu"
+                                               else "") + f": {_UNIT_WORDS[units]}")
+    if units != "m":
+        reason += f" (a {'person' if humanoid else 'figure'} of {metres:.2f} m)"
+    doubt = ""
+    if not fitting:
+        what = "a person" if humanoid else "any figure"
+        doubt = (f"a stature of {shown} file units fits no unit for {what} "
+                 f"({low:g}-{high:g} m): read as {_UNIT_WORDS[units]} "
+                 f"({metres:.3g} m)")
+    return units, reason, doubt
+
+
+_UNIT_WORDS = {"m": "metres", "dm": "decimetres", "cm": "centimetres", "mm": "millimetres",
+               "in": "inches", "ft": "feet", "cmu": "CMU units"}
 
 
 def nearest_axis(vector: np.ndarray) -> str:
