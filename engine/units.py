@@ -87,6 +87,18 @@ class SourceFrame:
         """3x3 rotation from file axes to internal axes (+Y up)."""
         return up_axis_rotation(self.up_axis)
 
+    def warning(self, path, flag_prefix: str) -> str:
+        """The doubt as one line naming the file and the overrides that settle it, as
+        command-line flags (``flag_prefix``: ``"--performer-"``, ``"--target-"``, ``"--"``):
+        ``"clip.bvh: a stature of ...; if that is wrong, give --performer-units UNIT"``;
+        ``""`` without a doubt."""
+        if not self.doubt:
+            return ""
+        shown = {"units": "UNIT", "up_axis": "AXIS"}
+        flags = " or ".join(f"{flag_prefix}{option.replace('_', '-')} {value or shown[option]}"
+                            for option, value in self.overrides)
+        return f"{path}: {' '.join(self.doubt.split())}; if that is wrong, give {flags}"
+
     def points_to_internal(self, points: np.ndarray) -> np.ndarray:
         """File-frame points ``(..., 3)`` in file units to internal metres, +Y up."""
         return (np.asarray(points, dtype=float) @ self.rotation.T) * self.scale
@@ -98,23 +110,30 @@ class SourceFrame:
 
 #: (low, high) metres: the statures a human figure is believed at
 HUMAN_STATURE = (0.5, 2.5)
-#: the stature [m] a unit is judged by when several put a figure in :data:`HUMAN_STATURE`
-_TYPICAL_STATURE = 1.7
+#: the stature [m] a unit is judged by when several put a figure in :data:`HUMAN_STATURE`:
+#: 1.7 m, but 1.4 m for CMU units (the CMU database's adults measure 1.3-1.5 m in them)
+_TYPICAL_STATURE = {"cmu": 1.4}
 #: the units a stature can tell apart (feet are never guessed: a person of 5.6 units is far
 #: more often a decimetre file than a file in feet)
 _DETECTED = ("m", "dm", "cm", "mm", "in")
 
 
 def detect_units(stature: float, *, cmu_names: bool,
-                 humanoid: bool = True) -> tuple[str, str, str]:
+                 humanoid: bool = True) -> tuple[str, str, str, str]:
     """Guess a file's length unit from the stature of the figure measured in that unit.
 
-    Returns ``(units, reason, doubt)``. The candidates are metres, decimetres, centimetres,
-    millimetres and inches (and CMU units when the CMU skeleton's joint names are there: its
-    statures overlap those of inches and decimetres); the unit chosen is the one that puts
-    the stature in :data:`HUMAN_STATURE` nearest (by ratio) to 1.7 m. When none does, the
-    nearest one is still chosen and ``doubt`` says so (for a ``humanoid``: a stature outside
-    the human range; for another figure only when no unit gives 5 cm to 50 m).
+    Returns ``(units, reason, doubt, other)``. The candidates are metres, decimetres,
+    centimetres, millimetres and inches (and CMU units when the CMU skeleton's joint names are
+    there: its statures overlap those of inches and decimetres); the unit chosen is the one
+    that puts the stature in :data:`HUMAN_STATURE` nearest (by ratio) to a typical stature
+    (1.7 m; 1.4 m for CMU units, so that a MakeHuman export of the CMU skeleton in
+    decimetres, 17 units, is told from a CMU file, 22 to 27 units).
+
+    ``doubt`` (else ``""``) says when the unit is not to be trusted: no unit puts the stature
+    in the range (the nearest is still chosen; for a figure that is not a ``humanoid`` the
+    range is 5 cm to 50 m), or a second unit other than CMU units fits nearly as well (within
+    a ratio of 1.5 of the first: a child of 97 cm, or a giant of 2.46 m in inches), which is
+    then ``other``, the override to suggest (else ``""``).
     """
     s = float(stature)
     shown = f"{s:.4g}"
@@ -122,25 +141,34 @@ def detect_units(stature: float, *, cmu_names: bool,
     low, high = HUMAN_STATURE if humanoid else (0.05, 50.0)
 
     def distance(unit):
-        return abs(math.log(s * UNITS[unit] / _TYPICAL_STATURE)) if s > 0 else math.inf
+        typical = _TYPICAL_STATURE.get(unit, 1.7)
+        return abs(math.log(s * UNITS[unit] / typical)) if s > 0 else math.inf
 
-    fitting = [u for u in candidates if low <= s * UNITS[u] <= high]
-    if cmu_names and "cmu" in fitting:
-        fitting = ["cmu"]                     # CMU names with a CMU stature: CMU units
-    units = min(fitting or candidates, key=distance)
+    fitting = sorted((u for u in candidates if low <= s * UNITS[u] <= high), key=distance)
+    units = fitting[0] if fitting else min(candidates, key=distance)
     metres = s * UNITS[units]
+    figure = "person" if humanoid else "figure"
     reason = (f"stature {shown} file units" + (" with CMU joint names" if units == "cmu"
                                                else "") + f": {_UNIT_WORDS[units]}")
     if units != "m":
-        reason += f" (a {'person' if humanoid else 'figure'} of {metres:.2f} m)"
-    doubt = ""
+        reason += f" (a {figure} of {metres:.2f} m)"
+    doubt, other = "", ""
     if not fitting:
         what = "a person" if humanoid else "any figure"
         doubt = (f"a stature of {shown} file units fits no unit for {what} "
-                 f"({low:g}-{high:g} m): read as {_UNIT_WORDS[units]} "
-                 f"({metres:.3g} m)")
-    return units, reason, doubt
+                 f"({low:g}-{high:g} m): read as {_UNIT_WORDS[units]} ({metres:.3g} m)")
+    elif (len(fitting) > 1 and "cmu" not in fitting[:2] and
+          distance(fitting[1]) - distance(fitting[0]) < _AMBIGUOUS):
+        other = fitting[1]
+        doubt = (f"a stature of {shown} file units is a {figure} of {metres:.2f} m in "
+                 f"{_UNIT_WORDS[units]} or of {s * UNITS[other]:.2f} m in "
+                 f"{_UNIT_WORDS[other]}: read as {_UNIT_WORDS[units]}")
+    return units, reason, doubt, other
 
+
+#: two units both fit a stature ambiguously when their ratios to the typical stature differ
+#: by less than this (natural log of 1.5)
+_AMBIGUOUS = math.log(1.5)
 
 _UNIT_WORDS = {"m": "metres", "dm": "decimetres", "cm": "centimetres", "mm": "millimetres",
                "in": "inches", "ft": "feet", "cmu": "CMU units"}

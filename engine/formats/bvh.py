@@ -682,10 +682,11 @@ def _detect_frame(record: BVHRecord, rotations, translations,
     heights = pts[..., k]
     stature = float(np.median(heights.max(axis=1) - heights.min(axis=1)))
     cmu = bool(_CMU_NAMES & set(lower))
-    units, why, unit_doubt = detect_units(stature, cmu_names=cmu, humanoid=roles is not None)
+    units, why, unit_doubt, other = detect_units(stature, cmu_names=cmu,
+                                                 humanoid=roles is not None)
     if unit_doubt:
         doubts.append(unit_doubt)
-        overrides.append(("units", ""))
+        overrides.append(("units", other))
     return _Detection(up, units, stature, f"{how}; {why}", "; ".join(doubts), tuple(overrides))
 
 
