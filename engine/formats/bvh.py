@@ -810,6 +810,10 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
 
 
 # --------------------------------------------------------------------------- writing
+#: lengths are written to 10 ** -this metres
+_LENGTH_STEP_DIGITS = 8
+
+
 def _fmt(value: float, decimals: int) -> str:
     text = f"{value:.{decimals}f}"
     return "0" + text[2:] if text.startswith("-0") and float(text) == 0 else text
@@ -825,12 +829,15 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             default.
         position_modes: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or per joint name; the skeleton's own by default.
-        decimals: digits after the decimal point.
+        decimals: digits after the decimal point of angles, and the fewest of lengths;
+            lengths get more where the unit is large, so that they are exact to 1e-8 m (a
+            file in metres is read back within a millionth of the figure's stature).
     """
     sk = motion.skeleton
     src = source or sk.source
     C = src.rotation
     s = src.scale
+    length_decimals = max(decimals, math.ceil(_LENGTH_STEP_DIGITS + math.log10(s)))
     modes = list(sk.position_modes)
     if isinstance(position_modes, str):
         _check_mode(position_modes, None)
@@ -900,7 +907,7 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         sites_of.setdefault(site.parent, []).append(site)
 
     def off(v):
-        return " ".join(_fmt(x, decimals) for x in v)
+        return " ".join(_fmt(x, length_decimals) for x in v)
 
     def emit(j: int, depth: int):
         pad = "\t" * depth
@@ -927,8 +934,11 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     out.append(f"Frames: {F}")
     out.append(f"Frame Time: {motion.frame_time!r}")
     if values.shape[1]:
-        values = np.where(np.abs(values) < 0.5 * 10.0 ** -decimals, 0.0, values)
-        row_fmt = " ".join([f"%.{decimals}f"] * values.shape[1])
+        column_decimals = np.full(values.shape[1], decimals)
+        for cols in pos_cols:
+            column_decimals[list(cols.values())] = length_decimals
+        values = np.where(np.abs(values) < 0.5 * 10.0 ** -column_decimals, 0.0, values)
+        row_fmt = " ".join(f"%.{d}f" for d in column_decimals)
         out.extend(row_fmt % tuple(row) for row in values.tolist())
     else:
         out.extend("" for _ in range(F))
