@@ -810,8 +810,8 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
 
 
 # --------------------------------------------------------------------------- writing
-#: lengths are written to 10 ** -this metres
-_LENGTH_STEP_DIGITS = 8
+#: [m] the stature the written precision of lengths is measured against
+_PERSON = 1.7
 
 
 def _fmt(value: float, decimals: int) -> str:
@@ -830,14 +830,15 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         position_modes: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or per joint name; the skeleton's own by default.
         decimals: digits after the decimal point of angles, and the fewest of lengths;
-            lengths get more where the unit is large, so that they are exact to 1e-8 m (a
-            file in metres is read back within a millionth of the figure's stature).
+            lengths get more where the unit is large (metres: 7), so that they are exact to
+            a ten-millionth of a 1.7 m person and a file is read back within a millionth of
+            the figure's stature.
     """
     sk = motion.skeleton
     src = source or sk.source
     C = src.rotation
     s = src.scale
-    length_decimals = max(decimals, math.ceil(_LENGTH_STEP_DIGITS + math.log10(s)))
+    length_decimals = max(decimals, math.ceil(7 + math.log10(s / _PERSON)))
     modes = list(sk.position_modes)
     if isinstance(position_modes, str):
         _check_mode(position_modes, None)
