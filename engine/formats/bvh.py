@@ -712,6 +712,11 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
         up_axis: the file's up axis (``"+Y"``, ``"+Z"``, ...); detected if None.
         position_mode: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or a mapping from joint name to mode; detected where not given.
+
+    Detection (:func:`_detect_frame`) never warns: a detected figure in doubt is put in the
+    skeleton's :attr:`~engine.units.SourceFrame.doubt` with the overrides that settle it,
+    for the caller to show in one line (the CLI on stderr, the window in its status bar).
+    A doubt about a figure given here is dropped.
     """
     path = record.path
     modes = detect_position_modes(record)
