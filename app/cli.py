@@ -40,6 +40,49 @@ def _add_reader_options(parser: argparse.ArgumentParser) -> None:
                             "(relative)")
 
 
+#: the reader settings each side of a retarget takes (``--performer-units`` ...), as
+#: (option, metavar or choices, help)
+SIDE_OPTIONS = (
+    ("units", sorted(UNITS), "length unit"),
+    ("scale", float, "metres per file unit (overrides the units)"),
+    ("up_axis", AXES, "up axis"),
+    ("position_mode", ("absolute", "relative"),
+     "position channels: replace the OFFSET (absolute) or add to it (relative)"),
+)
+SIDES = ("performer", "target")
+
+
+def _add_side_options(parser: argparse.ArgumentParser, when: str) -> None:
+    """``--performer-units``, ``--target-up-axis`` ... (BVH only; glTF is metres, +Y up)."""
+    for side in SIDES:
+        group = parser.add_argument_group(f"reading the {side} (BVH; {when})")
+        for option, kind, text in SIDE_OPTIONS:
+            flag = f"--{side}-{option.replace('_', '-')}"
+            if kind is float:
+                group.add_argument(flag, type=float, metavar="M", help=f"the {side}'s {text}")
+            else:
+                group.add_argument(flag, choices=kind, help=f"the {side}'s {text}")
+
+
+def side_options(args, side: str) -> dict:
+    """The reader overrides given for ``side`` (``units``, ``scale``, ``up_axis``,
+    ``position_mode``; those not given are left out)."""
+    values = {option: getattr(args, f"{side}_{option}") for option, _, _ in SIDE_OPTIONS}
+    return {k: v for k, v in values.items() if v is not None}
+
+
+def _side_flags(options: dict, side: str) -> str:
+    return ", ".join(f"--{side}-{k.replace('_', '-')}" for k in options)
+
+
+def _warn(motion, path, flag_prefix: str) -> None:
+    """Print the one warning line of a clip whose detected units or up axis are in doubt
+    (:meth:`engine.units.SourceFrame.warning`); never Python's multi-line warning format."""
+    line = motion.skeleton.source.warning(path, flag_prefix)
+    if line:
+        print(f"motion-composer: warning: {line}", file=sys.stderr)
+
+
 #: (flag, IKOptions field, help) of the solver settings the commands that run IK take
 IK_FLAGS = (
     ("--ik-tolerance", "tolerance", "metres: a position or plane task is met below this error"),
@@ -131,6 +174,7 @@ def cmd_info(args) -> int:
         motion, extra = _gltf_info(args, character)
     else:
         motion, extra = read_motion(args.file, **_reader_options(args)), None
+        _warn(motion, args.file, "--")
     info = describe_motion(motion)
     if extra is not None:
         info.update(extra)
@@ -253,11 +297,20 @@ def cmd_retarget(args) -> int:
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
     output_format(args.output)                       # an unwritable suffix fails before work
-    performer = read_performer(args.performer)
+    performer_options = side_options(args, "performer")
+    target_options = side_options(args, "target")
+    performer = read_performer(args.performer, **performer_options)
+    _warn(performer, args.performer, "--performer-")
     if args.frames:
         performer.excerpt(*args.frames)              # a range outside the clip fails first
     character = read_character(args.target)          # a glTF's bind pose is the target
-    target = character.rest_motion() if character is not None else read_motion(args.target)
+    if character is not None and target_options:
+        raise MotionComposerError(f"{args.target}: {_side_flags(target_options, 'target')} "
+                                  "apply to BVH files only; glTF is metres and +Y up by "
+                                  "definition")
+    target = (character.rest_motion() if character is not None else
+              read_motion(args.target, **target_options))
+    _warn(target, args.target, "--target-")
     if args.map:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
@@ -274,8 +327,8 @@ def cmd_retarget(args) -> int:
                                       f"{exc.strerror or exc}") from None
         constraints = tuple(constraints_from_json(text, args.constraints))
     project = Project(
-        performer=Source(os.path.abspath(args.performer)),
-        target=Source(os.path.abspath(args.target)),
+        performer=Source(os.path.abspath(args.performer), **performer_options),
+        target=Source(os.path.abspath(args.target), **target_options),
         correspondence=correspondence,
         bind_options=BindOptions(performer_reference=args.reference,
                                  target_reference=args.target_reference,
@@ -317,11 +370,10 @@ def cmd_export(args) -> int:
     import time
 
     from engine.formats import output_format
-    from engine.scene import Scene
 
     started = time.perf_counter()
     fmt = output_format(args.output)                 # an unwritable suffix fails before work
-    scene = Scene.open(args.project)
+    scene = _open_with_overrides(args)
     if args.solve:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
@@ -332,6 +384,32 @@ def cmd_export(args) -> int:
           f"{len(scene.displacement)} displacement curves) in "
           f"{time.perf_counter() - started:.2f} s")
     return 0
+
+
+def _open_with_overrides(args):
+    """The scene of ``args.project``, its sources read with the project's reader settings
+    except where ``--performer-*``/``--target-*`` give others (for this run; the project file
+    is not changed)."""
+    import dataclasses
+
+    from engine.project import open_project
+    from engine.scene import Scene
+
+    overrides = {side: side_options(args, side) for side in SIDES}
+    if not any(overrides.values()):
+        opened = open_project(args.project)
+        scene = Scene(opened.project, opened.performer, opened.target)
+    else:
+        from engine.project import load_project
+        project = load_project(args.project, check_sources=False)
+        project = project.replace(**{side: dataclasses.replace(getattr(project, side),
+                                                               **options)
+                                     for side, options in overrides.items() if options})
+        scene = Scene.from_project(project, path=args.project)
+    for side in SIDES:
+        source = getattr(scene.project, side)
+        _warn(getattr(scene, side), source.path or f"the embedded {side}", f"--{side}-")
+    return scene
 
 
 def cmd_batch(args) -> int:
@@ -345,6 +423,9 @@ def cmd_batch(args) -> int:
     started = time.perf_counter()
     project = load_project(args.project, check_sources=False)
     recipe = recipe_from_project(project, suffix=args.suffix)
+    recipe = dataclasses.replace(recipe, performer_reader=side_options(args, "performer"),
+                                 target_reader={**recipe.target_reader,
+                                                **side_options(args, "target")})
     if args.any_skeleton:
         recipe = type(recipe)(**{**recipe.__dict__, "pairs": {}})
     ik = ik_options_from_args(args, project.ik_options)
@@ -355,6 +436,8 @@ def cmd_batch(args) -> int:
         bar = "#" * int(30 * done / total)
         state = ("written" if summary["status"] == "written" else
                  f"FAILED: {summary['reason']}")
+        for doubt in summary.get("warnings", ()):
+            print(f"motion-composer: warning: {doubt}", file=sys.stderr)
         print(f"[{bar:<30}] {done:>{width}}/{total} {Path(summary['clip']).name}: {state}",
               file=sys.stderr, flush=True)
 
@@ -440,6 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "constraints and the IK correction), to reopen or export later")
     proj.add_argument("--embed-sources", action="store_true",
                       help="embed both clips in the project so that it can be sent on its own")
+    _add_side_options(rt, "detected when not given; --save-project stores them")
     _add_ik_options(rt, "the solver's defaults; --save-project stores them")
     _add_output_options(rt)
     rt.set_defaults(func=cmd_retarget)
@@ -460,6 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="map each clip automatically instead of with the project's map "
                          "(clips from other skeletons)")
     bt.add_argument("--summary", metavar="FILE.json", help="write the per-clip summary")
+    _add_side_options(bt, "detected per clip when not given; the target's: the project's")
     _add_ik_options(bt, "the project's")
     bt.set_defaults(func=cmd_batch)
 
@@ -474,6 +559,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--solve", action="store_true",
                     help="solve the project's constraints with IK again instead of using the "
                          "saved correction (hand edits to the curves are then replaced)")
+    _add_side_options(ex, "the project's when not given")
     _add_ik_options(ex, "the project's; they apply with --solve")
     _add_output_options(ex)
     ex.set_defaults(func=cmd_export)

@@ -32,6 +32,7 @@ class Recipe:
         floor: keep the feet on or above this height [m], or None.
         suffix: appended to each clip's stem for its output name.
         target_reader: options for reading the target (units, up_axis, ...).
+        performer_reader: options for reading every clip (none: detected per clip).
         ik: :class:`~engine.correction.ik.IKOptions` fields (none: the defaults).
     """
 
@@ -44,6 +45,7 @@ class Recipe:
     suffix: str = ""
     target_reader: dict = field(default_factory=dict)
     ik: dict = field(default_factory=dict)
+    performer_reader: dict = field(default_factory=dict)
 
 
 def recipe_from_project(project, *, suffix: str = "") -> Recipe:
@@ -83,15 +85,18 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     started = time.perf_counter()
     summary = {"clip": str(clip), "status": "failed", "output": None, "reason": ""}
     try:
-        performer = read_performer(clip)
+        performer = read_performer(clip, **recipe.performer_reader)
         target = read_motion(recipe.target_path, **recipe.target_reader)
+        summary["warnings"] = [line for line in (
+            performer.skeleton.source.warning(clip, "--performer-"),
+            target.skeleton.source.warning(recipe.target_path, "--target-")) if line]
         if recipe.pairs:
             corr = Correspondence(recipe.pairs)
             corr.validate(target.skeleton, performer.skeleton)
         else:
             from .conversion.automap import automap
             corr = automap(target.skeleton, performer.skeleton)
-        project = Project(performer=Source(os.path.abspath(clip)),
+        project = Project(performer=Source(os.path.abspath(clip), **recipe.performer_reader),
                           target=Source(recipe.target_path, **recipe.target_reader),
                           correspondence=corr, bind_options=BindOptions(**recipe.bind),
                           root=RootOptions(**recipe.root), auto_contacts=recipe.auto_contacts,

@@ -304,21 +304,52 @@ class MainWindow(QtWidgets.QMainWindow):
     def import_dialog(self, side: str) -> None:
         from engine.formats import open_filters
         path = self.ask_open_path(f"Import {side}", open_filters())
-        if path:
-            self.import_file(side, path)
+        if not path:
+            return
+        options = self.ask_import_options(side, path)
+        if options is not None:
+            self.import_file(side, path, **options)
 
-    def import_file(self, side: str, path) -> bool:
+    def ask_import_options(self, side: str, path) -> dict | None:
+        """How to read ``path``: for a BVH file, the options dialog (:mod:`.import_options`,
+        showing what detection found); ``{}`` for a glTF character (metres, +Y up by
+        definition) and for a file that cannot be read (:meth:`import_file` says why);
+        ``None`` when the user cancels."""
+        from app.gui.import_options import ImportOptionsDialog
+        from engine.formats import read_motion, sniff
+        try:
+            if sniff(path).mesh:
+                return {}
+            detected = read_motion(path)
+        except MotionComposerError:
+            return {}
+        given = getattr(self.doc.scene.project, side).reader_options() if \
+            getattr(self.doc.scene, f"{side}_path") == Path(path).resolve() else {}
+        dialog = ImportOptionsDialog(self, side, path, detected, given)
+        if dialog.exec() != QtWidgets.QDialog.DialogCode.Accepted:
+            return None
+        return dialog.options()
+
+    def import_file(self, side: str, path, **options) -> bool:
         """Import a performer or a target: one command, which also redoes the map (pairs set
-        by hand that still fit are kept, the rest auto-mapped)."""
+        by hand that still fit are kept, the rest auto-mapped). ``options`` (``units``,
+        ``scale``, ``up_axis``, ``position_mode``) override detection for a BVH file and are
+        kept in the project; a doubt about what was detected is shown in the status bar."""
         from engine.formats import read_motion, read_performer
         from engine.project import Source
 
         def load():
             # the file's content says its format; a glTF character can only be the target
-            motion = read_performer(path) if side == "performer" else read_motion(path)
-            self.doc.set_source(side, motion, Source(path=str(Path(path).resolve())),
+            motion = (read_performer(path, **options) if side == "performer" else
+                      read_motion(path, **options))
+            self.doc.set_source(side, motion, Source(path=str(Path(path).resolve()),
+                                                     **options),
                                 f"Import {side} {Path(path).name}")
             self.viewport.frame_all()
+            doubt = motion.skeleton.source.doubt
+            if doubt:
+                self.statusBar().showMessage(f"{Path(path).name}: {doubt}; if that is wrong, "
+                                             f"import it again and set it in the options", 0)
         return self._guard(load)
 
     def export_dialog(self) -> None:

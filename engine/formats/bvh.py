@@ -576,29 +576,128 @@ def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
     return rotations, translations
 
 
-def _detect_frame(record: BVHRecord, rotations, translations, skeleton_file: Skeleton):
-    """Detect up axis and units from a sample of frames (file units, file axes)."""
+#: an up axis is trusted when the body's vertical lies within this angle of it [deg] (at 45
+#: degrees two axes are as near; a runner's median lean stays under 40)
+_UP_AXIS_TOLERANCE = 40.0
+
+
+@dataclass(frozen=True)
+class _Detection:
+    """What :func:`_detect_frame` found (file units, file axes)."""
+
+    up_axis: str
+    units: str
+    stature: float
+    reason: str
+    doubt: str
+    overrides: tuple[tuple[str, str], ...]
+
+
+def _body(skeleton_file: Skeleton, positions: np.ndarray):
+    """The humanoid roles of a file skeleton (:func:`engine.conversion.automap.identify`, by
+    names or, where names say nothing, by structure), or ``None`` for a figure that is not
+    a humanoid. ``positions`` ``(J, 3)``: a frame's joints, to tell the sides by."""
+    from ..conversion.automap import identify
+    from ..errors import MappingError
+    try:
+        return identify(skeleton_file, positions)
+    except MappingError:
+        return None
+
+
+def _body_vertical(roles, skeleton_file: Skeleton, pose) -> np.ndarray:
+    """The body's vertical per frame ``(S, 3)``: from the feet to the head (a leg without a
+    foot ends at its shin's End Site, or at the shin), with its component along the
+    shoulders removed (arms either side: the vertical is square to them)."""
+    index = skeleton_file.index
+    positions = pose.positions
+    site_of = {site.parent: e for e, site in enumerate(skeleton_file.end_sites)}
+    ends = []
+    for side in ("l", "r"):
+        if f"foot_{side}" in roles:
+            ends.append(positions[:, index[roles[f"foot_{side}"]]])
+            continue
+        last = index[roles[next(r for r in (f"shin_{side}", f"thigh_{side}") if r in roles)]]
+        ends.append(pose.end_positions[:, site_of[last]] if last in site_of
+                    else positions[:, last])
+    vertical = positions[:, index[roles["head"]]] - (ends[0] + ends[1]) / 2
+    arm = next((r for r in ("upper_arm", "forearm", "hand")
+                if f"{r}_l" in roles and f"{r}_r" in roles), None)
+    if arm is not None:
+        across = positions[:, index[roles[f"{arm}_l"]]] - positions[:, index[roles[f"{arm}_r"]]]
+        norm = np.linalg.norm(across, axis=1, keepdims=True)
+        across = np.divide(across, norm, out=np.zeros_like(across), where=norm > 0)
+        vertical = vertical - np.sum(vertical * across, axis=1, keepdims=True) * across
+    return vertical
+
+
+def _detect_frame(record: BVHRecord, rotations, translations,
+                  skeleton_file: Skeleton) -> _Detection:
+    """Detect the up axis and the units from a sample of frames (file units, file axes).
+
+    The up axis is the coordinate axis nearest the body's vertical (:func:`_body_vertical`,
+    median over the sample) when the skeleton is a humanoid, whatever its joints are called;
+    for another figure, the axis from its feet to its head by name; else +Y with a doubt.
+    The stature is the median height of the figure along that axis (for a humanoid, of the
+    body below its hips joint, so that IK targets hanging from a ground root do not count);
+    the units follow from it (:func:`engine.units.detect_units`).
+    """
     F = rotations.shape[0]
     sample = np.unique(np.linspace(0, F - 1, min(F, 48)).round().astype(int))
     pose = fk_arrays(skeleton_file, rotations[sample], translations[sample])
     pts = pose.all_positions()                                        # (S, J+E, 3)
+    roles = _body(skeleton_file, pose.positions[0])
     lower = [n.lower() for n in record.names]
-    head = [j for j, n in enumerate(lower) if "head" in n and "end" not in n
-            and "top" not in n]
-    feet = [j for j, n in enumerate(lower) if any(w in n for w in ("foot", "ankle", "toe"))]
-    if head and feet:
-        v = np.median(pose.positions[:, head[0]] - pose.positions[:, feet].mean(axis=1), axis=0)
+    doubts, overrides = [], []
+    if roles is not None:
+        v = np.median(_body_vertical(roles, skeleton_file, pose), axis=0)
         up = nearest_axis(v)
-        how = f"'{record.names[head[0]]}' is above the feet along {up}"
+        how = (f"the body stands along {up} (feet to '{roles['head']}', square to the "
+               "shoulders)")
     else:
-        up = "+Y"
-        how = "no head and foot joints to tell the up axis by: +Y assumed"
+        head = [j for j, n in enumerate(lower) if "head" in n and "end" not in n
+                and "top" not in n]
+        feet = [j for j, n in enumerate(lower) if any(w in n for w in ("foot", "ankle", "toe"))]
+        v = (np.median(pose.positions[:, head[0]] - pose.positions[:, feet].mean(axis=1),
+                       axis=0) if head and feet else None)
+        up = nearest_axis(v) if v is not None else "+Y"
+        how = (f"'{record.names[head[0]]}' is above the feet along {up}" if v is not None
+               else "not a humanoid and no head and foot joints to tell the up axis by: +Y "
+                    "assumed")
     k = "XYZ".index(up[1])
+    if v is None or not np.any(v):
+        doubts.append("the up axis cannot be told from the figure (+Y assumed)")
+        overrides.append(("up_axis", ""))
+    else:
+        angle = math.degrees(math.acos(min(1.0, abs(v[k]) / np.linalg.norm(v))))
+        if angle > _UP_AXIS_TOLERANCE:
+            doubts.append(f"the figure stands {angle:.0f} degrees off {up}, its nearest axis")
+            overrides.append(("up_axis", ""))
+    if roles is not None:
+        body = set(_subtree(skeleton_file, skeleton_file.index[roles["hips"]]))
+        keep = [j for j in range(skeleton_file.num_joints) if j in body]
+        keep += [skeleton_file.num_joints + e for e, site in enumerate(skeleton_file.end_sites)
+                 if site.parent in body]
+        pts = pts[:, keep]
     heights = pts[..., k]
     stature = float(np.median(heights.max(axis=1) - heights.min(axis=1)))
     cmu = bool(_CMU_NAMES & set(lower))
-    units, why = detect_units(stature, cmu_names=cmu)
-    return up, units, stature, f"{how}; {why}"
+    units, why, unit_doubt, other = detect_units(stature, cmu_names=cmu,
+                                                 humanoid=roles is not None)
+    if unit_doubt:
+        doubts.append(unit_doubt)
+        overrides.append(("units", other))
+    return _Detection(up, units, stature, f"{how}; {why}", "; ".join(doubts), tuple(overrides))
+
+
+def _subtree(skeleton: Skeleton, top: int) -> list[int]:
+    """``top`` and every joint below it."""
+    out, stack = [], [top]
+    while stack:
+        j = stack.pop()
+        out.append(j)
+        stack.extend(skeleton.children[j])
+    return out
 
 
 def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: float | None = None,
@@ -613,6 +712,11 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
         up_axis: the file's up axis (``"+Y"``, ``"+Z"``, ...); detected if None.
         position_mode: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or a mapping from joint name to mode; detected where not given.
+
+    Detection (:func:`_detect_frame`) never warns: a detected figure in doubt is put in the
+    skeleton's :attr:`~engine.units.SourceFrame.doubt` with the overrides that settle it,
+    for the caller to show in one line (the CLI on stderr, the window in its status bar).
+    A doubt about a figure given here is dropped.
     """
     path = record.path
     modes = detect_position_modes(record)
@@ -641,13 +745,20 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                                         for p, o in record.end_sites])
     rotations, translations = _local_arrays(record, modes)
 
-    detected = units is None and scale is None or up_axis is None
-    reason = ""
+    units_given = units is not None or scale is not None
+    detected = not units_given or up_axis is None
+    reason, doubt, overrides = "", "", ()
     if detected:
-        d_up, d_units, _, reason = _detect_frame(record, rotations, translations, file_skeleton)
-        up_axis = up_axis or d_up
-        if units is None and scale is None:
-            units = d_units
+        found = _detect_frame(record, rotations, translations, file_skeleton)
+        reason = found.reason
+        # a doubt about a figure the caller gave is settled
+        kept = [(o, v) for o, v in found.overrides
+                if not (o == "units" and units_given or o == "up_axis" and up_axis)]
+        if kept:
+            doubt, overrides = found.doubt, tuple(kept)
+        up_axis = up_axis or found.up_axis
+        if not units_given:
+            units = found.units
     if scale is None:
         scale = UNITS[units]
     elif units is None:
@@ -656,7 +767,7 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
         raise BVHError(f"the scale must be a positive number of metres per unit, not {scale!r}",
                        path, None)
     source = SourceFrame(units=units, scale=float(scale), up_axis=up_axis, detected=detected,
-                         reason=reason)
+                         reason=reason, doubt=doubt, overrides=overrides)
     C = source.rotation
     offsets = record.offsets * scale
     offsets[0] = C @ record.offsets[0] * scale
@@ -704,6 +815,10 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
 
 
 # --------------------------------------------------------------------------- writing
+#: [m] the stature the written precision of lengths is measured against
+_PERSON = 1.7
+
+
 def _fmt(value: float, decimals: int) -> str:
     text = f"{value:.{decimals}f}"
     return "0" + text[2:] if text.startswith("-0") and float(text) == 0 else text
@@ -723,7 +838,10 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             default.
         position_modes: ``"absolute"`` or ``"relative"`` for every joint with position
             channels, or per joint name; the skeleton's own by default.
-        decimals: digits after the decimal point.
+        decimals: digits after the decimal point of angles, and the fewest of lengths;
+            lengths get more where the unit is large (metres: 7), so that they are exact to
+            a ten-millionth of a 1.7 m person and a file is read back within a millionth of
+            the figure's stature.
         channels: ``"all"``: every joint's own channels (a glTF character's joints have six
             each); ``"rotation"``: the root keeps its channels and every other joint writes
             its rotation channels only (what many DCC importers expect), its bone in its
@@ -743,6 +861,7 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     src = source or sk.source
     C = src.rotation
     s = src.scale
+    length_decimals = max(decimals, math.ceil(7 + math.log10(s / _PERSON)))
     modes = list(sk.position_modes)
     if isinstance(position_modes, str):
         _check_mode(position_modes, None)
@@ -820,7 +939,7 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         sites_of.setdefault(site.parent, []).append(site)
 
     def off(v):
-        return " ".join(_fmt(x, decimals) for x in v)
+        return " ".join(_fmt(x, length_decimals) for x in v)
 
     def emit(j: int, depth: int):
         pad = "\t" * depth
@@ -847,8 +966,11 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     out.append(f"Frames: {F}")
     out.append(f"Frame Time: {motion.frame_time!r}")
     if values.shape[1]:
-        values = np.where(np.abs(values) < 0.5 * 10.0 ** -decimals, 0.0, values)
-        row_fmt = " ".join([f"%.{decimals}f"] * values.shape[1])
+        column_decimals = np.full(values.shape[1], decimals)
+        for cols in pos_cols:
+            column_decimals[list(cols.values())] = length_decimals
+        values = np.where(np.abs(values) < 0.5 * 10.0 ** -column_decimals, 0.0, values)
+        row_fmt = " ".join(f"%.{d}f" for d in column_decimals)
         out.extend(row_fmt % tuple(row) for row in values.tolist())
     else:
         out.extend("" for _ in range(F))
