@@ -20,6 +20,10 @@ SELF_TEST_TIMEOUT_S = 120
 #: pixels of it the self-test wants to see
 TARGET_RGB = (242, 153, 64)
 MIN_TARGET_PIXELS = 100
+#: Qt platforms with no screen, hence no one to answer a dialog
+HEADLESS_PLATFORMS = ("offscreen", "minimal")
+#: the exit code of a load that failed without a screen (the command line's user error)
+EXIT_LOAD_FAILED = 2
 
 
 def demo_project() -> Path:
@@ -38,6 +42,16 @@ def _set_icon(app, window) -> None:
         window.setWindowIcon(icon)
 
 
+def _without_dialogs(window) -> None:
+    """Make ``window`` ask nothing: errors are kept in ``window.errors`` instead of shown in a
+    dialog, questions get their safe answer (no, nothing chosen, discard)."""
+    window.errors = []
+    window.show_error = window.errors.append
+    window.ask_yes_no = lambda question: False
+    window.ask_open_path = lambda caption, filters: ""
+    window.ask_unsaved = lambda: "discard"
+
+
 def run(project: str | None = None, *, demo: bool = False, screenshot: str | None = None,
         frame: int | None = None, quit_after_ms: int | None = None,
         self_test: bool = False) -> int:
@@ -45,6 +59,8 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
 
     ``screenshot``: save a PNG of the window once it is drawn, then quit (for documentation
     and self-tests); ``frame``: go to that frame first; ``self_test``: see :func:`self_test`.
+    With ``screenshot`` or without a screen (an offscreen Qt platform) no dialog opens: a
+    project that does not load prints one line on stderr and returns 2.
     """
     from app.gui.qt import QtCore, application
     from app.runtime import tune_allocator
@@ -56,10 +72,16 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     from app.gui.main_window import MainWindow
     window = MainWindow()
     _set_icon(app, window)
+    headless = screenshot is not None or app.platformName() in HEADLESS_PLATFORMS
+    if headless:
+        _without_dialogs(window)
     window.show()
     path = demo_project() if demo else project
     if path is not None:
-        window.open_project(path)
+        if not window.open_project(path) and headless:
+            reason = window.errors[-1] if window.errors else f"{path} did not open"
+            print(f"motion-composer: error: {' '.join(reason.split())}", file=sys.stderr)
+            return EXIT_LOAD_FAILED
     else:
         window.offer_recovery()
     if frame is not None:
@@ -204,11 +226,7 @@ def _run_self_test() -> int:
             from app.gui.main_window import MainWindow
             window = MainWindow()
             _set_icon(app, window)
-            window.errors = []
-            window.show_error = window.errors.append            # no modal dialogs
-            window.ask_yes_no = lambda question: False
-            window.ask_open_path = lambda caption, filters: ""
-            window.ask_unsaved = lambda: "discard"
+            _without_dialogs(window)
             try:
                 figures = self_test(app, window)
             finally:
