@@ -228,6 +228,25 @@ def test_help_lists_the_commands(capsys):
     assert "info" in out and "retarget" in out
 
 
+def _help(capsys, *args) -> str:
+    with pytest.raises(SystemExit) as exc:
+        main([*args, "--help"])
+    assert exc.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_names_the_window_flags_the_batch_extra_and_the_ik_correction(capsys):
+    out = _help(capsys)
+    for flag in ("--demo", "--screenshot PNG", "--frame N", "--self-test", "PROJECT.mcp"):
+        assert flag in out, flag
+    retarget = _help(capsys, "retarget")
+    assert retarget.startswith("usage: motion-composer retarget ")
+    assert "no IK correction" not in retarget
+    assert "inverse kinematics" in retarget and "--auto-contacts" in retarget
+    batch = _help(capsys, "batch")
+    assert "needs the batch extra" in batch and "composer[batch]" in batch   # wrapped at "-"
+
+
 # --------------------------------------------------------------------------- a real process
 def _env():
     env = dict(os.environ)
