@@ -461,11 +461,29 @@ def cmd_batch(args) -> int:
     return 0 if len(written) == len(summaries) else 1
 
 
+def _add_window_options(parser) -> None:
+    """The window's flags (``motion-composer [PROJECT] ...``), on ``parser`` or a group."""
+    parser.add_argument("--demo", action="store_true", help="open the bundled demo project")
+    parser.add_argument("--frame", type=int, metavar="N", help="go to frame N")
+    parser.add_argument("--screenshot", metavar="PNG",
+                        help="save a picture of the window once drawn, then quit; no dialogs: a "
+                             "project that does not load is one line on stderr and exit 2")
+    parser.add_argument("--self-test", action="store_true",
+                        help="start the window, load the demo, step through frames, check "
+                             "that the viewport draws, load the bundled skinned character, "
+                             "then quit; prints 'self-test: ok (...)' (exit 0) or "
+                             "'self-test: FAILED: reason' (exit 1)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="motion-composer",
-        description="Retarget captured motion onto any character and correct it with IK.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+        usage="%(prog)s [PROJECT.mcp] [--demo] [--frame N] [--screenshot PNG] [--self-test]\n"
+              "       %(prog)s COMMAND [options]   (%(prog)s COMMAND --help for each)",
+        description="Retarget captured motion onto any character and correct it with IK. "
+                    "Without a COMMAND: open the composer window (on PROJECT.mcp if given).")
+    _add_window_options(parser.add_argument_group("the window (without a COMMAND)"))
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", prog="motion-composer")
     info = sub.add_parser("info", help="describe a motion file",
                           description="Describe a BVH file or a glTF character (.glb, "
                                       ".gltf): joint tree, frames, frame rate, duration, "
@@ -480,7 +498,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     rt = sub.add_parser("retarget", help="convert a capture onto another character",
                         description="Convert a performer's motion onto a target character "
-                                    "through an intermediate skeleton (no IK correction).")
+                                    "through an intermediate skeleton; with the correction "
+                                    "options (constraints, automatic contacts, floor) then "
+                                    "correct it with whole-body inverse kinematics.")
     rt.add_argument("performer", help="the capture (.bvh)")
     rt.add_argument("--target", required=True,
                     help="the character: a .bvh whose rest pose or first frame gives it, or a "
@@ -538,7 +558,8 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("-o", "--output", required=True, help="folder for the results")
     bt.add_argument("--workers", type=int, help="parallel processes (default: CPUs)")
     bt.add_argument("--scheduler", metavar="ADDRESS",
-                    help="run on a Dask cluster (e.g. tcp://10.0.0.5:8786)")
+                    help="run on a Dask cluster (e.g. tcp://10.0.0.5:8786); needs the batch "
+                         "extra: pip install 'motion-composer[batch]'")
     bt.add_argument("--suffix", default="", help="added to each output file's name")
     bt.add_argument("--any-skeleton", action="store_true",
                     help="map each clip automatically instead of with the project's map "
@@ -573,14 +594,7 @@ def _gui(argv: list[str]) -> int:
                                      description="Open the composer window (or run a command: "
                                                  "motion-composer info|retarget|export ...).")
     parser.add_argument("project", nargs="?", help="a .mcp project to open")
-    parser.add_argument("--demo", action="store_true", help="open the bundled demo project")
-    parser.add_argument("--frame", type=int, help="go to this frame")
-    parser.add_argument("--screenshot", metavar="PNG",
-                        help="save a picture of the window once drawn, then quit")
-    parser.add_argument("--self-test", action="store_true",
-                        help="start the window, load the demo, step through frames, check "
-                             "that the viewport draws, then quit; prints 'self-test: ok (...)' "
-                             "(exit 0) or 'self-test: FAILED: reason' (exit 1)")
+    _add_window_options(parser)
     args = parser.parse_args(argv)
     from app.gui.main import run
     if args.self_test:

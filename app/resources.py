@@ -1,8 +1,11 @@
 """Where the bundled resources (demo project, clips, icons) are.
 
-From the source tree (or an editable install) they are the repository's ``resources/``
-folder; inside a PyInstaller bundle they are the ``resources/`` folder the spec copies next to
-the program's modules (``sys._MEIPASS``). The layout is the same in both, so the demo project's
+They are the ``resources/`` folder beside this ``app`` package inside ``motion_composer``:
+in an installed wheel the package data ``motion_composer/resources/``; in a checkout or an
+editable install ``motion_composer/app`` and ``motion_composer/resources`` are symlinks to the
+repository's ``app/`` and ``resources/``, and the real location of this file leads to the
+latter. Inside a PyInstaller bundle they are the ``resources/`` folder the spec copies next to
+the program's modules (``sys._MEIPASS``). The layout is the same in all, so the demo project's
 ``../clips/*.bvh`` paths hold either way.
 """
 from __future__ import annotations
@@ -19,7 +22,7 @@ def is_frozen() -> bool:
 
 
 def resources_folder() -> Path:
-    """The folder holding ``demo/``, ``clips/`` and ``icons/``."""
+    """The folder holding ``demo/``, ``clips/``, ``characters/`` and ``icons/``."""
     if is_frozen():
         return Path(sys._MEIPASS) / "resources"          # noqa: SLF001 - PyInstaller's name
     return Path(__file__).resolve().parent.parent / "resources"

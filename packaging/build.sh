@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds the desktop bundle, packaging/dist/motion-composer/ (PyInstaller, one folder), then
 # checks the built program, away from the sources: its self-test headless under Xvfb (start,
-# load the bundled demo, step frames, check the viewport drew, quit) and command-line runs on
+# load the bundled demo, step frames, check the viewport drew, take the bundled skinned
+# character as the target and check its mesh follows, quit) and command-line runs on
 # the bundled clips and demo (info --json, retarget with IK, export --solve, batch in two
 # worker processes). Fails loudly if any check fails; prints the self-test's line, the
 # bundle's size and the time taken.
@@ -93,6 +94,10 @@ fi
 if [[ "$line" != *"target pixels"* ]]; then
   cat "$scratch/self-test.out" >&2
   die "the built program's viewport was not checked: no OpenGL under Xvfb (${line#self-test: })"
+fi
+if [[ "$line" != *"skinned target"*"followed the motion"* ]]; then
+  cat "$scratch/self-test.out" >&2
+  die "the built program's self-test did not check a skinned target (${line#self-test: })"
 fi
 echo "$line"
 

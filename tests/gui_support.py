@@ -5,6 +5,10 @@ import pytest
 
 from app.gui.qt import QtGui, QtWidgets  # noqa: F401  (sets Qt up before anything else)
 
+#: the longest a GUI test waits for a condition, a signal or a window, in ms: generous, since
+#: a loaded CI machine may be many times slower (a wait that is met returns at once)
+WAIT_MS = 30_000
+
 
 def gl_available() -> bool:
     """Whether this process can make an OpenGL context (Xvfb with Mesa can; 'offscreen'

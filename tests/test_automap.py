@@ -593,10 +593,11 @@ def test_an_automatic_map_saves_and_loads_as_json(tmp_path):
 def test_automap_is_quick():
     import time
     target, performer = load("UNREAL")[0], load("bundled-FAIR1")[0]
-    start = time.perf_counter()
+    # the processor time of this process: other work on a loaded machine does not count
+    start = time.process_time()
     for _ in range(20):
         automap(target, performer)
-    assert (time.perf_counter() - start) / 20 < 0.05
+    assert (time.process_time() - start) / 20 < 0.05
 
 
 def test_the_engine_module_imports_only_stdlib_numpy_and_scipy():

@@ -7,6 +7,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -227,6 +228,25 @@ def test_help_lists_the_commands(capsys):
     assert "info" in out and "retarget" in out
 
 
+def _help(capsys, *args) -> str:
+    with pytest.raises(SystemExit) as exc:
+        main([*args, "--help"])
+    assert exc.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_names_the_window_flags_the_batch_extra_and_the_ik_correction(capsys):
+    out = _help(capsys)
+    for flag in ("--demo", "--screenshot PNG", "--frame N", "--self-test", "PROJECT.mcp"):
+        assert flag in out, flag
+    retarget = _help(capsys, "retarget")
+    assert retarget.startswith("usage: motion-composer retarget ")
+    assert "no IK correction" not in retarget
+    assert "inverse kinematics" in retarget and "--auto-contacts" in retarget
+    batch = _help(capsys, "batch")
+    assert "needs the batch extra" in batch and "composer[batch]" in batch   # wrapped at "-"
+
+
 # --------------------------------------------------------------------------- a real process
 def _env():
     env = dict(os.environ)
@@ -234,16 +254,24 @@ def _env():
     return env
 
 
+def console_script() -> str | None:
+    """The ``motion-composer`` script installed beside the Python running the tests (its
+    venv's ``bin``, on PATH or not), else one on PATH, else None."""
+    beside = Path(sys.executable).parent / "motion-composer"
+    return str(beside) if beside.is_file() else shutil.which("motion-composer")
+
+
 def _commands():
     yield pytest.param([sys.executable, "-m", "app.cli"], id="python -m app.cli")
-    script = shutil.which("motion-composer")
+    script = console_script()
     yield pytest.param([script] if script else None, id="motion-composer script")
 
 
 @pytest.mark.parametrize("command", list(_commands()))
 def test_subprocess_good_and_bad(command, tmp_path):
     if command is None:
-        pytest.skip("the motion-composer console script is not installed on PATH")
+        pytest.skip("the motion-composer console script is not installed (beside "
+                    f"{sys.executable} or on PATH)")
     good = subprocess.run(command + ["info", str(WALK), "--json"], capture_output=True,
                           text=True, cwd=REPO, env=_env(), timeout=120)
     assert good.returncode == 0, good.stderr

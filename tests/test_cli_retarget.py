@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -25,6 +24,7 @@ import pytest
 from app.cli import main
 from blender_util import blender_or_skip, run_blender_import
 from conftest import REPO, SHARED_DATA, clip_path, resolve, shared_path
+from test_cli import console_script
 from engine import forward_kinematics, read_bvh
 from engine.conversion.correspondence import Correspondence
 from engine.describe import stature
@@ -212,7 +212,7 @@ def test_retarget_with_an_explicit_map(case, capsys, tmp_path):
 
 
 def _command():
-    script = shutil.which("motion-composer")
+    script = console_script()
     return [script] if script else [sys.executable, "-m", "app.cli"]
 
 

@@ -11,6 +11,10 @@ The checks that do not trust our own reader:
   loads our BVH of a glTF character likewise.
 
 Synthetic characters are built by hand here (``_Glb``), independent of the engine's writer.
+The checks on real characters run on the data files of ``../shared`` and on the bundled test
+character, ``tests/data/test_character.glb`` (made by ``tests/data/make_test_character.py``
+with our writer; the independent reader and Blender check it), so that a fresh clone tests
+glTF reading, skinning and writing too.
 """
 from __future__ import annotations
 
@@ -38,6 +42,10 @@ from engine.skinning import joint_matrices, skin_character, skin_vertices
 
 ROBOT = "target_robot_expressive.glb"
 FOX = "target_fox.glb"
+#: the bundled test character (tests/data), and its animation
+TEST_CHARACTER = "test_character.glb"
+SWING = "Swing"
+TEST_DATA = Path(__file__).resolve().parent / "data"
 ROBOT_JOINTS = (
     "Bone FootL Body Hips Abdomen Torso_1 Neck Head ShoulderL UpperArmL LowerArmL Palm2L "
     "Middle1L Middle2L ThumbL Thumb2L Palm1L IndexL Index2L Palm3L Ring1L Ring2L ShoulderR "
@@ -54,6 +62,11 @@ FOX_JOINTS = (
 
 
 # =========================================================================== helpers
+def character_path(name: str) -> Path:
+    """The bundled test character in tests/data, or a data file of ../shared (or skip)."""
+    return TEST_DATA / name if name == TEST_CHARACTER else shared_path(name)
+
+
 def _size(character: Character) -> float:
     return float(np.ptp(character.bind_positions, axis=0).max())
 
@@ -383,12 +396,12 @@ def test_fox_loads(fox):
     assert any("centimetres" in note for note in fox.notes)
 
 
-@pytest.mark.parametrize("name", [ROBOT, FOX])
+@pytest.mark.parametrize("name", [ROBOT, FOX, TEST_CHARACTER])
 def test_bind_pose_reproduces_inverse_bind_matrices(name):
     """Each joint's bind matrix F_s * inverse(IBM) (F_s placing skin s's bind space so that its
     top joint sits where the scene puts it, computed here independently) equals the
     skeleton's bind position, and its rotation/scale the character's bind rotation/scale."""
-    path = shared_path(name)
+    path = character_path(name)
     character = read_gltf(path)
     mini = _Mini(path)
     size = _size(character)
@@ -420,21 +433,22 @@ def _ancestors(mini: _Mini, n: int) -> list[int]:
     return out
 
 
-@pytest.mark.parametrize("name", [ROBOT, FOX])
+@pytest.mark.parametrize("name", [ROBOT, FOX, TEST_CHARACTER])
 def test_skinning_bind_pose_gives_bind_vertices(name):
-    character = read_gltf(shared_path(name))
+    character = read_gltf(character_path(name))
     for mesh, verts in zip(character.meshes, skin_character(character)):
         assert verts.shape == (1, mesh.num_vertices, 3)
         np.testing.assert_allclose(verts[0], mesh.positions, atol=1e-6, rtol=0)
 
 
 @pytest.mark.parametrize("name,animation,frames", [(ROBOT, "Walking", [0, 7, 20]),
-                                                   (FOX, "Walk", [0, 9, 22])])
+                                                   (FOX, "Walk", [0, 9, 22]),
+                                                   (TEST_CHARACTER, SWING, [0, 7, 22])])
 def test_posed_mesh_matches_gltf_skinning_equation(name, animation, frames):
     """Our skinned vertices at animated frames equal the glTF equation evaluated from the file
     by the small independent reader (skinned primitives: sum w * world * IBM * v; rigid parts:
     their node's world matrix)."""
-    path = shared_path(name)
+    path = character_path(name)
     character = read_gltf(path)
     mini = _Mini(path)
     motion = character.motion(animation)
@@ -764,9 +778,11 @@ def _assert_same_character(a: Character, b: Character, motion_a, motion_b) -> No
 
 
 @pytest.mark.parametrize("name,animation,suffix", [(ROBOT, "Death", ".glb"),
-                                                   (FOX, "Run", ".gltf")])
+                                                   (FOX, "Run", ".gltf"),
+                                                   (TEST_CHARACTER, SWING, ".glb"),
+                                                   (TEST_CHARACTER, SWING, ".gltf")])
 def test_round_trip_write_read(tmp_path, name, animation, suffix):
-    character = read_gltf(shared_path(name))
+    character = read_gltf(character_path(name))
     motion = character.motion(animation)
     out = tmp_path / f"out{suffix}"
     write_gltf(motion, character, out)

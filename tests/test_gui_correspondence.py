@@ -27,7 +27,8 @@ from app.gui.correspondence_panel import (CorrespondencePanel, JointTree,  # noq
                                           required_joints)
 from app.gui.document import Document  # noqa: E402
 from engine.formats.bvh import read_bvh  # noqa: E402
-from tests.conftest import REPO, clip_path, shared_path  # noqa: E402
+from tests.conftest import clip_path, shared_path  # noqa: E402
+from gui_support import WAIT_MS  # noqa: E402
 
 automap_module = pytest.importorskip("engine.conversion.automap")
 
@@ -57,7 +58,7 @@ def panel(qtbot, doc):
     widget = CorrespondencePanel(doc)
     qtbot.addWidget(widget)
     widget.resize(560, 800)
-    with qtbot.waitExposed(widget):
+    with qtbot.waitExposed(widget, timeout=WAIT_MS):
         widget.show()
     return widget
 
@@ -156,7 +157,8 @@ def test_lines_only_for_visible_rows(panel, doc, qtbot):
     assert pairs_drawn(panel) == drawn
     # a small panel: rows scrolled out of view draw nothing, scrolling brings them back
     panel.resize(560, 420)
-    qtbot.waitUntil(lambda: panel.target_tree.item_centre_y("RThumb") is None)
+    qtbot.waitUntil(lambda: panel.target_tree.item_centre_y("RThumb") is None,
+                    timeout=WAIT_MS)
     assert "RThumb" not in pairs_drawn(panel)
     panel.target_tree.scrollToBottom()
     panel.performer_tree.scrollToBottom()
@@ -326,7 +328,8 @@ def test_unmap_from_tree_selection_and_table(panel, doc, qtbot):
 
 def test_delete_key_unmaps(panel, doc, qtbot):
     push_correspondence(doc, auto(doc), "Auto-map")
-    with qtbot.waitActive(panel):            # shortcuts only fire in the active window
+    # shortcuts only fire in the active window
+    with qtbot.waitActive(panel, timeout=WAIT_MS):
         panel.activateWindow()
     click_joint(qtbot, panel.target_tree, "Head")
     panel.target_tree.setFocus()
@@ -363,7 +366,8 @@ def test_table_combo_edits_the_performer(panel, doc, qtbot):
     assert doc.undo_stack.undoText() == \
         "Map LeftArm to LeftCollar (replaces LeftShoulder -> LeftCollar)"
     qtbot.waitUntil(lambda: panel.table.findChild(QtWidgets.QComboBox) is None
-                    or not panel.table.findChild(QtWidgets.QComboBox).isVisible())
+                    or not panel.table.findChild(QtWidgets.QComboBox).isVisible(),
+                    timeout=WAIT_MS)
     # "(unmapped)" unmaps
     index = panel.model.index(panel.model.row_of("Head"), 1)
     panel.table.edit(index)
@@ -401,7 +405,8 @@ def test_filter_hides_non_matching_joints(panel, doc, qtbot):
 def test_document_selection_shows_in_the_panel(panel, doc, qtbot):
     push_correspondence(doc, auto(doc), "Auto-map")
     panel.resize(560, 420)
-    qtbot.waitUntil(lambda: panel.target_tree.item_centre_y("RThumb") is None)
+    qtbot.waitUntil(lambda: panel.target_tree.item_centre_y("RThumb") is None,
+                    timeout=WAIT_MS)
     doc.select("target", "RThumb")
     assert panel.target_tree.selected_joint() == "RThumb"
     assert panel.performer_tree.selected_joint() == "RThumb"        # its performer joint
@@ -501,12 +506,12 @@ def test_changing_the_mapping_reconverts_the_motion(panel, doc, qtbot):
     first = doc.motion
     assert first is not None
     j = doc.scene.target.skeleton.index["LeftForeArm"]
-    with qtbot.waitSignal(doc.motionChanged, timeout=2000):
+    with qtbot.waitSignal(doc.motionChanged, timeout=WAIT_MS):
         drop(panel.target_tree, "LeftForeArm", "performer", "LeftShoulder")
     # LeftForeArm now follows the performer's upper arm; LeftArm lost it and follows its parent
     assert doc.motion is not None and doc.motion is not first
     assert not np.allclose(doc.motion.rotations[:, j], first.rotations[:, j], atol=1e-3)
-    with qtbot.waitSignal(doc.motionChanged, timeout=2000):
+    with qtbot.waitSignal(doc.motionChanged, timeout=WAIT_MS):
         doc.undo_stack.undo()
     np.testing.assert_allclose(doc.motion.rotations, first.rotations, atol=1e-12)
 
@@ -523,7 +528,7 @@ def test_other_conventions_as_target(qtbot, clips, name):
     panel = CorrespondencePanel(doc)
     qtbot.addWidget(panel)
     panel.resize(560, 800)
-    with qtbot.waitExposed(panel):
+    with qtbot.waitExposed(panel, timeout=WAIT_MS):
         panel.show()
     assert len(panel.target_tree.items) == target.skeleton.num_joints
     assert panel.unmapped_required()
@@ -536,8 +541,8 @@ def test_other_conventions_as_target(qtbot, clips, name):
 
 
 # ---------------------------------------------------------------------------- screenshot
-def test_screenshot(qtbot, clips):
-    """A picture of the panel with a real mapping (docs/screenshots/correspondence.png): the
+def test_screenshot(qtbot, clips, tmp_path):
+    """A picture of the panel with a real mapping (as in docs/screenshots/correspondence.png): the
     FAIR performer orders its limbs differently from the CMU target, so lines cross."""
     doc = Document()
     push_sources(doc, performer=read_bvh(clip_path("fair1_child8_jumping.bvh")),
@@ -546,7 +551,7 @@ def test_screenshot(qtbot, clips):
     panel = CorrespondencePanel(doc)
     qtbot.addWidget(panel)
     panel.resize(620, 860)
-    with qtbot.waitExposed(panel):
+    with qtbot.waitExposed(panel, timeout=WAIT_MS):
         panel.show()
     panel.automap_action.trigger()
     push_pair(doc, "LeftHand", None)                 # one required joint left unmapped
@@ -562,9 +567,5 @@ def test_screenshot(qtbot, clips):
     colours = {image.pixel(x, y) for x in range(0, image.width(), 7)
                for y in range(0, image.height(), 7)}
     assert len(colours) > 20
-    out = REPO / "docs" / "screenshots" / "correspondence.png"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    old = QtGui.QImage(str(out)) if out.exists() else None
-    if old is None or old.convertToFormat(image.format()) != image:
-        assert image.save(str(out))
+    assert image.save(str(tmp_path / "correspondence.png"))
     doc.close()

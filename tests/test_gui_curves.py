@@ -32,10 +32,8 @@ from engine.correction.constraints import Constraint  # noqa: E402
 from engine.correction.enforcement import enforce  # noqa: E402
 from engine.correction.displacement import ROOT  # noqa: E402
 
-from conftest import REPO  # noqa: E402
-from gui_support import demo_document  # noqa: E402
+from gui_support import WAIT_MS, demo_document  # noqa: E402
 
-SCREENSHOTS = REPO / "docs" / "screenshots"
 Qt = QtCore.Qt
 LEFT = Qt.MouseButton.LeftButton
 NOMOD = Qt.KeyboardModifier.NoModifier
@@ -64,9 +62,9 @@ def editor(qtbot, doc):
     qtbot.addWidget(w)
     w.resize(1100, 480)
     w.show()
-    qtbot.waitExposed(w)
+    qtbot.waitExposed(w, timeout=WAIT_MS)
     w.activateWindow()
-    qtbot.waitActive(w)             # keyboard shortcuts (Delete, Escape) need it
+    qtbot.waitActive(w, timeout=WAIT_MS)    # keyboard shortcuts (Delete, Escape) need it
     doc.select("target", JOINT)
     doc.set_frame(300)
     # zoom on the IK range so keys are far enough apart to be picked one by one
@@ -550,11 +548,10 @@ def test_undo_of_a_new_ik_result_updates_the_editor(editor, doc):
 
 
 # ---------------------------------------------------------------------------- screenshot
-def test_screenshot(editor, doc, qtbot):
+def test_screenshot(editor, doc, qtbot, tmp_path):
     editor.view_box.setRange(xRange=(258, 342), padding=0.02)
     rx = doc.scene.displacement.curves[(JOINT, "rx")]
     i = _roomy_key(rx)
     editor.set_selection([("rx", i), ("rx", i + 1)])
     qtbot.wait(30)
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    assert editor.grab().save(str(SCREENSHOTS / "curve_editor.png"))
+    assert editor.grab().save(str(tmp_path / "curve_editor.png"))

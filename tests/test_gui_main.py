@@ -9,6 +9,7 @@ import pytest
 
 from app.gui.qt import QtCore
 from conftest import REPO, clip_path
+from gui_support import WAIT_MS
 
 DEMO = REPO / "resources" / "demo" / "demo.mcp"
 
@@ -190,7 +191,7 @@ def test_screenshot_of_the_demo(window, qtbot, tmp_path):
     from gui_support import gl_available
     window.resize(1400, 900)
     window.show()
-    with qtbot.waitExposed(window):
+    with qtbot.waitExposed(window, timeout=WAIT_MS):
         pass
     window.open_project(DEMO)
     window.viewport.frame_all()

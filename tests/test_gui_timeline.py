@@ -31,10 +31,8 @@ from engine.correction.contacts import (contact_constraints, detect_contacts,  #
 from engine.correction.enforcement import enforce  # noqa: E402
 from engine.kinematics import forward_kinematics  # noqa: E402
 
-from conftest import REPO  # noqa: E402
-from gui_support import demo_document  # noqa: E402
+from gui_support import WAIT_MS, demo_document  # noqa: E402
 
-SCREENSHOTS = REPO / "docs" / "screenshots"
 Qt = QtCore.Qt
 LEFT, RIGHT = Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton
 HAND = "reach LeftHand"
@@ -85,7 +83,7 @@ def timeline(qtbot, doc):
     qtbot.addWidget(w)
     w.resize(1100, 440)
     w.show()
-    qtbot.waitExposed(w)
+    qtbot.waitExposed(w, timeout=WAIT_MS)
     w.view.setXRange(0, 240, padding=0)        # ~3.7 px per frame: drags land on frames
     qtbot.wait(10)
     return w
@@ -244,7 +242,7 @@ def test_drag_start_handle_previews_then_pushes_one_command(qtbot, timeline, doc
     assert timeline.rows[row].hover == "start"
     _move(qtbot, timeline, 30, row)
     _move(qtbot, timeline, 28, row)
-    qtbot.waitUntil(lambda: bool(timeline.live.latencies), timeout=5000)
+    qtbot.waitUntil(lambda: bool(timeline.live.latencies), timeout=WAIT_MS)
     # during the drag: the handle moved, the motion is a preview, nothing was pushed
     assert timeline.rows[row].range == (18, 28, 91, 105)
     assert timeline.live.previewing
@@ -316,7 +314,7 @@ def test_right_click_during_drag_cancels(qtbot, timeline, doc):
     _press(qtbot, timeline, 91, row)                  # the end handle
     for f in (95, 100, 104):
         _move(qtbot, timeline, f, row)
-    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
+    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=WAIT_MS)
     assert timeline.rows[row].range == (18, 32, 104, 105)
     assert not np.array_equal(_arrays(doc.motion)[0], rot0)
     vp = timeline.plot.viewport()
@@ -480,7 +478,7 @@ def inspector(qtbot, timeline, doc):
     qtbot.addWidget(w)
     w.resize(380, 470)
     w.show()
-    qtbot.waitExposed(w)
+    qtbot.waitExposed(w, timeout=WAIT_MS)
     timeline.select(_row_of(doc, HAND))
     return w
 
@@ -541,7 +539,7 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     for _ in range(3):
         qtbot.keyClick(spin, Qt.Key.Key_Up)
     assert doc.undo_stack.count() == count + 1                # not yet
-    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 2, timeout=5000)
+    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 2, timeout=WAIT_MS)
     assert doc.scene.constraints[i].goal["point"][0] == pytest.approx(x0 + 0.03)
 
     # kind, priority, weight, enabled
@@ -616,7 +614,7 @@ def test_take_from_pose_and_pick(qtbot, inspector, doc):
 
 
 # ====================================================================== screenshots
-def test_screenshots(qtbot, solved):
+def test_screenshots(qtbot, solved, tmp_path):
     """The bundled demo: the hand constraint first, one contact disabled, the hand selected
     with its inspector."""
     d = demo_document()
@@ -630,19 +628,18 @@ def test_screenshots(qtbot, solved):
     qtbot.addWidget(tl)
     tl.resize(1200, 520)
     tl.show()
-    qtbot.waitExposed(tl)
+    qtbot.waitExposed(tl, timeout=WAIT_MS)
     tl.view.setXRange(0, 480, padding=0.005)
     insp = ConstraintInspector(d, tl)
     qtbot.addWidget(insp)
     insp.resize(420, insp.sizeHint().height())
     insp.show()
-    qtbot.waitExposed(insp)
+    qtbot.waitExposed(insp, timeout=WAIT_MS)
     tl.select(0)
     tl.rows[0].hover = "start"
     qtbot.wait(50)
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    assert tl.grab().save(str(SCREENSHOTS / "timeline.png"))
-    assert insp.grab().save(str(SCREENSHOTS / "inspector.png"))
+    assert tl.grab().save(str(tmp_path / "timeline.png"))
+    assert insp.grab().save(str(tmp_path / "inspector.png"))
     d.close()
 
 
@@ -654,7 +651,7 @@ def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, ti
     spin = inspector.goal_edits["position", "point"].spins[2]
     z0 = doc.scene.constraints[i].goal["point"][2]
     qtbot.keyClick(spin, Qt.Key.Key_Up)
-    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
+    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=WAIT_MS)
     assert doc.undo_stack.count() == count
     qtbot.mouseClick(timeline.duplicate_button, LEFT)
     assert doc.undo_stack.count() == count + 2
@@ -674,7 +671,7 @@ def test_empty_document(qtbot):
     qtbot.addWidget(insp)
     tl.show()
     insp.show()
-    qtbot.waitExposed(tl)
+    qtbot.waitExposed(tl, timeout=WAIT_MS)
     assert tl.rows == [] and tl.selected_index is None
     assert not tl.add_button.isEnabled() and not tl.delete_button.isEnabled()
     tl.add_constraint("LeftHand")                 # nothing to add on: no motion
@@ -691,7 +688,7 @@ def test_release_solves_in_the_document_job_runner(qtbot, timeline, doc):
     _press(qtbot, timeline, 91, row)
     for f in (95, 100):
         _move(qtbot, timeline, f, row)
-    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=5000)
+    qtbot.waitUntil(lambda: timeline.live.previewing, timeout=WAIT_MS)
     preview = doc.motion
     _release(qtbot, timeline, 100, row)
     # the edit is applied at once, as one command; the solve runs in the document's runner

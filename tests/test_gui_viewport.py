@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gui_support import demo_document, require_gl
+from gui_support import WAIT_MS, demo_document, require_gl
 
 
 @pytest.fixture()
@@ -16,7 +16,7 @@ def view(qtbot):
     qtbot.addWidget(v)
     v.resize(800, 600)
     v.show()
-    qtbot.waitExposed(v)
+    qtbot.waitExposed(v, timeout=WAIT_MS)
     doc.set_frame(300)
     v.frame_all()
     qtbot.wait(50)
@@ -196,7 +196,7 @@ def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     qtbot.mouseMove(v, QtCore.QPoint(int(x), int(y) - 30))
     qtbot.mouseRelease(v, QtCore.Qt.MouseButton.LeftButton,
                        pos=QtCore.QPoint(int(x), int(y) - 30))
-    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=20000)
+    qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=WAIT_MS)
     qtbot.waitUntil(lambda: not doc.pending, timeout=30000)     # the solve landed
     assert doc.undo_stack.undoText() == "Move goal of reach"
     goal = np.array(doc.scene.constraints[0].goal["point"])

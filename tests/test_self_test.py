@@ -40,6 +40,9 @@ def test_the_self_test_loads_the_demo_steps_frames_and_passes(tmp_path):
         # an X server (Xvfb with Mesa here): the viewport must really have drawn
         pixels = re.search(r"drew (\d+) target pixels", line)
         assert pixels and int(pixels.group(1)) >= 100, line
+    # then a skinned target: the bundled test character, whose mesh follows the motion
+    assert "skinned target test_character.glb (480 vertices, 31 joints) followed the motion" \
+        in line, line
 
 
 def test_a_broken_demo_fails_the_self_test_with_its_reason(tmp_path):

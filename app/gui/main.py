@@ -10,6 +10,9 @@ from app.resources import resource_path
 
 REPO_RESOURCES = resource_path("")           # the source tree's resources/, or the bundle's
 DEMO_PROJECT = resource_path("demo/demo.mcp")
+#: a skinned glTF character (our own, made by tests/data/make_test_character.py): the
+#: self-test's skinned target
+SKINNED_CHARACTER = resource_path("characters/test_character.glb")
 ICON = resource_path("icons/motion-composer.png")
 
 #: frames the self-test steps through, at least
@@ -20,6 +23,10 @@ SELF_TEST_TIMEOUT_S = 120
 #: pixels of it the self-test wants to see
 TARGET_RGB = (242, 153, 64)
 MIN_TARGET_PIXELS = 100
+#: Qt platforms with no screen, hence no one to answer a dialog
+HEADLESS_PLATFORMS = ("offscreen", "minimal")
+#: the exit code of a load that failed without a screen (the command line's user error)
+EXIT_LOAD_FAILED = 2
 
 
 def demo_project() -> Path:
@@ -38,6 +45,18 @@ def _set_icon(app, window) -> None:
         window.setWindowIcon(icon)
 
 
+def _without_dialogs(window) -> None:
+    """Make ``window`` ask nothing: errors are kept in ``window.errors`` instead of shown in a
+    dialog, questions get their safe answer (no, nothing chosen, discard), and no autosave is
+    offered (so none is declined, which would delete it)."""
+    window.errors = []
+    window.offer_recovery = lambda project_path=None: False
+    window.show_error = window.errors.append
+    window.ask_yes_no = lambda question: False
+    window.ask_open_path = lambda caption, filters: ""
+    window.ask_unsaved = lambda: "discard"
+
+
 def run(project: str | None = None, *, demo: bool = False, screenshot: str | None = None,
         frame: int | None = None, quit_after_ms: int | None = None,
         self_test: bool = False) -> int:
@@ -45,6 +64,8 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
 
     ``screenshot``: save a PNG of the window once it is drawn, then quit (for documentation
     and self-tests); ``frame``: go to that frame first; ``self_test``: see :func:`self_test`.
+    With ``screenshot`` or without a screen (an offscreen Qt platform) no dialog opens: a
+    project that does not load prints one line on stderr and returns 2.
     """
     from app.gui.qt import QtCore, application
     from app.runtime import tune_allocator
@@ -56,8 +77,15 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     from app.gui.main_window import MainWindow
     window = MainWindow()
     _set_icon(app, window)
+    headless = screenshot is not None or app.platformName() in HEADLESS_PLATFORMS
+    if headless:
+        _without_dialogs(window)
     window.show()
-    start(window, project, demo=demo)
+    path = demo_project() if demo else project
+    if not start(window, project, demo=demo) and headless and path is not None:
+        reason = window.errors[-1] if window.errors else f"{path} did not open"
+        print(f"motion-composer: error: {' '.join(reason.split())}", file=sys.stderr)
+        return EXIT_LOAD_FAILED
     if frame is not None:
         window.doc.set_frame(frame)
     if screenshot is not None:
@@ -112,8 +140,42 @@ def _wait(app, seconds: float, until=None) -> None:
         time.sleep(0.005)
 
 
+def _check_skinned_target(app, window) -> str:
+    """Import the bundled skinned character as the target of the demo's performer, step two
+    frames and check that its mesh followed. Returns the figures for the report."""
+    import numpy as np
+
+    path = SKINNED_CHARACTER
+    if not path.is_file():
+        raise SelfTestFailure(f"the bundled skinned character is missing: {path}")
+    errors = window.errors
+    if not window.import_file("target", path):
+        raise SelfTestFailure(f"the skinned character did not open: "
+                              f"{' '.join((errors[-1] if errors else 'no reason given').split())}")
+    doc = window.doc
+    character = doc.scene.character
+    if character is None or not character.meshes or not doc.scene.ready:
+        raise SelfTestFailure("the skinned character opened without its mesh or map")
+    skin = window.viewport.skin
+    last = doc.scene.num_frames - 1
+    doc.set_frame(0)
+    app.processEvents()
+    if skin is None or not skin.visible():
+        raise SelfTestFailure("the viewport does not show the skinned character's mesh")
+    first = np.array(skin.opts["meshdata"].vertexes(), copy=True)
+    doc.set_frame(last // 2)
+    app.processEvents()
+    if np.allclose(skin.opts["meshdata"].vertexes(), first):
+        raise SelfTestFailure("the skinned mesh did not move with the motion")
+    if errors:
+        raise SelfTestFailure(f"an error was shown: {' '.join(errors[-1].split())}")
+    return (f"skinned target {path.name} ({character.num_vertices} vertices, "
+            f"{character.skeleton.num_joints} joints) followed the motion")
+
+
 def self_test(app, window) -> str:
-    """Load the demo into ``window``, step through frames, check that the viewport drew.
+    """Load the demo into ``window``, step through frames, check that the viewport drew, then
+    take the bundled skinned character as the target and check that its mesh follows.
     Returns the figures for the report; raises :class:`SelfTestFailure`."""
     import numpy as np
 
@@ -175,15 +237,17 @@ def self_test(app, window) -> str:
                 + (f" (OpenGL {gl.majorVersion()}.{gl.minorVersion()})" if gl else ""))
     else:
         drew = f"viewport not checked (no OpenGL on the '{app.platformName()}' platform)"
-    return (f"demo {doc.scene.num_frames} frames, {doc.scene.target.skeleton.num_joints} target joints, "
-            f"loaded in {load_s:.2f} s; stepped {steps} frames ({first}-{first + steps - 1}) "
-            f"at {steps / max(step_s, 1e-9):.0f} fps; {drew}; "
-            f"{time.perf_counter() - started:.1f} s in all")
+    demo = (f"demo {doc.scene.num_frames} frames, {doc.scene.target.skeleton.num_joints} target "
+            f"joints, loaded in {load_s:.2f} s; stepped {steps} frames "
+            f"({first}-{first + steps - 1}) at {steps / max(step_s, 1e-9):.0f} fps; {drew}")
+    skinned = _check_skinned_target(app, window)
+    return f"{demo}; {skinned}; {time.perf_counter() - started:.1f} s in all"
 
 
 def _run_self_test() -> int:
-    """``motion-composer --self-test``: start, load the demo, step frames, quit. Prints one
-    line, ``self-test: ok (...)`` with exit code 0 or ``self-test: FAILED: reason`` with 1."""
+    """``motion-composer --self-test``: start, load the demo, step frames, load a skinned
+    target, quit. Prints one line, ``self-test: ok (...)`` with exit code 0 or
+    ``self-test: FAILED: reason`` with 1."""
     import tempfile
     import threading
 
@@ -211,11 +275,7 @@ def _run_self_test() -> int:
             from app.gui.main_window import MainWindow
             window = MainWindow()
             _set_icon(app, window)
-            window.errors = []
-            window.show_error = window.errors.append            # no modal dialogs
-            window.ask_yes_no = lambda question: False
-            window.ask_open_path = lambda caption, filters: ""
-            window.ask_unsaved = lambda: "discard"
+            _without_dialogs(window)
             try:
                 figures = self_test(app, window)
             finally:
