@@ -199,7 +199,7 @@ def cmd_retarget(args) -> int:
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
-    from engine.fileio import atomic_write
+    from engine.fileio import atomic_write, check_outputs
     from engine.conversion import BindOptions, RootOptions
     from engine.correction.ik import IKOptions
     from engine.project import Project, Source
@@ -207,7 +207,13 @@ def cmd_retarget(args) -> int:
 
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
-    output_format(args.output)                       # an unwritable suffix fails before work
+    # an output that is an input, a folder or a device, or an unwritable suffix, fails
+    # before any work
+    check_outputs((("-o", args.output), ("--save-map", args.save_map),
+                   ("--save-project", args.save_project), ("--report", args.report)),
+                  (("the performer", args.performer), ("the target", args.target),
+                   ("the --map file", args.map), ("the --constraints file", args.constraints)))
+    output_format(args.output)
     performer = read_performer(args.performer)
     character = read_character(args.target)          # a glTF's bind pose is the target
     target = character.rest_motion() if character is not None else read_motion(args.target)
@@ -269,12 +275,17 @@ def cmd_export(args) -> int:
     (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
+    from engine.fileio import check_outputs
     from engine.formats import output_format, write_motion
     from engine.scene import Scene
 
     started = time.perf_counter()
-    fmt = output_format(args.output)                 # an unwritable suffix fails before work
+    outputs = (("-o", args.output),)
+    check_outputs(outputs, (("the project", args.project),))    # all before any work
+    fmt = output_format(args.output)
     scene = Scene.open(args.project)
+    check_outputs(outputs, (("the project's performer", scene.project.performer.path),
+                            ("the project's target", scene.project.target.path)))
     if args.solve:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
@@ -293,7 +304,8 @@ def cmd_batch(args) -> int:
     import dataclasses
     import time
 
-    from engine.batch import recipe_from_project, run_batch
+    from engine.batch import check_batch_outputs, recipe_from_project, run_batch
+    from engine.fileio import check_outputs
     from engine.project import load_project
 
     started = time.perf_counter()
@@ -303,6 +315,10 @@ def cmd_batch(args) -> int:
         recipe = type(recipe)(**{**recipe.__dict__, "pairs": {}})
     ik = ik_options_from_args(args, project.ik_options)
     recipe = type(recipe)(**{**recipe.__dict__, "ik": dataclasses.asdict(ik)})
+    inputs = (("the project", args.project), ("the target", recipe.target_path),
+              *((f"the clip {clip}", clip) for clip in args.clips))
+    check_outputs((("--summary", args.summary),), inputs)
+    check_batch_outputs(recipe, args.clips, args.output, inputs[:1])
     width = len(str(len(args.clips)))
 
     def progress(done, total, summary):
@@ -404,7 +420,11 @@ def build_parser() -> argparse.ArgumentParser:
                                     "stops the rest; the exit code is 1 if any failed.")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
     bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
-    bt.add_argument("-o", "--output", required=True, help="folder for the results")
+    bt.add_argument("-o", "--output", required=True,
+                    help="folder for the results, created if missing; a run locks it until it "
+                         "ends, so a second run into the same folder is refused at once "
+                         "(one file per clip: <clip stem><suffix>.bvh, existing files of "
+                         "those names are replaced)")
     bt.add_argument("--workers", type=int, help="parallel processes (default: CPUs)")
     bt.add_argument("--scheduler", metavar="ADDRESS",
                     help="run on a Dask cluster (e.g. tcp://10.0.0.5:8786)")
