@@ -290,3 +290,13 @@ def test_viewport_normals_match_pyqtgraph_where_it_has_them_and_are_zero_where_n
     np.testing.assert_allclose(ours[finite], theirs[finite], atol=1e-5)
     assert np.all(ours[~finite] == 0)
     assert SkinMeshData(verts, faces).vertexNormals(indexed="faces").shape == (len(faces), 3, 3)
+
+
+def test_a_one_frame_performer_with_automatic_contacts(capsys, tmp_path):
+    """A T-pose file (one frame) as the performer with --auto-contacts: there is no velocity
+    to detect contacts from (numpy's gradient raised before), so none, and the pose is
+    written."""
+    code, out, err = run(capsys, "retarget", TPOSE, "--target", TPOSE, "-o",
+                         tmp_path / "out.bvh", "--auto-contacts", "--floor", "0")
+    assert (code, err) == (0, ""), err
+    assert "wrote" in out and (tmp_path / "out.bvh").is_file()
