@@ -214,6 +214,8 @@ def test_project_numbers_beyond_the_range_name_their_field(project, tmp_path, ca
 @pytest.mark.parametrize("change, field", [
     ({"goal": {"point": [0.0, 1e308, 0.0]}}, "goal.point"),
     ({"goal": {"point": [0.0, float("nan"), 0.0]}}, "goal.point"),
+    ({"kind": "trajectory", "goal": {"keys": [[5, 0.0, 1e308, 0.0]]}}, "goal.keys"),
+    ({"kind": "trajectory", "goal": {"points": [[0.0, 1e300, 0.0]] * 6}}, "goal.points"),
     ({"weight": 1e308}, "weight"),
     ({"weight": float("inf")}, "weight"),
 ])
