@@ -302,3 +302,21 @@ def test_a_one_frame_performer_with_automatic_contacts(capsys, tmp_path):
                          tmp_path / "out.bvh", "--auto-contacts", "--floor", "0")
     assert (code, err) == (0, ""), err
     assert "wrote" in out and (tmp_path / "out.bvh").is_file()
+
+
+@pytest.mark.parametrize("target, output, phrase", [
+    (TPOSE, "out.bvh", "frame 2, Hips Xposition: -5e+10 in file units is beyond the range"),
+    ("target_fox.glb", "out.glb", "frame 2: the translation of 'b_Hip_01'"),
+])
+def test_an_output_that_would_not_read_back_is_refused(capsys, tmp_path, target, output,
+                                                       phrase):
+    """A root position just inside the range (5e8 file units in the first frame, a
+    video-to-BVH exporter's runaway root) blown up by ``--root-scale 100 100``: the result would
+    hold numbers the readers refuse, so the writer refuses it instead of writing a file that
+    does not read back."""
+    clip, _ = _mutated(tmp_path, WALK, "walk.bvh", b"5.2300 ", b"500000000 ",
+                       line_starts=b"5.2300")
+    target = target if isinstance(target, type(TPOSE)) else shared_path(target)
+    one_line(*run(capsys, "retarget", clip, "--target", target, "-o", tmp_path / output,
+                  "--root-scale", "100", "100"), phrase, "would not read back")
+    assert not (tmp_path / output).exists()
