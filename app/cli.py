@@ -179,7 +179,7 @@ def cmd_info(args) -> int:
     if extra is not None:
         info.update(extra)
     if args.json:
-        json.dump(info, sys.stdout, indent=2)
+        json.dump(info, sys.stdout, indent=2, allow_nan=False)      # strict JSON
         sys.stdout.write("\n")
         return 0
     sk = motion.skeleton
@@ -288,7 +288,7 @@ def cmd_retarget(args) -> int:
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
-    from engine.fileio import atomic_write
+    from engine.fileio import atomic_write, check_outputs
     from engine.conversion import BindOptions, RootOptions
     from engine.correction.ik import IKOptions
     from engine.project import Project, Source
@@ -296,7 +296,13 @@ def cmd_retarget(args) -> int:
 
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
-    output_format(args.output)                       # an unwritable suffix fails before work
+    # an output that is an input, a folder or a device, or an unwritable suffix, fails
+    # before any work
+    check_outputs((("-o", args.output), ("--save-map", args.save_map),
+                   ("--save-project", args.save_project), ("--report", args.report)),
+                  (("the performer", args.performer), ("the target", args.target),
+                   ("the --map file", args.map), ("the --constraints file", args.constraints)))
+    output_format(args.output)
     performer_options = side_options(args, "performer")
     target_options = side_options(args, "target")
     performer = read_performer(args.performer, **performer_options)
@@ -351,7 +357,7 @@ def cmd_retarget(args) -> int:
     elapsed = time.perf_counter() - started
     if args.report:
         report = dict(result.report, output=str(args.output), total_s=elapsed)
-        atomic_write(args.report, json.dumps(report, indent=2) + "\n")
+        atomic_write(args.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
     note = ""
     if result.correction is not None:
         worst = max((c["max_residual"] or 0.0 for c in result.report["constraints"]),
@@ -369,11 +375,16 @@ def cmd_export(args) -> int:
     (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
+    from engine.fileio import check_outputs
     from engine.formats import output_format
 
     started = time.perf_counter()
-    fmt = output_format(args.output)                 # an unwritable suffix fails before work
+    outputs = (("-o", args.output),)
+    check_outputs(outputs, (("the project", args.project),))    # all before any work
+    fmt = output_format(args.output)
     scene = _open_with_overrides(args)
+    check_outputs(outputs, (("the project's performer", scene.project.performer.path),
+                            ("the project's target", scene.project.target.path)))
     if args.solve:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
@@ -417,7 +428,8 @@ def cmd_batch(args) -> int:
     import dataclasses
     import time
 
-    from engine.batch import recipe_from_project, run_batch
+    from engine.batch import check_batch_outputs, recipe_from_project, run_batch
+    from engine.fileio import check_outputs
     from engine.project import load_project
 
     started = time.perf_counter()
@@ -430,6 +442,10 @@ def cmd_batch(args) -> int:
         recipe = type(recipe)(**{**recipe.__dict__, "pairs": {}})
     ik = ik_options_from_args(args, project.ik_options)
     recipe = type(recipe)(**{**recipe.__dict__, "ik": dataclasses.asdict(ik)})
+    inputs = (("the project", args.project), ("the target", recipe.target_path),
+              *((f"the clip {clip}", clip) for clip in args.clips))
+    check_outputs((("--summary", args.summary),), inputs)
+    check_batch_outputs(recipe, args.clips, args.output, inputs[:1])
     width = len(str(len(args.clips)))
 
     def progress(done, total, summary):
@@ -457,7 +473,7 @@ def cmd_batch(args) -> int:
             print(f"  failed   {Path(s['clip']).name}: {s['reason']}")
     if args.summary:
         from engine.fileio import atomic_write
-        atomic_write(args.summary, json.dumps(summaries, indent=2) + "\n")
+        atomic_write(args.summary, json.dumps(summaries, indent=2, allow_nan=False) + "\n")
     return 0 if len(written) == len(summaries) else 1
 
 
@@ -555,7 +571,11 @@ def build_parser() -> argparse.ArgumentParser:
                                     "stops the rest; the exit code is 1 if any failed.")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
     bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
-    bt.add_argument("-o", "--output", required=True, help="folder for the results")
+    bt.add_argument("-o", "--output", required=True,
+                    help="folder for the results, created if missing; a run locks it until it "
+                         "ends, so a second run into the same folder is refused at once "
+                         "(one file per clip: <clip stem><suffix>.bvh, existing files of "
+                         "those names are replaced)")
     bt.add_argument("--workers", type=int, help="parallel processes (default: CPUs)")
     bt.add_argument("--scheduler", metavar="ADDRESS",
                     help="run on a Dask cluster (e.g. tcp://10.0.0.5:8786); needs the batch "

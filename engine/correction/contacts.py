@@ -86,7 +86,7 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     options = options or ContactOptions()
     sk = motion.skeleton
     feet = feet if feet is not None else find_feet(sk)
-    if not feet:
+    if not feet or motion.num_frames < 2:        # a contact lasts two frames or more
         return []
     pose = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False)
     pos = pose.positions

@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from ._numparse import parse_number_rows
 from ..errors import BVHError, ExportError
+from .. import limits
 from ..fileio import atomic_write
 from ..kinematics import fk_arrays
 from ..motion import Motion
@@ -137,6 +138,9 @@ class _Tokens:
             raise BVHError(f"expected {what}, found {tok!r}", self.path, line) from None
         if not math.isfinite(value):
             raise BVHError(f"expected {what} (a finite number), found {tok!r}", self.path, line)
+        wrong = limits.problem(value)
+        if wrong is not None:
+            raise BVHError(f"expected {what}, found {tok[:40]!r}: {wrong}", self.path, line)
         return value
 
 
@@ -416,9 +420,11 @@ def _parse_motion_header(lines: list[str], motion_line: int, path) -> _MotionHea
         frame_time = float(ft_tok)
     except ValueError:
         frame_time = float("nan")
-    if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
-        raise BVHError(f"expected a positive number of seconds after 'Frame Time:', found "
-                       f"{ft_tok!r}", path, ft_line)
+    if not (math.isfinite(frame_time) and 0 < frame_time <= limits.MAX_FRAME_TIME
+            and math.isfinite(1.0 / frame_time)):
+        raise BVHError(f"expected a positive number of seconds, at most "
+                       f"{limits.MAX_FRAME_TIME:g}, after 'Frame Time:', found {ft_tok[:40]!r}",
+                       path, ft_line)
     return _MotionHeader(n_frames, frames_line, frame_time, ft_line)
 
 
@@ -441,7 +447,7 @@ def _parse_values(text: str, lines: list[str], head: _MotionHeader, names, chann
     else:
         values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
                                        head.frames_line, names, channels, path)
-    if not np.all(np.isfinite(values)):
+    if not limits.all_usable(values):
         values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
                                        head.frames_line, names, channels, path)
     return values
@@ -488,6 +494,11 @@ def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names
                 raise BVHError(f"value {c + 1} of frame {row + 1} "
                                f"({_channel_label(c, names, channels)}) is {tok[:40]!r}; "
                                "expected a finite number", path, line)
+            wrong = limits.problem(v)
+            if wrong is not None:
+                raise BVHError(f"value {c + 1} of frame {row + 1} "
+                               f"({_channel_label(c, names, channels)}) is {tok[:40]!r}: "
+                               f"{wrong}", path, line)
             values[row, c] = v
         row += 1
     if row < n_frames and n_cols:
@@ -763,9 +774,10 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
         scale = UNITS[units]
     elif units is None:
         units = "custom"
-    if not (math.isfinite(scale) and scale > 0):
-        raise BVHError(f"the scale must be a positive number of metres per unit, not {scale!r}",
-                       path, None)
+    low, high = limits.SCALE_RANGE
+    if not (math.isfinite(scale) and low <= scale <= high):
+        raise BVHError(f"the scale must be a positive number of metres per unit, from {low:g} "
+                       f"to {high:g}, not {scale!r}", path, None)
     source = SourceFrame(units=units, scale=float(scale), up_axis=up_axis, detected=detected,
                          reason=reason, doubt=doubt, overrides=overrides)
     C = source.rotation
@@ -933,6 +945,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             values[:, col] = t[:, axis] - offsets[j][axis] if modes[j] == "relative" \
                 else t[:, axis]
 
+    _check_range(sk, offsets, values, s)
+
     out = ["HIERARCHY"]
     sites_of: dict[int, list[EndSite]] = {}
     for site in sk.end_sites:
@@ -975,6 +989,27 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     else:
         out.extend("" for _ in range(F))
     return "\n".join(out) + "\n"
+
+
+def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
+    """Refuse, with an :class:`ExportError`, a motion whose numbers in file units (``offsets``
+    ``(J, 3)``, channel ``values`` ``(F, C)``, End Site offsets over ``scale``) leave the range
+    the reader takes (:data:`engine.limits.MAX_MAGNITUDE`): the file would not read back."""
+    sites = np.array([site.offset / scale for site in sk.end_sites]).reshape(-1, 3)
+    for what, array in (("OFFSET", offsets), ("End Site OFFSET", sites)):
+        if not limits.all_usable(array):
+            k = int(np.flatnonzero(~(np.abs(array) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+            joint = sk.names[k] if what == "OFFSET" else sk.end_sites[k].name
+            raise ExportError(f"the {what} of {joint!r} in file units ({array[k].tolist()}) is "
+                              f"beyond the range a BVH file is read with (magnitude at most "
+                              f"{limits.MAX_MAGNITUDE:g}); the file would not read back")
+    if not limits.all_usable(values):
+        f, c = (int(i[0]) for i in np.nonzero(~(np.abs(values) <= limits.MAX_MAGNITUDE)))
+        raise ExportError(f"frame {f + 1}, {_channel_label(c, sk.names, sk.channels)}: "
+                          f"{values[f, c]:g} in file units is beyond the range a BVH file is "
+                          f"read with (magnitude at most {limits.MAX_MAGNITUDE:g}); the file "
+                          "would not read back (a root scale or unit that blows the motion "
+                          "up?)")
 
 
 def write_bvh(motion: Motion, path: str | os.PathLike, **options) -> None:

@@ -62,6 +62,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .. import limits
 from ..errors import ExportError, GLTFError
 from ..fileio import atomic_write
 from ..motion import Motion
@@ -435,9 +436,10 @@ class _Doc:
             isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
         if ok:
             arr = np.array(v, dtype=float)
-            ok = bool(np.all(np.isfinite(arr)))
+            ok = limits.all_usable(arr)
         if not ok:
-            raise self.error(f"{where}.{key}", f"expected {n} finite numbers, found "
+            raise self.error(f"{where}.{key}", f"expected {n} finite numbers of magnitude at "
+                                               f"most {limits.MAX_MAGNITUDE:g}, found "
                                                f"{str(v)[:80]}")
         return arr
 
@@ -600,9 +602,10 @@ class _Doc:
         elif ctype == 5126:
             with np.errstate(invalid="ignore"):
                 out = data.astype(float)
-            if not np.all(np.isfinite(out)):
-                bad = int(np.flatnonzero(~np.all(np.isfinite(out), axis=1))[0])
-                raise self.error(aw, f"element {bad} is not a finite number")
+            if not limits.all_usable(out):
+                bad = int(np.flatnonzero(~(np.abs(out) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+                raise self.error(aw, f"element {bad} is not a finite number of magnitude at "
+                                     f"most {limits.MAX_MAGNITUDE:g}")
         else:
             out = data.astype(np.int64)
         if cols > 1:
@@ -918,8 +921,9 @@ def _frame_rate(doc: _Doc, fps: float | None, hint: dict) -> float:
     if fps is None:
         hinted = hint.get("fps")
         fps = float(hinted) if isinstance(hinted, (int, float)) and hinted > 0 else DEFAULT_FPS
-    if not (math.isfinite(fps) and fps > 0):
-        raise GLTFError(f"the frame rate must be a positive number, not {fps!r}", doc.path)
+    if not (math.isfinite(fps) and 1.0 / limits.MAX_FRAME_TIME <= fps <= limits.MAX_MAGNITUDE):
+        raise GLTFError(f"the frame rate must be a positive number of frames per second, at "
+                        f"least {1.0 / limits.MAX_FRAME_TIME:g}, not {fps!r}", doc.path)
     return fps
 
 
@@ -1590,6 +1594,25 @@ def write_gltf(motion: Motion, character: Character | None, path: str | os.PathL
     atomic_write(path, data)
 
 
+def _check_range(motion: Motion) -> None:
+    """Refuse, with an :class:`ExportError`, a motion whose offsets or translations [m] leave
+    the range the reader takes (:data:`engine.limits.MAX_MAGNITUDE`): the file would not read
+    back."""
+    sk = motion.skeleton
+    if not limits.all_usable(sk.offsets):
+        j = int(np.flatnonzero(~(np.abs(sk.offsets) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+        raise ExportError(f"the offset of {sk.names[j]!r} ({sk.offsets[j].tolist()} m) is "
+                          f"beyond the range a glTF file is read with (magnitude at most "
+                          f"{limits.MAX_MAGNITUDE:g}); the file would not read back")
+    if not limits.all_usable(motion.translations):
+        f, k = (int(i[0]) for i in
+                np.nonzero(~(np.abs(motion.translations) <= limits.MAX_MAGNITUDE).all(axis=2)))
+        raise ExportError(f"frame {f + 1}: the translation of {sk.names[sk.translated[k]]!r} "
+                          f"({motion.translations[f, k].tolist()} m) is beyond the range a glTF "
+                          f"file is read with (magnitude at most {limits.MAX_MAGNITUDE:g}); the "
+                          "file would not read back (a root scale that blows the motion up?)")
+
+
 def format_gltf(motion: Motion, character: Character | None, *, name: str | None = None,
                 binary: bool = True) -> bytes:
     """The bytes :func:`write_gltf` writes (GLB, or ``.gltf`` JSON when ``binary`` is off)."""
@@ -1599,6 +1622,7 @@ def format_gltf(motion: Motion, character: Character | None, *, name: str | None
         raise ExportError("the motion has no frames to write")
     if J > 65536:
         raise ExportError(f"{J} joints: glTF joint indices stop at 65535")
+    _check_range(motion)
     if character is not None:
         csk = character.skeleton
         if csk.names != sk.names or not np.array_equal(csk.parents, sk.parents):
