@@ -1,12 +1,15 @@
-"""Atomic file writing: a save either completes or leaves the previous file untouched."""
+"""Atomic file writing: a save either completes or leaves the previous file untouched; and
+reading that refuses what is not a regular file."""
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import tempfile
 
 from .errors import MotionComposerError
 
-__all__ = ["atomic_write", "FileWriteError"]
+__all__ = ["atomic_write", "FileWriteError", "read_regular_file"]
 
 
 class FileWriteError(MotionComposerError):
@@ -53,3 +56,27 @@ def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = 
         if isinstance(exc, OSError):
             raise FileWriteError(f"{path}: cannot be written: {exc.strerror or exc}") from None
         raise
+
+
+def read_regular_file(path: str | os.PathLike) -> bytes:
+    """The bytes of the regular file at ``path``; a folder, a device (``/dev/zero`` would be
+    read forever), a pipe or a socket is refused before anything is read, and opening a pipe
+    does not wait for a writer.
+
+    Raises:
+        FileNotFoundError: no such file.
+        IsADirectoryError: a folder.
+        OSError: any other file that is not regular (``strerror`` says so), or one that cannot
+            be read.
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    with os.fdopen(fd, "rb") as handle:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, "this is a folder", os.fspath(path))
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, "not a regular file (a device, pipe or socket)",
+                          os.fspath(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return handle.read()
