@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 import json
+import math
 import os
 import sys
 
@@ -51,6 +52,23 @@ def _print_bug() -> None:
           "traceback above", file=sys.stderr)
 
 
+def _number(text: str) -> float:
+    """A number given on the command line: finite and within the range the engine takes
+    (:data:`engine.limits.MAX_MAGNITUDE`); argparse words the error with the flag."""
+    from engine import limits
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, not {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, not {text!r}")
+    if limits.problem(value) is not None:
+        raise argparse.ArgumentTypeError(f"expected a number of magnitude at most "
+                                         f"{limits.MAX_MAGNITUDE:g}, not {text!r}")
+    return value
+
+
 def _reader_options(args) -> dict:
     options = {}
     if args.units:
@@ -67,7 +85,7 @@ def _reader_options(args) -> dict:
 def _add_reader_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("reading (detected when not given)")
     group.add_argument("--units", choices=sorted(UNITS), help="the file's length unit")
-    group.add_argument("--scale", type=float, help="metres per file unit (overrides --units)")
+    group.add_argument("--scale", type=_number, help="metres per file unit (overrides --units)")
     group.add_argument("--up-axis", choices=AXES, help="the file's up axis")
     group.add_argument("--position-mode", choices=("absolute", "relative"),
                        help="position channels replace the OFFSET (absolute) or add to it "
@@ -233,7 +251,7 @@ def cmd_retarget(args) -> int:
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
-    from engine.fileio import atomic_write, read_regular_file
+    from engine.fileio import atomic_write, check_outputs, read_regular_file
     from engine.conversion import BindOptions, RootOptions
     from engine.correction.ik import IKOptions
     from engine.project import Project, Source
@@ -241,7 +259,13 @@ def cmd_retarget(args) -> int:
 
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
-    output_format(args.output)                       # an unwritable suffix fails before work
+    # an output that is an input, a folder or a device, or an unwritable suffix, fails
+    # before any work
+    check_outputs((("-o", args.output), ("--save-map", args.save_map),
+                   ("--save-project", args.save_project), ("--report", args.report)),
+                  (("the performer", args.performer), ("the target", args.target),
+                   ("the --map file", args.map), ("the --constraints file", args.constraints)))
+    output_format(args.output)
     performer = read_performer(args.performer)
     character = read_character(args.target)          # a glTF's bind pose is the target
     target = character.rest_motion() if character is not None else read_motion(args.target)
@@ -305,12 +329,17 @@ def cmd_export(args) -> int:
     (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
+    from engine.fileio import check_outputs
     from engine.formats import output_format, write_motion
     from engine.scene import Scene
 
     started = time.perf_counter()
-    fmt = output_format(args.output)                 # an unwritable suffix fails before work
+    outputs = (("-o", args.output),)
+    check_outputs(outputs, (("the project", args.project),))    # all before any work
+    fmt = output_format(args.output)
     scene = Scene.open(args.project)
+    check_outputs(outputs, (("the project's performer", scene.project.performer.path),
+                            ("the project's target", scene.project.target.path)))
     if args.solve:
         scene = scene.replace(ik_options=ik_options_from_args(args, scene.ik_options))
         scene = scene.solve().scene
@@ -329,7 +358,8 @@ def cmd_batch(args) -> int:
     import dataclasses
     import time
 
-    from engine.batch import recipe_from_project, run_batch
+    from engine.batch import check_batch_outputs, recipe_from_project, run_batch
+    from engine.fileio import check_outputs
     from engine.project import load_project
 
     started = time.perf_counter()
@@ -339,6 +369,10 @@ def cmd_batch(args) -> int:
         recipe = type(recipe)(**{**recipe.__dict__, "pairs": {}})
     ik = ik_options_from_args(args, project.ik_options)
     recipe = type(recipe)(**{**recipe.__dict__, "ik": dataclasses.asdict(ik)})
+    inputs = (("the project", args.project), ("the target", recipe.target_path),
+              *((f"the clip {clip}", clip) for clip in args.clips))
+    check_outputs((("--summary", args.summary),), inputs)
+    check_batch_outputs(recipe, args.clips, args.output, inputs[:1])
     width = len(str(len(args.clips)))
 
     def progress(done, total, summary):
@@ -409,7 +443,7 @@ def build_parser() -> ArgumentParser:
     rt.add_argument("--root", choices=("scaled", "absolute", "in-place"), default="scaled",
                     help="root translation: scaled by the ratio of hip heights (default), as "
                          "captured, or with the horizontal displacement removed")
-    rt.add_argument("--root-scale", type=float, nargs=2, metavar=("H", "V"),
+    rt.add_argument("--root-scale", type=_number, nargs=2, metavar=("H", "V"),
                     help="horizontal and vertical root scale, overriding the hip-height ratio")
     rt.add_argument("--distribute", choices=("even", "first"), default="even",
                     help="how a target chain with unmapped inner joints turns: spread over "
@@ -419,7 +453,7 @@ def build_parser() -> ArgumentParser:
                      help='Cartesian constraints to enforce (JSON: {"constraints": [...]})')
     fix.add_argument("--auto-contacts", action="store_true",
                      help="detect the performer's foot contacts and pin the target's feet")
-    fix.add_argument("--floor", type=float, metavar="HEIGHT",
+    fix.add_argument("--floor", type=_number, metavar="HEIGHT",
                      help="keep the target's feet and toes on or above a floor at HEIGHT "
                           "metres (also the floor automatic contacts stand on)")
     fix.add_argument("--report", metavar="REPORT.json",
@@ -440,7 +474,11 @@ def build_parser() -> ArgumentParser:
                                     "stops the rest; the exit code is 1 if any failed.")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
     bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
-    bt.add_argument("-o", "--output", required=True, help="folder for the results")
+    bt.add_argument("-o", "--output", required=True,
+                    help="folder for the results, created if missing; a run locks it until it "
+                         "ends, so a second run into the same folder is refused at once "
+                         "(one file per clip: <clip stem><suffix>.bvh, existing files of "
+                         "those names are replaced)")
     bt.add_argument("--workers", type=int, help="parallel processes (default: CPUs)")
     bt.add_argument("--scheduler", metavar="ADDRESS",
                     help="run on a Dask cluster (e.g. tcp://10.0.0.5:8786)")

@@ -5,9 +5,15 @@ A :class:`Recipe` is plain, picklable data, so the same :func:`process_clip` run
 process pool or on a Dask cluster. Each clip gives a summary dict: ``status`` ``"written"`` or
 ``"failed"`` with the ``reason`` (one line, as the CLI prints errors), the output path, the
 frame count, the largest constraint residual, contact drift figures and the time taken.
+
+The output folder is checked before any work: it must be a folder (or not exist yet), every
+clip must get its own output name, and no output may be a clip or the target. A run holds an
+exclusive lock on the folder (:func:`folder_lock`) until it ends, so a second run into the same
+folder is refused at once instead of overwriting the first run's results.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 import traceback
@@ -15,7 +21,15 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Recipe", "recipe_from_project", "process_clip", "run_batch"]
+from .errors import MotionComposerError
+
+__all__ = ["Recipe", "recipe_from_project", "process_clip", "run_batch", "output_path",
+           "check_batch_outputs", "folder_lock", "BatchOutputError"]
+
+
+class BatchOutputError(MotionComposerError):
+    """A batch output folder that cannot be used: a file, a folder another run is writing
+    into, or outputs that would overwrite each other or an input."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +79,62 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
                   ik=dataclasses.asdict(project.ik_options))
 
 
+def output_path(recipe: Recipe, clip, out_dir) -> Path:
+    """Where :func:`process_clip` writes ``clip``: ``out_dir/<stem><suffix>.bvh``."""
+    return Path(out_dir) / f"{Path(clip).stem}{recipe.suffix}.bvh"
+
+
+def check_batch_outputs(recipe: Recipe, clips, out_dir, inputs=()) -> None:
+    """Refuse, before any work, an ``out_dir`` that exists and is not a folder, two clips with
+    one output name, and an output that is one of the clips, the target or one of ``inputs``
+    (pairs ``(what, path)``, e.g. the project file); raises :class:`BatchOutputError`."""
+    from .fileio import FileWriteError, check_output_path
+
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise BatchOutputError(f"-o {out_dir}: is a file; batch writes one file per clip into "
+                               "a folder: give a folder (it is created if missing)")
+    sources = [("the target", recipe.target_path), *inputs,
+               *((f"the clip {c}", c) for c in clips)]
+    seen: dict[str, str] = {}
+    for clip in clips:
+        out = output_path(recipe, clip, out_dir)
+        key = os.path.realpath(out)
+        if key in seen:
+            raise BatchOutputError(f"the clips {seen[key]} and {clip} would both be written "
+                                   f"to {out}; rename one, or run them into different folders")
+        seen[key] = str(clip)
+        if not os.path.isdir(out_dir):
+            continue                           # a new folder holds no input and no device
+        try:
+            check_output_path(out, sources)
+        except FileWriteError as exc:
+            raise BatchOutputError(str(exc)) from None
+
+
+@contextlib.contextmanager
+def folder_lock(out_dir):
+    """Hold an exclusive lock on the folder ``out_dir`` (created if missing) while the block
+    runs; raise :class:`BatchOutputError` at once if another run holds it.
+
+    The lock is an ``flock`` on the folder itself: nothing is left in the folder, and the
+    system releases it when the process ends, however it ends.
+    """
+    import fcntl
+
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    fd = os.open(out_dir, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise BatchOutputError(f"-o {out_dir}: another batch run is writing into this "
+                                   "folder; wait for it to finish or choose another "
+                                   "folder") from None
+        yield
+    finally:
+        os.close(fd)                           # closing the descriptor releases the lock
+
+
 def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
     """Retarget one clip with ``recipe`` and write ``out_dir/<stem><suffix>.bvh``.
 
@@ -98,7 +168,7 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
                           floor=recipe.floor, ik_options=IKOptions(**recipe.ik))
         result = Scene(project, performer, target).solve(regenerate=True)
         Path(out_dir).mkdir(parents=True, exist_ok=True)
-        out = Path(out_dir) / f"{Path(clip).stem}{recipe.suffix}.bvh"
+        out = output_path(recipe, clip, out_dir)
         write_bvh(result.motion, out)
         residuals = [c["max_residual"] for c in result.report["constraints"]
                      if c["max_residual"] is not None]
@@ -128,15 +198,21 @@ def run_batch(recipe: Recipe, clips: list[str], out_dir: str, *, workers: int | 
     ``workers``: local processes (default: the number of CPUs). ``scheduler``: a Dask
     scheduler address (``tcp://host:8786``) to run on a cluster instead (needs
     ``dask.distributed``). ``progress(done, total, summary)`` is called as clips finish.
+    The outputs are checked first (:func:`check_batch_outputs`) and the folder is locked for
+    the run (:func:`folder_lock`); both raise :class:`BatchOutputError` before any work.
     """
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    check_batch_outputs(recipe, clips, out_dir)
+    with folder_lock(out_dir):
+        return _run_locked(recipe, clips, out_dir, workers, scheduler, progress)
+
+
+def _run_locked(recipe, clips, out_dir, workers, scheduler, progress) -> list[dict]:
     total = len(clips)
     results: dict[int, dict] = {}
     if scheduler:
         try:
             from distributed import Client, as_completed as dask_completed
         except ImportError:
-            from .errors import MotionComposerError
             raise MotionComposerError("--scheduler needs Dask: pip install 'dask[distributed]'"
                                       ) from None
         with Client(scheduler) as client:

@@ -1,5 +1,10 @@
 """Atomic file writing: a save either completes or leaves the previous file untouched; and
-reading that refuses what is not a regular file."""
+reading that refuses what is not a regular file (:func:`read_regular_file`).
+
+A write never destroys what it should not: it goes through a symbolic link to the link's
+target (the link stays), refuses a directory, a device or any other non-regular file, and the
+commands check their outputs against their inputs before any work (:func:`check_outputs`).
+"""
 from __future__ import annotations
 
 import errno
@@ -9,7 +14,8 @@ import tempfile
 
 from .errors import MotionComposerError
 
-__all__ = ["atomic_write", "FileWriteError", "read_regular_file"]
+__all__ = ["atomic_write", "FileWriteError", "resolve_write_target", "check_output_path",
+           "check_outputs", "read_regular_file"]
 
 
 class FileWriteError(MotionComposerError):
@@ -17,17 +23,97 @@ class FileWriteError(MotionComposerError):
     previous file, if any, is intact."""
 
 
+def _kind(mode: int) -> str | None:
+    """What a non-regular file is, in words (``None`` for a regular file)."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def resolve_write_target(path: str | os.PathLike) -> str:
+    """The file a write to ``path`` replaces: the final target of a symbolic link (so that the
+    link is kept and its target gets the new content), else ``path`` itself.
+
+    Raises :class:`FileWriteError` when that file exists and is not a regular file (a folder,
+    a device such as ``/dev/full``, a named pipe), or when its folder does not exist.
+    """
+    path = os.fspath(path)
+    target = os.path.realpath(path) if os.path.islink(path) else path
+    try:
+        mode = os.stat(target).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise FileWriteError(f"{path}: cannot be written: {exc.strerror or exc}") from None
+    kind = _kind(mode) if mode is not None else None
+    if kind is not None:
+        raise FileWriteError(f"{path}: cannot be written: it is {kind}, not a regular file")
+    folder = os.path.dirname(os.path.abspath(target))
+    if not os.path.isdir(folder):
+        raise FileWriteError(f"{path}: cannot be written: the folder {folder} does not exist")
+    return target
+
+
+def _same_file(a: str, b: str) -> bool:
+    """Whether paths ``a`` and ``b`` name one file (through links, hard links included)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:                            # one of them does not exist (yet)
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_output_path(path: str | os.PathLike, inputs=(), *, label: str | None = None) -> None:
+    """Refuse, before any work, an output ``path`` that cannot be written without destroying
+    something: a folder, a device or other non-regular file, a missing folder
+    (:func:`resolve_write_target`), or one of ``inputs`` (pairs ``(what, path)``: the files the
+    same command reads, e.g. ``("the performer", "walk.bvh")``).
+
+    ``label`` names the output in the message (the command-line flag, ``"-o"``); the error is
+    a :class:`FileWriteError`.
+    """
+    path = os.fspath(path)
+    shown = f"{label} {path}" if label else path
+    try:
+        resolve_write_target(path)
+    except FileWriteError as exc:
+        raise FileWriteError(f"{label} {exc}" if label else str(exc)) from None
+    for what, source in inputs:
+        if source is not None and _same_file(path, os.fspath(source)):
+            raise FileWriteError(f"{shown}: is {what}, an input of this command; writing it "
+                                 "would destroy it: choose another file")
+
+
+def check_outputs(outputs, inputs=()) -> None:
+    """:func:`check_output_path` for every ``(label, path)`` of ``outputs`` (``None`` paths
+    skipped), and refuse two outputs that are one file."""
+    given = [(label, os.fspath(path)) for label, path in outputs if path is not None]
+    for i, (label, path) in enumerate(given):
+        check_output_path(path, inputs, label=label)
+        for other_label, other in given[:i]:
+            if _same_file(path, other):
+                raise FileWriteError(f"{label} {path}: is also the file of {other_label}; "
+                                     "give each output its own file")
+
+
 def atomic_write(path: str | os.PathLike, data: str | bytes, *, encoding: str = "utf-8") -> None:
     """Write ``data`` to ``path`` through a temporary file in the same folder, then rename.
 
     The temporary file is flushed and fsynced before :func:`os.replace`, so a crash at any
     moment leaves either the old file or the complete new one, never a half-written file.
+    A symbolic link is written through (its target is replaced, the link stays); a folder,
+    device or other non-regular file is refused (:func:`resolve_write_target`).
     """
-    path = os.fspath(path)
+    path = resolve_write_target(path)
     folder = os.path.dirname(os.path.abspath(path))
     payload = data.encode(encoding) if isinstance(data, str) else data
-    if not os.path.isdir(folder):
-        raise FileWriteError(f"{path}: cannot be written: the folder {folder} does not exist")
     try:
         fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
                                    dir=folder)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import limits
 from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_arrays
 from ..motion import Motion
@@ -38,8 +39,9 @@ class RootOptions:
                                       f"not {self.mode!r}")
         if self.scale is not None:
             h, v = self.scale
-            if not (np.isfinite(h) and np.isfinite(v)):
-                raise MotionComposerError(f"root scale must be two finite numbers, not "
+            if not limits.all_usable((h, v)):
+                raise MotionComposerError(f"root scale must be two finite numbers of magnitude "
+                                          f"at most {limits.MAX_MAGNITUDE:g}, not "
                                           f"{self.scale!r}")
             object.__setattr__(self, "scale", (float(h), float(v)))
 

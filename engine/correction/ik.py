@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .. import limits
 from ..errors import IKOptionsError
 from ..quaternions import qconj, qmul, qnormalize, qrot, to_matrix
 from ..skeleton import Skeleton
@@ -231,6 +232,9 @@ def _checked_number(name: str, value, low: float, high: float | None, open_low: 
     value = float(value)
     if not math.isfinite(value):
         raise IKOptionsError(name, f"expected a finite number, not {value!r}")
+    if limits.problem(value) is not None:
+        raise IKOptionsError(name, f"expected a number of magnitude at most "
+                                   f"{limits.MAX_MAGNITUDE:g}, not {value!r}")
     if value < low or (open_low and value == low) or (high is not None and value > high):
         wanted = (f"from {low:g} to {high:g}" if high is not None else
                   f"above {low:g}" if open_low else f">= {low:g}")

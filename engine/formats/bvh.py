@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from ._numparse import parse_number_rows
 from ..errors import BVHError, ExportError
+from .. import limits
 from ..fileio import atomic_write
 from ..kinematics import fk_arrays
 from ..motion import Motion
@@ -137,6 +138,9 @@ class _Tokens:
             raise BVHError(f"expected {what}, found {tok!r}", self.path, line) from None
         if not math.isfinite(value):
             raise BVHError(f"expected {what} (a finite number), found {tok!r}", self.path, line)
+        wrong = limits.problem(value)
+        if wrong is not None:
+            raise BVHError(f"expected {what}, found {tok[:40]!r}: {wrong}", self.path, line)
         return value
 
 
@@ -416,9 +420,11 @@ def _parse_motion_header(lines: list[str], motion_line: int, path) -> _MotionHea
         frame_time = float(ft_tok)
     except ValueError:
         frame_time = float("nan")
-    if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
-        raise BVHError(f"expected a positive number of seconds after 'Frame Time:', found "
-                       f"{ft_tok!r}", path, ft_line)
+    if not (math.isfinite(frame_time) and 0 < frame_time <= limits.MAX_FRAME_TIME
+            and math.isfinite(1.0 / frame_time)):
+        raise BVHError(f"expected a positive number of seconds, at most "
+                       f"{limits.MAX_FRAME_TIME:g}, after 'Frame Time:', found {ft_tok[:40]!r}",
+                       path, ft_line)
     return _MotionHeader(n_frames, frames_line, frame_time, ft_line)
 
 
@@ -441,7 +447,7 @@ def _parse_values(text: str, lines: list[str], head: _MotionHeader, names, chann
     else:
         values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
                                        head.frames_line, names, channels, path)
-    if not np.all(np.isfinite(values)):
+    if not limits.all_usable(values):
         values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
                                        head.frames_line, names, channels, path)
     return values
@@ -488,6 +494,11 @@ def _parse_rows_carefully(lines, first_row, n_cols, n_frames, frames_line, names
                 raise BVHError(f"value {c + 1} of frame {row + 1} "
                                f"({_channel_label(c, names, channels)}) is {tok[:40]!r}; "
                                "expected a finite number", path, line)
+            wrong = limits.problem(v)
+            if wrong is not None:
+                raise BVHError(f"value {c + 1} of frame {row + 1} "
+                               f"({_channel_label(c, names, channels)}) is {tok[:40]!r}: "
+                               f"{wrong}", path, line)
             values[row, c] = v
         row += 1
     if row < n_frames and n_cols:
@@ -652,9 +663,10 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
         scale = UNITS[units]
     elif units is None:
         units = "custom"
-    if not (math.isfinite(scale) and scale > 0):
-        raise BVHError(f"the scale must be a positive number of metres per unit, not {scale!r}",
-                       path, None)
+    low, high = limits.SCALE_RANGE
+    if not (math.isfinite(scale) and low <= scale <= high):
+        raise BVHError(f"the scale must be a positive number of metres per unit, from {low:g} "
+                       f"to {high:g}, not {scale!r}", path, None)
     source = SourceFrame(units=units, scale=float(scale), up_axis=up_axis, detected=detected,
                          reason=reason)
     C = source.rotation

@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .. import limits
 from ..errors import ExportError, GLTFError
 from ..fileio import atomic_write
 from ..motion import Motion
@@ -428,9 +429,10 @@ class _Doc:
             isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
         if ok:
             arr = np.array(v, dtype=float)
-            ok = bool(np.all(np.isfinite(arr)))
+            ok = limits.all_usable(arr)
         if not ok:
-            raise self.error(f"{where}.{key}", f"expected {n} finite numbers, found "
+            raise self.error(f"{where}.{key}", f"expected {n} finite numbers of magnitude at "
+                                               f"most {limits.MAX_MAGNITUDE:g}, found "
                                                f"{str(v)[:80]}")
         return arr
 
@@ -557,9 +559,10 @@ class _Doc:
         elif ctype == 5126:
             with np.errstate(invalid="ignore"):
                 out = data.astype(float)
-            if not np.all(np.isfinite(out)):
-                bad = int(np.flatnonzero(~np.all(np.isfinite(out), axis=1))[0])
-                raise self.error(aw, f"element {bad} is not a finite number")
+            if not limits.all_usable(out):
+                bad = int(np.flatnonzero(~(np.abs(out) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+                raise self.error(aw, f"element {bad} is not a finite number of magnitude at "
+                                     f"most {limits.MAX_MAGNITUDE:g}")
         else:
             out = data.astype(np.int64)
         if cols > 1:
@@ -873,8 +876,9 @@ def _frame_rate(doc: _Doc, fps: float | None, hint: dict) -> float:
     if fps is None:
         hinted = hint.get("fps")
         fps = float(hinted) if isinstance(hinted, (int, float)) and hinted > 0 else DEFAULT_FPS
-    if not (math.isfinite(fps) and fps > 0):
-        raise GLTFError(f"the frame rate must be a positive number, not {fps!r}", doc.path)
+    if not (math.isfinite(fps) and 1.0 / limits.MAX_FRAME_TIME <= fps <= limits.MAX_MAGNITUDE):
+        raise GLTFError(f"the frame rate must be a positive number of frames per second, at "
+                        f"least {1.0 / limits.MAX_FRAME_TIME:g}, not {fps!r}", doc.path)
     return fps
 
 

@@ -14,7 +14,8 @@ from pathlib import Path
 from ..correction.displacement import ROOT, DisplacementMap
 from ..correction.enforcement import Correction
 from ..errors import BVHError, MappingError
-from ..fileio import FileWriteError, atomic_write, read_regular_file
+from ..fileio import (FileWriteError, atomic_write, read_regular_file,
+                      resolve_write_target)
 from ..formats.bvh import _decode, parse_bvh
 from ..motion import Motion
 from .json import _sub, project_from_json, project_to_json
@@ -34,18 +35,20 @@ def backup_path(path) -> Path:
 def save_project(project: Project, path, *, backup: bool = True) -> None:
     """Write ``project`` to ``path`` atomically: a crash or kill at any moment leaves the
     previous file intact. With ``backup``, the previous file (when its content differs) is
-    first kept as ``<name>.bak``, itself written atomically."""
+    first kept as ``<name>.bak``, itself written atomically. Through a symbolic link, the
+    link's target is written and its backup kept beside it; the link stays."""
     path = os.fspath(path)
     payload = project_to_json(project, path).encode("utf-8")
-    if backup and os.path.isfile(path):
+    target = resolve_write_target(path)
+    if backup and os.path.isfile(target):
         try:
-            previous = Path(path).read_bytes()
+            previous = Path(target).read_bytes()
         except OSError as exc:
             raise FileWriteError(f"{path}: cannot keep a backup: the file cannot be read: "
                                  f"{exc.strerror or exc}") from None
         if previous != payload:
-            atomic_write(backup_path(path), previous)
-    atomic_write(path, payload)
+            atomic_write(backup_path(target), previous)
+    atomic_write(target, payload)
 
 
 def _read_text(path) -> str:

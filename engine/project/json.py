@@ -10,6 +10,7 @@ import re
 
 import numpy as np
 
+from .. import limits
 from ..conversion.binding import BindOptions
 from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
@@ -546,6 +547,9 @@ def _num(value, where: str, *, positive: bool = False) -> float:
     value = float(value)
     if not math.isfinite(value):
         raise _Invalid(where, f"expected a finite number, not {value!r}")
+    if limits.problem(value) is not None:
+        raise _Invalid(where, f"expected a number of magnitude at most "
+                              f"{limits.MAX_MAGNITUDE:g}, not {value!r}")
     if positive and value <= 0:
         raise _Invalid(where, f"expected a positive number, not {value!r}")
     return value

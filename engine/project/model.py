@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
+from .. import limits
 from ..conversion.binding import BindOptions
 from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
@@ -227,6 +228,9 @@ class Project:
 
     def __post_init__(self):
         object.__setattr__(self, "constraints", tuple(self.constraints))
+        if self.floor is not None and limits.problem(self.floor) is not None:
+            raise MotionComposerError(f"floor: expected a finite height in metres of magnitude "
+                                      f"at most {limits.MAX_MAGNITUDE:g}, not {self.floor!r}")
         if self.ik_options.scale is not None:
             raise ValueError("a project's IK options leave scale None: each run takes the "
                              "character's stature")

@@ -21,11 +21,11 @@ ones) and a weight (scales the task's rows within its level).
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ... import limits
 from . import orientation, plane, position, trajectory
 from .base import ConstraintError, ConstraintKind
 
@@ -83,10 +83,10 @@ class Constraint:
                 or self.priority < 1:
             raise ConstraintError(f"{label}: priority must be a whole number from 1 (highest), "
                                   f"not {self.priority!r}", "priority")
-        if not (isinstance(self.weight, (int, float)) and math.isfinite(self.weight)
+        if not (isinstance(self.weight, (int, float)) and limits.problem(self.weight) is None
                 and self.weight > 0):
-            raise ConstraintError(f"{label}: weight must be a positive number, not "
-                                  f"{self.weight!r}", "weight")
+            raise ConstraintError(f"{label}: weight must be a positive number of at most "
+                                  f"{limits.MAX_MAGNITUDE:g}, not {self.weight!r}", "weight")
         if not isinstance(self.goal, dict):
             raise ConstraintError(f"{label}: goal must be an object, not {self.goal!r}", "goal")
         goal = self.kind_object.validate(dict(self.goal), self.start, self.end, label)

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ... import limits
 from ...errors import MotionComposerError
 
 if TYPE_CHECKING:
@@ -66,9 +67,9 @@ def vector(value, n: int, field: str, label: str) -> np.ndarray:
     except (TypeError, ValueError):
         raise ConstraintError(f"{label}: {field} must be {n} numbers, not {value!r}",
                               field) from None
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise ConstraintError(f"{label}: {field} must be {n} finite numbers, not {value!r}",
-                              field)
+    if arr.shape != (n,) or not limits.all_usable(arr):
+        raise ConstraintError(f"{label}: {field} must be {n} finite numbers of magnitude at "
+                              f"most {limits.MAX_MAGNITUDE:g}, not {value!r}", field)
     return arr
 
 
