@@ -85,7 +85,7 @@ def _reader_options(args) -> dict:
 def _add_reader_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("reading (detected when not given)")
     group.add_argument("--units", choices=sorted(UNITS), help="the file's length unit")
-    group.add_argument("--scale", type=_number, help="metres per file unit (overrides --units)")
+    group.add_argument("--scale", type=float, help="metres per file unit (overrides --units)")
     group.add_argument("--up-axis", choices=AXES, help="the file's up axis")
     group.add_argument("--position-mode", choices=("absolute", "relative"),
                        help="position channels replace the OFFSET (absolute) or add to it "
@@ -443,7 +443,7 @@ def build_parser() -> ArgumentParser:
     rt.add_argument("--root", choices=("scaled", "absolute", "in-place"), default="scaled",
                     help="root translation: scaled by the ratio of hip heights (default), as "
                          "captured, or with the horizontal displacement removed")
-    rt.add_argument("--root-scale", type=_number, nargs=2, metavar=("H", "V"),
+    rt.add_argument("--root-scale", type=float, nargs=2, metavar=("H", "V"),
                     help="horizontal and vertical root scale, overriding the hip-height ratio")
     rt.add_argument("--distribute", choices=("even", "first"), default="even",
                     help="how a target chain with unmapped inner joints turns: spread over "
