@@ -46,7 +46,9 @@ def _cli(*argv, cwd=REPO, timeout=cli_fuzz.CASE_TIMEOUT_S):
 
 @pytest.fixture(scope="module")
 def seeds(tmp_path_factory) -> cli_fuzz.Seeds:
-    folder = tmp_path_factory.mktemp("fuzz-seeds")
+    keep = os.environ.get("MC_FUZZ_KEEP")
+    folder = Path(keep) / "seeds" if keep else tmp_path_factory.mktemp("fuzz-seeds")
+    folder.mkdir(parents=True, exist_ok=True)
     walk = folder / "walk.bvh"
     shutil.copy(WALK_60, walk)
     tpose = folder / "tpose.bvh"
