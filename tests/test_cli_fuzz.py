@@ -212,3 +212,34 @@ def test_reads_refuse_devices_and_pipes(role, special, tmp_path):
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
     assert str(special) in proc.stderr and "not a regular file" in proc.stderr
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------- what it found
+def test_a_one_frame_clip_with_auto_contacts(tmp_path, capsys):
+    # a pose file: the CMU walk (cgspeed's BVH) cut to its first frame
+    lines = WALK_60.read_text().splitlines(keepends=True)
+    at = next(i for i, line in enumerate(lines) if line.startswith("Frames:"))
+    pose = tmp_path / "pose.bvh"
+    pose.write_text("".join(lines[:at] + ["Frames: 1\n", lines[at + 1], lines[at + 2]]))
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", str(pose), "--target", str(CLIPS / "cmu_rest_tpose.bvh"),
+                 "-o", str(out), "--auto-contacts"]) == 0
+    assert capsys.readouterr().err == ""
+    from engine.formats import read_motion
+    assert read_motion(out).num_frames == 1
+
+
+def test_zero_quaternion_keys_are_refused_with_their_sampler(seeds, tmp_path, capsys):
+    # an exporter that leaves a rotation output accessor without a buffer view (all zeros,
+    # by the glTF specification)
+    doc = json.loads(seeds.gltf[0].read_text())
+    a, s = next((a, ch["sampler"]) for a, anim in enumerate(doc["animations"])
+                for ch in anim["channels"] if ch["target"]["path"] == "rotation")
+    output = doc["animations"][a]["samplers"][s]["output"]
+    del doc["accessors"][output]["bufferView"]
+    path = tmp_path / "zeros.gltf"
+    path.write_text(json.dumps(doc))
+    code = main(["info", str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Warning" not in err
+    assert (f"{path}: animations[{a}].samplers[{s}].output: key 0 is a zero quaternion" in err)

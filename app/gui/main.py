@@ -30,10 +30,6 @@ def demo_project() -> Path:
     return Path(override) if override else DEMO_PROJECT
 
 
-#: Qt platforms that draw without a display server
-HEADLESS_PLATFORMS = ("offscreen", "minimal")
-
-
 class NoDisplayError(MotionComposerError):
     """The window was asked for where there is no display to show it on."""
 
@@ -57,7 +53,7 @@ def _check_display(*, headless: bool) -> None:
         return
     if not headless:
         raise NoDisplayError("no display: run it under xvfb-run, or use --screenshot")
-    os.environ["QT_QPA_PLATFORM"] = HEADLESS_PLATFORMS[0]
+    os.environ["QT_QPA_PLATFORM"] = "offscreen"
     rules = os.environ.get("QT_LOGGING_RULES")
     os.environ["QT_LOGGING_RULES"] = ";".join(filter(None, [rules, "default.warning=false"]))
     print("motion-composer: note: no display: drawing offscreen, without the 3D viewport",
