@@ -172,9 +172,12 @@ def test_an_unexpected_exception_exits_3_with_its_traceback(monkeypatch, capsys)
     assert err.splitlines()[-1].startswith("motion-composer: internal error (a bug, exit 3)")
 
 
-def test_the_window_without_a_display_says_so_in_one_line(tmp_path):
+@pytest.mark.parametrize("platform", [None, "xcb"])
+def test_the_window_without_a_display_says_so_in_one_line(platform, tmp_path):
     env = {k: v for k, v in _env().items()
            if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    if platform is not None:
+        env["QT_QPA_PLATFORM"] = platform
     proc = subprocess.run([sys.executable, "-m", "app.cli", "--demo"], capture_output=True,
                           text=True, cwd=tmp_path, env=env, timeout=60)
     assert (proc.returncode, proc.stdout) == (2, "")

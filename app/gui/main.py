@@ -37,11 +37,14 @@ class NoDisplayError(MotionComposerError):
 def _has_display() -> bool:
     """Whether Qt can show a window here: on X11 and Wayland systems a display server is named
     (``DISPLAY``, ``WAYLAND_DISPLAY``) or ``QT_QPA_PLATFORM`` names a platform that needs none
-    (or another one the user chose); Windows and macOS always have one."""
+    (``offscreen``, ``minimal``, ``vnc``, ``eglfs``...: any but ``xcb`` and ``wayland*``);
+    Windows and macOS always have one."""
     if sys.platform.startswith(("win", "darwin")):
         return True
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or
-                os.environ.get("QT_QPA_PLATFORM"))
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return True
+    platform = os.environ.get("QT_QPA_PLATFORM", "").split(":")[0].strip()
+    return bool(platform) and platform != "xcb" and not platform.startswith("wayland")
 
 
 def _check_display(*, headless: bool) -> None:
