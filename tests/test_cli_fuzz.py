@@ -28,7 +28,8 @@ CASES = int(os.environ.get("MC_FUZZ_CASES", "200"))
 SEED = int(os.environ.get("MC_FUZZ_SEED", "13"))
 #: cases per driver process
 CHUNK = 150
-#: every this many cases one runs as its own ``python -m app.cli`` process
+#: every this many cases one runs as its own process (``python -m app.cli``, and every other
+#: one the ``motion-composer`` console script when it is on PATH)
 SUBPROCESS_EVERY = 20
 WALK_60 = REPO / "tests" / "data" / "walk_first_60.bvh"
 
@@ -91,8 +92,14 @@ def _run_driver(cases, folder: Path) -> dict[str, dict]:
     return results
 
 
-def _run_subprocess(case: cli_fuzz.Case) -> dict:
-    proc = _cli(*case.argv)
+def _run_subprocess(case: cli_fuzz.Case, script: str | None) -> dict:
+    """``case`` as its own process: the ``motion-composer`` console script when ``script``,
+    else ``python -m app.cli``."""
+    if script:
+        proc = subprocess.run([script, *case.argv], capture_output=True, text=True, cwd=REPO,
+                              env=_env(), timeout=cli_fuzz.CASE_TIMEOUT_S)
+    else:
+        proc = _cli(*case.argv)
     return dict(id=case.id, code=proc.returncode, stderr=proc.stderr,
                 problem=cli_fuzz.judge(case, proc.returncode, proc.stdout, proc.stderr))
 
@@ -104,7 +111,9 @@ def test_fuzzed_files_through_the_real_cli(seeds, tmp_path):
     alone = cases[::SUBPROCESS_EVERY]
     pooled = [c for c in cases if c not in alone]
     results = _run_driver(pooled, folder)
-    results.update({c.id: _run_subprocess(c) for c in alone})
+    script = shutil.which("motion-composer")
+    results.update({c.id: _run_subprocess(c, script if i % 2 else None)
+                    for i, c in enumerate(alone)})
 
     by_kind = collections.Counter(c.kind for c in cases)
     codes = collections.Counter((c.kind, results.get(c.id, {}).get("code")) for c in cases)
