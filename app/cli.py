@@ -399,6 +399,15 @@ def cmd_batch(args) -> int:
     if args.summary:
         from engine.fileio import atomic_write
         atomic_write(args.summary, json.dumps(summaries, indent=2) + "\n")
+    bugs = [s for s in summaries
+            if s["reason"].startswith(("unexpected ", "the worker process failed"))]
+    for s in bugs:                      # a bug in a clip never stops the rest, but says so
+        print(f"{s['clip']}: {s.get('traceback', '')}{s['reason']}", file=sys.stderr)
+    if bugs:
+        print(f"motion-composer: internal error (a bug, exit 3) in {len(bugs)} of "
+              f"{len(summaries)} clips: please report it with the traceback above",
+              file=sys.stderr)
+        return EXIT_BUG
     return 0 if len(written) == len(summaries) else 1
 
 
@@ -471,7 +480,8 @@ def build_parser() -> ArgumentParser:
                         description="Retarget many clips with one project's mapping, binding, "
                                     "root options, automatic contacts and floor, in parallel "
                                     "processes (or on a Dask cluster). A failing clip never "
-                                    "stops the rest; the exit code is 1 if any failed.")
+                                    "stops the rest; the exit code is 1 if any failed (3 if one "
+                                    "failed by a bug, with its traceback).")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
     bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
     bt.add_argument("-o", "--output", required=True,

@@ -181,6 +181,23 @@ def test_an_unexpected_exception_exits_3_with_its_traceback(monkeypatch, capsys)
     assert err.splitlines()[-1].startswith("motion-composer: internal error (a bug, exit 3)")
 
 
+def test_a_bug_in_one_batch_clip_exits_3_with_its_traceback(seeds, monkeypatch, capsys,
+                                                            tmp_path):
+    import engine.scene
+
+    def broken(self, **kwargs):
+        raise ZeroDivisionError("an injected bug")
+
+    monkeypatch.setattr(engine.scene.Scene, "solve", broken)
+    code = main(["batch", str(seeds.projects[0]), str(seeds.walk), "-o", str(tmp_path / "out"),
+                 "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 3
+    assert "Traceback (most recent call last):" in err and "ZeroDivisionError" in err
+    assert err.splitlines()[-1].startswith("motion-composer: internal error (a bug, exit 3) "
+                                           "in 1 of 1 clips")
+
+
 @pytest.mark.parametrize("platform", [None, "xcb"])
 def test_the_window_without_a_display_says_so_in_one_line(platform, tmp_path):
     env = {k: v for k, v in _env().items()
