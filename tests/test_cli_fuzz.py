@@ -1,12 +1,14 @@
 """The real command line on mutated real files: every run exits 0 with finite output, or 2
-with one line on stderr; nothing else (no exit 3, traceback, warning, crash or hang).
+with one line on stderr (``batch``: or 1 for clips that failed for a typed reason); nothing
+else (no exit 3, traceback, warning, crash or hang). See tests/cli_fuzz.py.
 
 The seeds are real: a CMU walk (the CMU mocap database's BVH, as cgspeed's conversion writes
 it), the CMU rest T-pose, glTF characters written by this program (JSON and GLB, as a user's
-pipeline feeds them back) and, with ../shared/data, the Khronos sample Fox (a GLB exported by
-Blender's glTF exporter), projects saved by ``retarget --save-project`` (sources by path and
-embedded). The cases are the same on every run (a fixed seed). ``MC_FUZZ_CASES=3000`` runs
-more by hand, ``MC_FUZZ_SEED`` others, and ``MC_FUZZ_KEEP=DIR`` keeps the mutated files.
+pipeline feeds them back), projects saved by ``retarget --save-project`` (sources by path and
+embedded) and, with ../shared/data, more clips and characters (:data:`SHARED_BVH`,
+:data:`SHARED_GLB`). The cases are the same on every run (a fixed seed).
+``MC_FUZZ_CASES=3000`` runs more by hand, ``MC_FUZZ_SEED`` others, and ``MC_FUZZ_KEEP=DIR``
+keeps the mutated files (and the seeds) there.
 """
 from __future__ import annotations
 
@@ -32,6 +34,11 @@ CHUNK = 150
 #: one the ``motion-composer`` console script when it is on PATH)
 SUBPROCESS_EVERY = 20
 WALK_60 = REPO / "tests" / "data" / "walk_first_60.bvh"
+#: with ../shared/data, more seeds: the Bandai-Namco dataset's BVH (its own 21-joint rig) and
+#: a CMU clip retargeted by Xia et al. (deep-learning output)
+SHARED_BVH = ("bandai2_raise-up-right-hand_normal_001.bvh", "cmu_xia_angry_13_000_run.bvh")
+#: the Khronos sample Fox (Blender's glTF exporter) and a Mixamo-rigged character
+SHARED_GLB = ("target_fox.glb", "target_mixamo_ely.glb")
 
 
 def _env():
@@ -61,9 +68,9 @@ def seeds(tmp_path_factory) -> cli_fuzz.Seeds:
              "--save-project", folder / "embedded.mcp", "--embed-sources"]):
         assert main([str(a) for a in argv]) == 0
     glb = [folder / "walk_on_tpose.glb"]
-    if (SHARED_DATA / "target_fox.glb").is_file():
-        glb.append(SHARED_DATA / "target_fox.glb")
-    return cli_fuzz.Seeds(walk=walk, tpose=tpose, bvh=[walk, tpose],
+    glb += [SHARED_DATA / n for n in SHARED_GLB if (SHARED_DATA / n).is_file()]
+    bvh = [walk, tpose] + [SHARED_DATA / n for n in SHARED_BVH if (SHARED_DATA / n).is_file()]
+    return cli_fuzz.Seeds(walk=walk, tpose=tpose, bvh=bvh,
                           gltf=[folder / "walk_on_tpose.gltf"], glb=glb,
                           projects=[folder / "walk.mcp", folder / "embedded.mcp"])
 
