@@ -81,13 +81,12 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = None,
                     options: ContactOptions | None = None) -> list[Contact]:
-    """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted).
-    A clip of fewer than two frames has none (a contact lasts two frames at least)."""
+    """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted)."""
     from ..describe import stature
     options = options or ContactOptions()
     sk = motion.skeleton
     feet = feet if feet is not None else find_feet(sk)
-    if not feet or motion.num_frames < 2:
+    if not feet or motion.num_frames < 2:        # a contact lasts two frames or more
         return []
     pose = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False)
     pos = pose.positions
