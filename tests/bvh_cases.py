@@ -184,6 +184,18 @@ CASES = [
             ("value 7 of frame 1", "expected a finite number")),
     BadCase("overflow", _row_token(2, 8, b"1e999"),
             ("value 8 of frame 2", "expected a finite number")),
+    # finite numbers that overflow once scaled, squared or turned into angles (issue 13): a
+    # deep-learning exporter writing an unnormalised output, a corrupted float written as text
+    BadCase("value-1e308-position", _row_token(1, 1, b"1e308"),
+            ("value 1 of frame 1", "Hips Xposition", "'1e308'", "beyond the range")),
+    BadCase("value-1e308-rotation", _row_token(40, 5, b"-1e308"),
+            ("value 5 of frame 40", "Hips Yrotation", "'-1e308'", "beyond the range")),
+    BadCase("value-just-too-large", _row_token(7, 9, b"1000000001"),
+            ("value 9 of frame 7", "beyond the range")),
+    BadCase("offset-1e308",
+            _replace_line(lambda ls: find(ls, b"OFFSET", find(ls, b"JOINT Chest")),
+                          b"OFFSET ", b"OFFSET 1e308 "),
+            ("expected the X value of OFFSET", "'1e308'", "beyond the range")),
     BadCase("offset-not-a-number",
             _replace_line(lambda ls: find(ls, b"OFFSET", find(ls, b"JOINT LeftShoulder")),
                           b"1.47088", b"abc"),
@@ -210,6 +222,14 @@ CASES = [
     BadCase("frame-time-zero",
             _replace_line(lambda ls: find(ls, b"Frame Time"), b".0083333", b"0"),
             ("expected a positive number of seconds",)),
+    # a Frame Time that is a frame rate, or garbage: 1e308 s per frame, and 12 s (more than
+    # the 10 s accepted; a stop-motion export at 1/12 fps written as 12)
+    BadCase("frame-time-1e308",
+            _replace_line(lambda ls: find(ls, b"Frame Time"), b".0083333", b"1e308"),
+            ("expected a positive number of seconds, at most 10", "'1e308'")),
+    BadCase("frame-time-12-seconds",
+            _replace_line(lambda ls: find(ls, b"Frame Time"), b".0083333", b"12"),
+            ("expected a positive number of seconds, at most 10", "'12'")),
     BadCase("extra-closing-brace", _extra_brace, ("unbalanced braces", "'}'")),
     BadCase("missing-closing-brace", _missing_brace,
             ("joint 'Hips' (opened at line 2)", "expected '}'")),

@@ -37,6 +37,35 @@ def to_view(points: np.ndarray) -> np.ndarray:
     return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
 
 
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``(V, 3)`` float32 unit normals of a triangle mesh's ``vertices`` ``(V, 3)`` (``faces``
+    ``(T, 3)`` vertex indices): the sum of the normals of the faces around each vertex,
+    weighted by their areas. A vertex whose faces are all degenerate (zero area, as the
+    collapsed triangles of a skinned glTF character often are) or that has none gets a zero
+    normal rather than NaN."""
+    v = vertices[faces]                                           # (T, 3 corners, 3)
+    face_normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])  # length: twice the area
+    summed = np.zeros((len(vertices), 3))
+    for corner in range(3):
+        np.add.at(summed, faces[:, corner], face_normals)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    return np.divide(summed, length, out=np.zeros_like(summed),
+                     where=length > 0).astype(np.float32)
+
+
+class SkinMeshData(gl.MeshData):
+    """Mesh data whose smooth-shading normals come from :func:`vertex_normals` (numpy, in
+    one pass) instead of pyqtgraph's per-vertex loop, which divides by zero on degenerate
+    faces and prints a RuntimeWarning."""
+
+    def __init__(self, vertexes: np.ndarray, faces: np.ndarray):
+        super().__init__(vertexes=vertexes, faces=faces)
+        self._normals = vertex_normals(np.asarray(vertexes, dtype=float), np.asarray(faces))
+
+    def vertexNormals(self, indexed=None):                       # noqa: N802 (pyqtgraph)
+        return self._normals if indexed is None else self._normals[self.faces()]
+
+
 # an octahedral bone from (0,0,0) to (0,0,1) with its waist at 0.15 and radius 0.08
 _OCTA_V = np.array([[0, 0, 0], [0.08, 0, 0.15], [0, 0.08, 0.15], [-0.08, 0, 0.15],
                     [0, -0.08, 0.15], [0, 0, 1.0]])
@@ -267,12 +296,12 @@ class Viewport(gl.GLViewWidget):
         faces = np.concatenate([m.triangles + o for m, o in zip(character.meshes, offsets)])
         verts = to_view(verts) + layout["target"]
         if self.skin is None:
-            self.skin = gl.GLMeshItem(vertexes=verts, faces=faces,
+            self.skin = gl.GLMeshItem(meshdata=SkinMeshData(verts, faces),
                                       color=(0.85, 0.80, 0.72, 0.55), shader="shaded",
                                       smooth=True, glOptions="translucent")
             self.addItem(self.skin)
         else:
-            self.skin.setMeshData(vertexes=verts, faces=faces,
+            self.skin.setMeshData(meshdata=SkinMeshData(verts, faces),
                                   color=(0.85, 0.80, 0.72, 0.55), shader="shaded", smooth=True)
         self.skin.setVisible(True)
 

@@ -800,6 +800,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             values[:, col] = t[:, axis] - offsets[j][axis] if modes[j] == "relative" \
                 else t[:, axis]
 
+    _check_range(sk, offsets, values, s)
+
     out = ["HIERARCHY"]
     sites_of: dict[int, list[EndSite]] = {}
     for site in sk.end_sites:
@@ -839,6 +841,27 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     else:
         out.extend("" for _ in range(F))
     return "\n".join(out) + "\n"
+
+
+def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
+    """Refuse, with an :class:`ExportError`, a motion whose numbers in file units (``offsets``
+    ``(J, 3)``, channel ``values`` ``(F, C)``, End Site offsets over ``scale``) leave the range
+    the reader takes (:data:`engine.limits.MAX_MAGNITUDE`): the file would not read back."""
+    sites = np.array([site.offset / scale for site in sk.end_sites]).reshape(-1, 3)
+    for what, array in (("OFFSET", offsets), ("End Site OFFSET", sites)):
+        if not limits.all_usable(array):
+            k = int(np.flatnonzero(~(np.abs(array) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+            joint = sk.names[k] if what == "OFFSET" else sk.end_sites[k].name
+            raise ExportError(f"the {what} of {joint!r} in file units ({array[k].tolist()}) is "
+                              f"beyond the range a BVH file is read with (magnitude at most "
+                              f"{limits.MAX_MAGNITUDE:g}); the file would not read back")
+    if not limits.all_usable(values):
+        f, c = (int(i[0]) for i in np.nonzero(~(np.abs(values) <= limits.MAX_MAGNITUDE)))
+        raise ExportError(f"frame {f + 1}, {_channel_label(c, sk.names, sk.channels)}: "
+                          f"{values[f, c]:g} in file units is beyond the range a BVH file is "
+                          f"read with (magnitude at most {limits.MAX_MAGNITUDE:g}); the file "
+                          "would not read back (a root scale or unit that blows the motion "
+                          "up?)")
 
 
 def write_bvh(motion: Motion, path: str | os.PathLike, **options) -> None:

@@ -1561,6 +1561,25 @@ def write_gltf(motion: Motion, character: Character | None, path: str | os.PathL
     atomic_write(path, data)
 
 
+def _check_range(motion: Motion) -> None:
+    """Refuse, with an :class:`ExportError`, a motion whose offsets or translations [m] leave
+    the range the reader takes (:data:`engine.limits.MAX_MAGNITUDE`): the file would not read
+    back."""
+    sk = motion.skeleton
+    if not limits.all_usable(sk.offsets):
+        j = int(np.flatnonzero(~(np.abs(sk.offsets) <= limits.MAX_MAGNITUDE).all(axis=1))[0])
+        raise ExportError(f"the offset of {sk.names[j]!r} ({sk.offsets[j].tolist()} m) is "
+                          f"beyond the range a glTF file is read with (magnitude at most "
+                          f"{limits.MAX_MAGNITUDE:g}); the file would not read back")
+    if not limits.all_usable(motion.translations):
+        f, k = (int(i[0]) for i in
+                np.nonzero(~(np.abs(motion.translations) <= limits.MAX_MAGNITUDE).all(axis=2)))
+        raise ExportError(f"frame {f + 1}: the translation of {sk.names[sk.translated[k]]!r} "
+                          f"({motion.translations[f, k].tolist()} m) is beyond the range a glTF "
+                          f"file is read with (magnitude at most {limits.MAX_MAGNITUDE:g}); the "
+                          "file would not read back (a root scale that blows the motion up?)")
+
+
 def format_gltf(motion: Motion, character: Character | None, *, name: str | None = None,
                 binary: bool = True) -> bytes:
     """The bytes :func:`write_gltf` writes (GLB, or ``.gltf`` JSON when ``binary`` is off)."""
@@ -1570,6 +1589,7 @@ def format_gltf(motion: Motion, character: Character | None, *, name: str | None
         raise ExportError("the motion has no frames to write")
     if J > 65536:
         raise ExportError(f"{J} joints: glTF joint indices stop at 65535")
+    _check_range(motion)
     if character is not None:
         csk = character.skeleton
         if csk.names != sk.names or not np.array_equal(csk.parents, sk.parents):

@@ -31,11 +31,19 @@ __all__ = ["project_to_json", "project_from_json", "ik_dict", "IK_FIELDS"]
 IK_FIELDS = tuple(f.name for f in dataclasses.fields(IKOptions) if f.name != "scale")
 
 
+def _folder(path) -> str:
+    """The folder relative source paths start from: the project file's own, also when it is
+    opened or saved through a symbolic link (the file is where the link points)."""
+    path = os.fspath(path)
+    return os.path.dirname(os.path.abspath(os.path.realpath(path) if os.path.islink(path)
+                                           else path))
+
+
 # --------------------------------------------------------------------------- writing
 def project_to_json(project: Project, path=None) -> str:
     """The project file's text. ``path`` (where it will be written) makes source paths
     relative to its folder; without it they are written as held."""
-    folder = os.path.dirname(os.path.abspath(os.fspath(path))) if path is not None else None
+    folder = _folder(path) if path is not None else None
     try:
         return _encode(_project_dict(project, folder), 0, "") + "\n"
     except _Invalid as exc:
@@ -189,7 +197,7 @@ def _scalar(value, where: str) -> str:
 def project_from_json(text: str, path=None) -> Project:
     """A project from a file's text; ``path`` (the file) resolves relative source paths and
     is named in errors. Sources are not read here (see :func:`open_project`)."""
-    folder = os.path.dirname(os.path.abspath(os.fspath(path))) if path is not None else None
+    folder = _folder(path) if path is not None else None
     try:
         data = _parse(text)
         data = migrate(data)

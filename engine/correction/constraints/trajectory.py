@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ... import limits
 from . import position
 from .base import ConstraintError, GoalField
 from .position import PositionKind
@@ -44,17 +45,19 @@ class TrajectoryKind(PositionKind):
         if "points" in goal:
             pts = _array(goal["points"], "goal.points", label)
             n = end - start + 1
-            if pts.ndim != 2 or pts.shape != (n, 3) or not np.all(np.isfinite(pts)):
+            if pts.ndim != 2 or pts.shape != (n, 3) or not limits.all_usable(pts):
                 raise ConstraintError(f"{label}: goal.points must hold one [x, y, z] per "
-                                      f"frame from start to end ({n} points), got shape "
-                                      f"{pts.shape}", "goal.points")
+                                      f"frame from start to end ({n} points of finite numbers "
+                                      f"of magnitude at most {limits.MAX_MAGNITUDE:g}), got "
+                                      f"shape {pts.shape}", "goal.points")
             return {"points": pts}
         if "keys" in goal:
             keys = _array(goal["keys"], "goal.keys", label)
             if keys.ndim != 2 or keys.shape[1] != 4 or len(keys) < 1 or \
-                    not np.all(np.isfinite(keys)) or np.any(np.diff(keys[:, 0]) <= 0):
+                    not limits.all_usable(keys) or np.any(np.diff(keys[:, 0]) <= 0):
                 raise ConstraintError(f"{label}: goal.keys must be [[frame, x, y, z], ...] "
-                                      "with increasing frames", "goal.keys")
+                                      "with increasing frames, finite numbers of magnitude "
+                                      f"at most {limits.MAX_MAGNITUDE:g}", "goal.keys")
             return {"keys": keys}
         raise ConstraintError(f"{label}: a trajectory goal needs 'points' (one per "
                               "frame) or 'keys' ([frame, x, y, z] ...)", "goal")
