@@ -1,6 +1,11 @@
 """The ``motion-composer`` command.
 
-Errors a user can cause print one line on stderr (no traceback) and exit with code 2.
+The contract of every command (and of the window's flags):
+
+* an error the user can cause (a bad argument, a malformed file, an impossible mapping) is a
+  :class:`~engine.errors.MotionComposerError`: one line on stderr, no traceback, exit code 2.
+  Argument errors are :class:`UsageError` (the usage text is printed only with ``--help``);
+* an unexpected exception is a bug: its traceback on stderr and exit code 3.
 """
 from __future__ import annotations
 
@@ -15,6 +20,35 @@ from engine.describe import describe_motion, joint_tree_lines
 from engine.units import AXES, UNITS
 
 EXIT_USER_ERROR = 2
+#: an unexpected exception: a bug, reported with its traceback
+EXIT_BUG = 3
+
+
+class UsageError(MotionComposerError):
+    """A command line argparse refuses (a missing argument, an unknown flag, a bad value)."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """An :class:`argparse.ArgumentParser` whose errors raise :class:`UsageError` instead of
+    printing the usage text and exiting (the subcommands' parsers are of this class too)."""
+
+    def error(self, message: str):
+        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+def _print_error(exc: MotionComposerError) -> None:
+    """``exc`` on one line of stderr."""
+    text = " ".join(str(exc).split())
+    print(text if isinstance(exc, UsageError) else f"motion-composer: error: {text}",
+          file=sys.stderr)
+
+
+def _print_bug() -> None:
+    """The traceback of the exception being handled, and what it means, on stderr."""
+    import traceback
+    traceback.print_exc(file=sys.stderr)
+    print("motion-composer: internal error (a bug, exit 3): please report it with the "
+          "traceback above", file=sys.stderr)
 
 
 def _reader_options(args) -> dict:
@@ -288,7 +322,7 @@ def cmd_retarget(args) -> int:
     from engine.correction.constraints import constraints_from_json
     from engine.conversion.correspondence import Correspondence
     from engine.errors import MotionComposerError
-    from engine.fileio import atomic_write, check_outputs
+    from engine.fileio import atomic_write, check_outputs, read_regular_file
     from engine.conversion import BindOptions, RootOptions
     from engine.correction.ik import IKOptions
     from engine.project import Project, Source
@@ -326,11 +360,13 @@ def cmd_retarget(args) -> int:
     constraints = ()
     if args.constraints:
         try:
-            with open(args.constraints, encoding="utf-8") as handle:
-                text = handle.read()
+            text = read_regular_file(args.constraints).decode("utf-8")
         except OSError as exc:
             raise MotionComposerError(f"{args.constraints}: cannot be read: "
                                       f"{exc.strerror or exc}") from None
+        except UnicodeDecodeError as exc:
+            raise MotionComposerError(f"{args.constraints}: not a constraints file: byte "
+                                      f"{exc.start} is not UTF-8 text") from None
         constraints = tuple(constraints_from_json(text, args.constraints))
     project = Project(
         performer=Source(os.path.abspath(args.performer), **performer_options),
@@ -474,6 +510,15 @@ def cmd_batch(args) -> int:
     if args.summary:
         from engine.fileio import atomic_write
         atomic_write(args.summary, json.dumps(summaries, indent=2, allow_nan=False) + "\n")
+    bugs = [s for s in summaries
+            if s["reason"].startswith(("unexpected ", "the worker process failed"))]
+    for s in bugs:                      # a bug in a clip never stops the rest, but says so
+        print(f"{s['clip']}: {s.get('traceback', '')}{s['reason']}", file=sys.stderr)
+    if bugs:
+        print(f"motion-composer: internal error (a bug, exit 3) in {len(bugs)} of "
+              f"{len(summaries)} clips: please report it with the traceback above",
+              file=sys.stderr)
+        return EXIT_BUG
     return 0 if len(written) == len(summaries) else 1
 
 
@@ -491,8 +536,8 @@ def _add_window_options(parser) -> None:
                              "'self-test: FAILED: reason' (exit 1)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
         prog="motion-composer",
         usage="%(prog)s [PROJECT.mcp] [--demo] [--frame N] [--screenshot PNG] [--self-test]\n"
               "       %(prog)s COMMAND [options]   (%(prog)s COMMAND --help for each)",
@@ -568,7 +613,8 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Retarget many clips with one project's mapping, binding, "
                                     "root options, automatic contacts and floor, in parallel "
                                     "processes (or on a Dask cluster). A failing clip never "
-                                    "stops the rest; the exit code is 1 if any failed.")
+                                    "stops the rest; the exit code is 1 if any failed (3 if one "
+                                    "failed by a bug, with its traceback).")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
     bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
     bt.add_argument("-o", "--output", required=True,
@@ -610,9 +656,9 @@ def build_parser() -> argparse.ArgumentParser:
 def _gui(argv: list[str]) -> int:
     """``motion-composer [PROJECT] [--demo] [--frame N] [--screenshot PNG] [--self-test]``:
     the window."""
-    parser = argparse.ArgumentParser(prog="motion-composer",
-                                     description="Open the composer window (or run a command: "
-                                                 "motion-composer info|retarget|export ...).")
+    parser = ArgumentParser(prog="motion-composer",
+                            description="Open the composer window (or run a command: "
+                                        "motion-composer info|retarget|export ...).")
     parser.add_argument("project", nargs="?", help="a .mcp project to open")
     _add_window_options(parser)
     args = parser.parse_args(argv)
@@ -623,32 +669,44 @@ def _gui(argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command (or open the window) ``argv`` names; the exit code.
+
+    A :class:`UsageError` prints its line and raises ``SystemExit(2)``, as argparse does; any
+    other error the user can cause prints its line and returns 2; an unexpected exception
+    prints its traceback and returns 3.
+    """
     import sys as _sys
     from app.runtime import tune_allocator
     tune_allocator()
     argv = list(_sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
-    commands = set(parser._subparsers._group_actions[0].choices)   # noqa: SLF001
-    if not argv or (argv[0] not in commands and argv[0] not in ("-h", "--help")):
-        try:
-            return _gui(argv)
-        except MotionComposerError as exc:
-            print(f"motion-composer: error: {' '.join(str(exc).split())}", file=sys.stderr)
-            return EXIT_USER_ERROR
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 0
     try:
-        return args.func(args)
+        return _run(argv)
+    except UsageError as exc:
+        _print_error(exc)
+        raise SystemExit(EXIT_USER_ERROR) from None
     except MotionComposerError as exc:
-        print(f"motion-composer: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        _print_error(exc)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("motion-composer: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 0
+    except Exception:                     # noqa: BLE001 - a bug: say so, with its traceback
+        _print_bug()
+        return EXIT_BUG
+
+
+def _run(argv: list[str]) -> int:
+    parser = build_parser()
+    commands = set(parser._subparsers._group_actions[0].choices)   # noqa: SLF001
+    if not argv or (argv[0] not in commands and argv[0] not in ("-h", "--help")):
+        return _gui(argv)
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    return args.func(args)
 
 
 if __name__ == "__main__":

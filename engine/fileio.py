@@ -1,4 +1,5 @@
-"""Atomic file writing: a save either completes or leaves the previous file untouched.
+"""Atomic file writing: a save either completes or leaves the previous file untouched; and
+reading that refuses what is not a regular file (:func:`read_regular_file`).
 
 A write goes through ``.<name>.<random>.tmp`` beside the file. A process killed in the middle
 of a write leaves that temporary file behind; the next write of the same file removes such
@@ -10,6 +11,7 @@ commands check their outputs against their inputs before any work (:func:`check_
 """
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import tempfile
@@ -23,7 +25,7 @@ except ImportError:                     # Windows: leftovers are told by their a
     fcntl = None
 
 __all__ = ["atomic_write", "remove_stale_temporaries", "FileWriteError", "STALE_TMP_S",
-           "resolve_write_target", "check_output_path", "check_outputs"]
+           "resolve_write_target", "check_output_path", "check_outputs", "read_regular_file"]
 
 #: [s] a leftover temporary file last written longer ago than this, and (on POSIX) not locked
 #: by a live writer, is removed by the next write of the same file
@@ -221,3 +223,27 @@ def _remove_if_stale(candidate: str, now: float) -> bool:
         return True
     finally:
         os.close(fd)
+
+
+def read_regular_file(path: str | os.PathLike) -> bytes:
+    """The bytes of the regular file at ``path``; a folder, a device (``/dev/zero`` would be
+    read forever), a pipe or a socket is refused before anything is read, and opening a pipe
+    does not wait for a writer.
+
+    Raises:
+        FileNotFoundError: no such file.
+        IsADirectoryError: a folder.
+        OSError: any other file that is not regular (``strerror`` says so), or one that cannot
+            be read.
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    with os.fdopen(fd, "rb") as handle:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, "this is a folder", os.fspath(path))
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, "not a regular file (a device, pipe or socket)",
+                          os.fspath(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return handle.read()

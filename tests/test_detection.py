@@ -166,3 +166,14 @@ def test_a_figure_with_no_body_and_no_names_says_the_up_axis_is_assumed():
 
 def test_units_table_has_decimetres():
     assert UNITS["dm"] == 0.1
+
+
+def test_a_vanishingly_small_figure_is_read_without_a_numpy_warning():
+    """Found by the CLI fuzz test: every OFFSET of the CMU T-pose set to 1e-300 made the
+    up-axis angle divide by a norm that underflowed to zero (a RuntimeWarning on stderr)."""
+    import re
+    text = clip_path("cmu_rest_tpose.bvh").read_text()
+    tiny = re.sub(r"OFFSET[^\n]*", "OFFSET 1e-300 1e-300 1e-300", text)
+    motion = parse_bvh(tiny, "tiny.bvh")                  # warnings are errors in the suite
+    assert np.all(np.isfinite(motion.skeleton.offsets))
+    assert motion.skeleton.source.doubt                   # no unit fits: said, not guessed

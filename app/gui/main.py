@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from app.resources import resource_path
+from engine.errors import MotionComposerError
 
 REPO_RESOURCES = resource_path("")           # the source tree's resources/, or the bundle's
 DEMO_PROJECT = resource_path("demo/demo.mcp")
@@ -34,6 +35,39 @@ def demo_project() -> Path:
     bundled ``resources/demo/demo.mcp``."""
     override = os.environ.get("MC_DEMO_PROJECT")
     return Path(override) if override else DEMO_PROJECT
+
+
+class NoDisplayError(MotionComposerError):
+    """The window was asked for where there is no display to show it on."""
+
+
+def _has_display() -> bool:
+    """Whether Qt can show a window here: on X11 and Wayland systems a display server is named
+    (``DISPLAY``, ``WAYLAND_DISPLAY``) or ``QT_QPA_PLATFORM`` names a platform that needs none
+    (``offscreen``, ``minimal``, ``vnc``, ``eglfs``...: any but ``xcb`` and ``wayland*``);
+    Windows and macOS always have one."""
+    if sys.platform.startswith(("win", "darwin")):
+        return True
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return True
+    platform = os.environ.get("QT_QPA_PLATFORM", "").split(":")[0].strip()
+    return bool(platform) and platform != "xcb" and not platform.startswith("wayland")
+
+
+def _check_display(*, headless: bool) -> None:
+    """Refuse a window that cannot be shown, before Qt aborts the process on it (SIGABRT and
+    its own messages). ``headless``: a screenshot or the self-test, which need no screen: they
+    then draw on Qt's offscreen platform, without the 3D viewport (no OpenGL there), say so in
+    one line and silence Qt's warnings about the missing OpenGL context."""
+    if _has_display():
+        return
+    if not headless:
+        raise NoDisplayError("no display: run it under xvfb-run, or use --screenshot")
+    os.environ["QT_QPA_PLATFORM"] = "offscreen"
+    rules = os.environ.get("QT_LOGGING_RULES")
+    os.environ["QT_LOGGING_RULES"] = ";".join(filter(None, [rules, "default.warning=false"]))
+    print("motion-composer: note: no display: drawing offscreen, without the 3D viewport",
+          file=sys.stderr)
 
 
 def _set_icon(app, window) -> None:
@@ -66,7 +100,12 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
     and self-tests); ``frame``: go to that frame first; ``self_test``: see :func:`self_test`.
     With ``screenshot`` or without a screen (an offscreen Qt platform) no dialog opens: a
     project that does not load prints one line on stderr and returns 2.
+
+    Raises:
+        NoDisplayError: where there is no display, unless ``screenshot`` or ``self_test``
+            (drawn on Qt's offscreen platform then), before Qt is started.
     """
+    _check_display(headless=self_test or screenshot is not None)
     from app.gui.qt import QtCore, application
     from app.runtime import tune_allocator
 

@@ -10,10 +10,9 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from ..errors import MappingError
-from ..fileio import atomic_write
+from ..fileio import atomic_write, read_regular_file
 from ..skeleton import Skeleton
 
 __all__ = ["Correspondence", "BY_HAND"]
@@ -160,11 +159,14 @@ class Correspondence:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Correspondence":
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            text = read_regular_file(path).decode("utf-8")
         except FileNotFoundError:
             raise MappingError("no such mapping file", path) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise MappingError(f"cannot be read: {exc}", path) from None
+        except OSError as exc:
+            raise MappingError(f"cannot be read: {exc.strerror or exc}", path) from None
+        except UnicodeDecodeError as exc:
+            raise MappingError(f"not a mapping file: byte {exc.start} is not UTF-8 text",
+                               path) from None
         return cls.from_json(text, path)
 
 

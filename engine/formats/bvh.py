@@ -675,6 +675,8 @@ def _detect_frame(record: BVHRecord, rotations, translations,
         how = (f"'{record.names[head[0]]}' is above the feet along {up}" if v is not None
                else "not a humanoid and no head and foot joints to tell the up axis by: +Y "
                     "assumed")
+    if v is not None and np.any(v):
+        v = v / np.abs(v).max()          # a tiny figure's norm would underflow to zero
     k = "XYZ".index(up[1])
     if v is None or not np.any(v):
         doubts.append("the up axis cannot be told from the figure (+Y assumed)")

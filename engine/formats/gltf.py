@@ -780,6 +780,8 @@ def _sample_channel(doc: _Doc, a: int, sampler_index: int, samplers: list, times
         a_in, v, b_out = tri[:, 0], tri[:, 1], tri[:, 2]
     else:
         v = out
+    if path == "rotation":
+        v = _unit_keys(doc, v, f"{sw}.output")
     idx = np.clip(np.searchsorted(t, times, side="right") - 1, 0, K - 1)
     nxt = np.minimum(idx + 1, K - 1)
     dt = t[nxt] - t[idx]
@@ -804,6 +806,16 @@ def _sample_channel(doc: _Doc, a: int, sampler_index: int, samplers: list, times
         norm = np.linalg.norm(res, axis=1, keepdims=True)
         res = res / np.where(norm > 1e-12, norm, 1.0)
     return res
+
+
+def _unit_keys(doc: _Doc, keys: np.ndarray, where: str) -> np.ndarray:
+    """Rotation keys ``(K, 4)`` scaled to unit length (interpolation assumes them); a zero
+    quaternion (an accessor without a buffer view is all zeros) is refused."""
+    norm = np.linalg.norm(keys, axis=1)
+    if np.any(norm < 1e-12):
+        k = int(np.flatnonzero(norm < 1e-12)[0])
+        raise doc.error(where, f"key {k} is a zero quaternion, which is not a rotation")
+    return keys / norm[:, None]
 
 
 def _animation_times(doc: _Doc, a: int, anim: dict, fps: float) -> tuple[np.ndarray, float]:

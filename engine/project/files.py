@@ -14,7 +14,8 @@ from pathlib import Path
 from ..correction.displacement import ROOT, DisplacementMap
 from ..correction.enforcement import Correction
 from ..errors import BVHError, MappingError
-from ..fileio import FileWriteError, atomic_write, resolve_write_target
+from ..fileio import (FileWriteError, atomic_write, read_regular_file,
+                      resolve_write_target)
 from ..formats.bvh import _decode, parse_bvh
 from ..motion import Motion
 from .json import _sub, project_from_json, project_to_json
@@ -52,7 +53,7 @@ def save_project(project: Project, path, *, backup: bool = True) -> None:
 
 def _read_text(path) -> str:
     try:
-        data = Path(path).read_bytes()
+        data = read_regular_file(path)
     except FileNotFoundError:
         raise ProjectError("no such project file", path) from None
     except IsADirectoryError:
