@@ -15,9 +15,9 @@ import json
 import os
 import sys
 
-from engine import MotionComposerError
-from engine.describe import describe_motion, joint_tree_lines
-from engine.units import AXES, UNITS
+from motion_composer.engine import MotionComposerError
+from motion_composer.engine.describe import describe_motion, joint_tree_lines
+from motion_composer.engine.units import AXES, UNITS
 
 EXIT_USER_ERROR = 2
 #: an unexpected exception: a bug, reported with its traceback
@@ -143,7 +143,7 @@ IK_FLAGS = (
 
 
 def _add_ik_options(parser: argparse.ArgumentParser, defaults: str) -> None:
-    from engine.correction.ik import IKOptions
+    from motion_composer.engine.correction.ik import IKOptions
 
     solver = IKOptions()
     group = parser.add_argument_group(f"IK settings (not given: {defaults})")
@@ -158,7 +158,7 @@ def ik_options_from_args(args, base):
     flag."""
     import dataclasses
 
-    from engine.errors import IKOptionsError
+    from motion_composer.engine.errors import IKOptionsError
 
     changes, flags = {}, {}
     for flag, name, _ in IK_FLAGS:
@@ -202,7 +202,7 @@ def _gltf_info(args, character):
 
 
 def cmd_info(args) -> int:
-    from engine.formats import read_character, read_motion
+    from motion_composer.engine.formats import read_character, read_motion
     character = read_character(args.file)
     if character is not None:
         motion, extra = _gltf_info(args, character)
@@ -271,7 +271,7 @@ def _reference(text: str):
 
 def _frame_range(text: str):
     """``A:B`` (0-based, inclusive; either end may be left out) for ``--frames``."""
-    from engine.motion import parse_frame_range
+    from motion_composer.engine.motion import parse_frame_range
     try:
         return parse_frame_range(text)
     except MotionComposerError as exc:
@@ -280,7 +280,7 @@ def _frame_range(text: str):
 
 def _fps(text: str) -> float:
     """A frame rate in (0, 1000] for ``--fps``."""
-    from engine.motion import MAX_FPS
+    from motion_composer.engine.motion import MAX_FPS
     try:
         value = float(text)
     except ValueError:
@@ -307,8 +307,8 @@ def _add_output_options(parser) -> None:
 def _write_output(args, motion, character):
     """Select frames, resample and write ``motion`` as the output options say; returns what
     was written."""
-    from engine.formats import write_motion
-    from engine.motion import export_selection
+    from motion_composer.engine.formats import write_motion
+    from motion_composer.engine.motion import export_selection
     motion = export_selection(motion, args.frames, args.fps)
     write_motion(motion, args.output, character,
                  channels="rotation" if args.rotation_only else "all")
@@ -318,15 +318,16 @@ def _write_output(args, motion, character):
 def cmd_retarget(args) -> int:
     import time
 
-    from engine.formats import output_format, read_character, read_motion, read_performer
-    from engine.correction.constraints import constraints_from_json
-    from engine.conversion.correspondence import Correspondence
-    from engine.errors import MotionComposerError
-    from engine.fileio import atomic_write, check_outputs, read_regular_file
-    from engine.conversion import BindOptions, RootOptions
-    from engine.correction.ik import IKOptions
-    from engine.project import Project, Source
-    from engine.scene import Scene
+    from motion_composer.engine.formats import (output_format, read_character, read_motion,
+                                                read_performer)
+    from motion_composer.engine.correction.constraints import constraints_from_json
+    from motion_composer.engine.conversion.correspondence import Correspondence
+    from motion_composer.engine.errors import MotionComposerError
+    from motion_composer.engine.fileio import atomic_write, check_outputs, read_regular_file
+    from motion_composer.engine.conversion import BindOptions, RootOptions
+    from motion_composer.engine.correction.ik import IKOptions
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
 
     started = time.perf_counter()
     ik_options = ik_options_from_args(args, IKOptions())
@@ -355,7 +356,7 @@ def cmd_retarget(args) -> int:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
     else:
-        from engine.conversion.automap import automap
+        from motion_composer.engine.conversion.automap import automap
         correspondence = automap(target.skeleton, performer.skeleton)
     constraints = ()
     if args.constraints:
@@ -387,7 +388,7 @@ def cmd_retarget(args) -> int:
     if args.save_project:
         # the session as a project, with every constraint enforced (the user's and the
         # automatic ones) and the IK correction as displacement-map keys
-        from engine.project import embed_sources, save_project
+        from motion_composer.engine.project import embed_sources, save_project
         saved = result.scene.project
         save_project(embed_sources(saved) if args.embed_sources else saved, args.save_project)
     elapsed = time.perf_counter() - started
@@ -411,8 +412,8 @@ def cmd_export(args) -> int:
     (``OUT.glb``/``OUT.gltf``: with the target character's mesh and skin, when it has them)."""
     import time
 
-    from engine.fileio import check_outputs
-    from engine.formats import output_format
+    from motion_composer.engine.fileio import check_outputs
+    from motion_composer.engine.formats import output_format
 
     started = time.perf_counter()
     outputs = (("-o", args.output),)
@@ -439,15 +440,15 @@ def _open_with_overrides(args):
     is not changed)."""
     import dataclasses
 
-    from engine.project import open_project
-    from engine.scene import Scene
+    from motion_composer.engine.project import open_project
+    from motion_composer.engine.scene import Scene
 
     overrides = {side: side_options(args, side) for side in SIDES}
     if not any(overrides.values()):
         opened = open_project(args.project)
         scene = Scene(opened.project, opened.performer, opened.target)
     else:
-        from engine.project import load_project
+        from motion_composer.engine.project import load_project
         project = load_project(args.project, check_sources=False)
         project = project.replace(**{side: dataclasses.replace(getattr(project, side),
                                                                **options)
@@ -464,9 +465,9 @@ def cmd_batch(args) -> int:
     import dataclasses
     import time
 
-    from engine.batch import check_batch_outputs, recipe_from_project, run_batch
-    from engine.fileio import check_outputs
-    from engine.project import load_project
+    from motion_composer.engine.batch import check_batch_outputs, recipe_from_project, run_batch
+    from motion_composer.engine.fileio import check_outputs
+    from motion_composer.engine.project import load_project
 
     started = time.perf_counter()
     project = load_project(args.project, check_sources=False)
@@ -508,7 +509,7 @@ def cmd_batch(args) -> int:
         else:
             print(f"  failed   {Path(s['clip']).name}: {s['reason']}")
     if args.summary:
-        from engine.fileio import atomic_write
+        from motion_composer.engine.fileio import atomic_write
         atomic_write(args.summary, json.dumps(summaries, indent=2, allow_nan=False) + "\n")
     bugs = [s for s in summaries
             if s["reason"].startswith(("unexpected ", "the worker process failed"))]
@@ -662,7 +663,7 @@ def _gui(argv: list[str]) -> int:
     parser.add_argument("project", nargs="?", help="a .mcp project to open")
     _add_window_options(parser)
     args = parser.parse_args(argv)
-    from app.gui.main import run
+    from motion_composer.app.gui.main import run
     if args.self_test:
         return run(self_test=True)
     return run(args.project, demo=args.demo, screenshot=args.screenshot, frame=args.frame)
@@ -676,7 +677,7 @@ def main(argv: list[str] | None = None) -> int:
     prints its traceback and returns 3.
     """
     import sys as _sys
-    from app.runtime import tune_allocator
+    from motion_composer.app.runtime import tune_allocator
     tune_allocator()
     argv = list(_sys.argv[1:] if argv is None else argv)
     try:

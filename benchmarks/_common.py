@@ -28,7 +28,7 @@ def prepare(*, one_core: bool = False) -> bool:
             os.environ[var] = "1"
     if str(REPO) not in sys.path:
         sys.path.insert(0, str(REPO))
-    from app.runtime import tune_allocator
+    from motion_composer.app.runtime import tune_allocator
     return tune_allocator()
 CLIPS = REPO / "resources" / "clips"
 #: ``../shared/data`` beside the repository, or ``$MC_SHARED_DATA`` (as in tests/conftest.py)

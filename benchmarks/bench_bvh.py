@@ -43,7 +43,7 @@ MEMORY_TARGET = 200.0       # [MB], taken as MiB: the stricter reading
 
 
 def read_and_fk(path):
-    import engine
+    from motion_composer import engine
     motion = engine.read_bvh(path)
     return motion, engine.forward_kinematics(motion)
 
@@ -55,7 +55,8 @@ def child_memory(path: str, mode: str) -> dict:
 
     import numpy as np
 
-    import engine  # noqa: F401  (imports count towards the baseline, not the figure)
+    # imports count towards the baseline, not the figure
+    from motion_composer import engine  # noqa: F401
     gc.collect()
     if mode == "rss":
         base_peak, base_hwm = max_rss_mib(), proc_status_mib("VmHWM")
@@ -110,7 +111,7 @@ def main(argv=None) -> int:
     rss = run_child(script, ["--file", str(path), "--child-memory", "rss"])
     traced = run_child(script, ["--file", str(path), "--child-memory", "tracemalloc"])
 
-    from engine.formats.bvh import write_bvh
+    from motion_composer.engine.formats.bvh import write_bvh
 
     motion, pose = read_and_fk(path)                 # also the warm-up run
     sk = motion.skeleton

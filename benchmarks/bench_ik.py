@@ -45,18 +45,19 @@ def main() -> None:
                         help="also time the paper's frame-by-frame scheme (about a minute)")
     args = parser.parse_args()
 
-    from engine import forward_kinematics, read_bvh
-    from engine.correction.constraints import Constraint
-    from engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
-    from engine.correction.enforcement import enforce
-    from engine.conversion import retarget
+    from motion_composer.engine import forward_kinematics, read_bvh
+    from motion_composer.engine.correction.constraints import Constraint
+    from motion_composer.engine.correction.contacts import (contact_constraints, detect_contacts,
+                                                            horizontal_drift)
+    from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.conversion import retarget
 
     walk = SHARED_DATA / "cmu_max_131_01_walk.bvh"
     bandai = SHARED_DATA / "bandai1_walk_normal_001.bvh"
     if not (walk.is_file() and bandai.is_file()):
         sys.exit(f"error: this benchmark needs {walk} and {bandai} (set MC_SHARED_DATA)")
     performer, target = read_bvh(walk), read_bvh(bandai)
-    from engine.conversion.automap import automap
+    from motion_composer.engine.conversion.automap import automap
     corr = automap(target.skeleton, performer.skeleton)
     how = "automatic mapping"
     composed = retarget(performer, target, corr)

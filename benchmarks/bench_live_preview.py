@@ -46,14 +46,15 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
 
-    from app.gui.qt import QtCore, application
+    from motion_composer.app.gui.qt import QtCore, application
     app = application([])
-    from app.gui.commands import push_constraints
-    from app.gui.live import LiveSolver
-    from engine.correction.preview import changed_window, window_problem
-    from engine.correction.constraints import Constraint
-    from engine.correction.contacts import contact_constraints, detect_contacts, find_feet
-    from engine.kinematics import forward_kinematics
+    from motion_composer.app.gui.commands import push_constraints
+    from motion_composer.app.gui.live import LiveSolver
+    from motion_composer.engine.correction.preview import changed_window, window_problem
+    from motion_composer.engine.correction.constraints import Constraint
+    from motion_composer.engine.correction.contacts import (contact_constraints, detect_contacts,
+                                                            find_feet)
+    from motion_composer.engine.kinematics import forward_kinematics
     from gui_support import demo_document
 
     doc = demo_document()

@@ -39,10 +39,10 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=9)
     args = parser.parse_args()
 
-    from engine import read_bvh
-    from engine.conversion import bind
-    from engine.conversion import compose, retarget
-    from engine.conversion import convert
+    from motion_composer.engine import read_bvh
+    from motion_composer.engine.conversion import bind
+    from motion_composer.engine.conversion import compose, retarget
+    from motion_composer.engine.conversion import convert
 
     clip = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
     targets = {"Bandai": "bandai1_walk_normal_001.bvh", "CC3": "cc3_cmu_02_06_pickup.bvh"}
@@ -50,7 +50,7 @@ def main() -> None:
         sys.exit(f"error: this benchmark needs {clip} (set MC_SHARED_DATA)")
     performer = read_bvh(clip)
     F = performer.num_frames
-    from engine.conversion.automap import automap
+    from motion_composer.engine.conversion.automap import automap
     print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
     print(f"{clip.name}: {F} frames, {performer.skeleton.num_joints} joints\n")
     for label, name in targets.items():

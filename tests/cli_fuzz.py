@@ -404,7 +404,7 @@ def _finite(name: str, *arrays) -> str | None:
 
 def check_outputs(case: Case, stdout: str) -> str | None:
     """What is wrong with the files a run that exited 0 wrote (``None``: nothing)."""
-    from engine.formats import read_character, read_motion
+    from motion_composer.engine.formats import read_character, read_motion
     if case.argv[0] == "info" and "--json" in case.argv:
         try:
             _strict_json(stdout)
@@ -476,7 +476,7 @@ def _alarm(signum, frame):
 
 def run_in_process(case: Case) -> dict:
     """Run ``case`` with :func:`app.cli.main` in this process; its outcome and the verdict."""
-    from app.cli import main
+    from motion_composer.app.cli import main
     out, err = io.StringIO(), io.StringIO()
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(CASE_TIMEOUT_S)

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.formats.bvh import format_bvh
-from engine.kinematics import fk_arrays
-from engine.motion import Motion
-from engine.skeleton import EndSite, Skeleton
-from engine.units import UNITS, SourceFrame
+from motion_composer.engine.formats.bvh import format_bvh
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.motion import Motion
+from motion_composer.engine.skeleton import EndSite, Skeleton
+from motion_composer.engine.units import UNITS, SourceFrame
 
 
 def without_joint(motion: Motion, name: str) -> Motion:

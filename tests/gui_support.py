@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from app.gui.qt import QtGui, QtWidgets  # noqa: F401  (sets Qt up before anything else)
+from motion_composer.app.gui.qt import (QtGui,  # noqa: F401  (sets Qt up before anything else)
+                                        QtWidgets)
 
 #: the longest a GUI test waits for a condition, a signal or a window, in ms: generous, since
 #: a loaded CI machine may be many times slower (a wait that is met returns at once)
@@ -35,12 +36,12 @@ def require_gl():
 
 def demo_document():
     """The bundled CMU walk on the bundled CMU T-pose skeleton, mapped, evaluated."""
-    from app.gui.document import Document
+    from motion_composer.app.gui.document import Document
     from conftest import clip_path
-    from engine import read_bvh
-    from engine.conversion.correspondence import Correspondence
-    from engine.project import Project, Source
-    from engine.scene import Scene
+    from motion_composer.engine import read_bvh
+    from motion_composer.engine.conversion.correspondence import Correspondence
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
     from ik_fixtures import MAX_TO_HOLDEN
 
     performer, target = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from engine import read_bvh
-from engine.conversion.correspondence import Correspondence
-from engine.conversion import retarget
+from motion_composer.engine import read_bvh
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.conversion import retarget
 
 from conftest import clip_path, shared_path
 

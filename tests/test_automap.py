@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from engine.conversion.automap import Roles, automap, identify, parse_name
-from engine.formats.bvh import read_bvh
-from engine.conversion.correspondence import Correspondence
-from engine.errors import MappingError
-from engine.kinematics import forward_kinematics
-from engine.skeleton import EndSite, Skeleton
+from motion_composer.engine.conversion.automap import Roles, automap, identify, parse_name
+from motion_composer.engine.formats.bvh import read_bvh
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.errors import MappingError
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.skeleton import EndSite, Skeleton
 from conftest import REPO, SHARED_BVH, clip_path, shared_path
 
 SIDED = ("upper_arm", "forearm", "hand", "thigh", "shin", "foot")
@@ -444,7 +444,7 @@ def test_a_skeleton_that_is_not_humanoid_is_refused_with_a_reason():
 
 
 def test_roles_read_as_a_mapping_and_serve_foot_detection():
-    from engine.correction.contacts import find_feet
+    from motion_composer.engine.correction.contacts import find_feet
     skeleton = load("bundled-CMU-rest")[0]
     roles = identify(skeleton)
     assert roles.get("foot_l") == "LeftFoot" and roles["toe_r"] == "RightToeBase"

@@ -33,10 +33,10 @@ from functools import lru_cache
 import pytest
 
 from conftest import shared_path
-from engine.conversion.automap import automap, identify, parse_name
-from engine.formats.bvh import read_bvh
-from engine.formats.gltf import read_gltf
-from engine.kinematics import forward_kinematics
+from motion_composer.engine.conversion.automap import automap, identify, parse_name
+from motion_composer.engine.formats.bvh import read_bvh
+from motion_composer.engine.formats.gltf import read_gltf
+from motion_composer.engine.kinematics import forward_kinematics
 
 ROKOKO = "rokoko_mixamo_jesse_dance.bvh"
 ELY = "target_mixamo_ely.glb"

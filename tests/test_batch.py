@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import read_bvh
-from engine.batch import Recipe, process_clip, run_batch
+from motion_composer.engine import read_bvh
+from motion_composer.engine.batch import Recipe, process_clip, run_batch
 from conftest import clip_path, shared_path
 
 TPOSE = str(clip_path("cmu_rest_tpose.bvh"))
@@ -75,7 +75,7 @@ def test_on_a_local_dask_cluster(tmp_path):
 
 def test_the_batch_command_applies_a_project(tmp_path, capsys):
     import json
-    from app.cli import main
+    from motion_composer.app.cli import main
     from conftest import REPO
     demo = REPO / "resources" / "demo" / "demo.mcp"
     bad = tmp_path / "bad.bvh"

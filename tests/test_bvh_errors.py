@@ -4,9 +4,9 @@ from __future__ import annotations
 import pytest
 
 from bvh_cases import CASES, WALK, find, walk_lines
-from engine import MotionComposerError
-from engine.formats.bvh import parse_bvh_text, read_bvh
-from engine.errors import BVHError, FileFormatError
+from motion_composer.engine import MotionComposerError
+from motion_composer.engine.formats.bvh import parse_bvh_text, read_bvh
+from motion_composer.engine.errors import BVHError, FileFormatError
 
 
 def check(error: BVHError, path, line, expects):

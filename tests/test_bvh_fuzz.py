@@ -16,9 +16,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from conftest import clip_path
-from engine import MotionComposerError
-from engine.formats.bvh import read_bvh
-from engine.describe import describe_motion
+from motion_composer.engine import MotionComposerError
+from motion_composer.engine.formats.bvh import read_bvh
+from motion_composer.engine.describe import describe_motion
 
 
 def _first_frames(name: str, frames: int) -> bytes:

@@ -18,12 +18,13 @@ from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from conftest import BUNDLED_BVH, SHARED_BVH, clip_path, shared_path
-from engine.formats._numparse import parse_number_rows
-from engine.formats.bvh import detect_position_modes, parse_bvh, parse_bvh_text, read_bvh
-from engine.describe import stature
-from engine.errors import BVHError
-from engine.kinematics import forward_kinematics
-from engine.units import UNITS
+from motion_composer.engine.formats._numparse import parse_number_rows
+from motion_composer.engine.formats.bvh import (detect_position_modes, parse_bvh, parse_bvh_text,
+                                                read_bvh)
+from motion_composer.engine.describe import stature
+from motion_composer.engine.errors import BVHError
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.units import UNITS
 
 # --------------------------------------------------------------------------- the README table
 #: file -> (frames, frame time as written, FPS column, joints, End Sites, up axis, units,

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-import engine.fileio
+import motion_composer.engine.fileio
 from conftest import all_bvh_params, resolve
-from engine.formats.bvh import (BVHRecord, format_bvh, parse_bvh_text, read_bvh, record_to_motion,
+from motion_composer.engine.formats.bvh import (BVHRecord, format_bvh, parse_bvh_text, read_bvh, record_to_motion,
                                 write_bvh)
-from engine.errors import ExportError
-from engine.kinematics import forward_kinematics
-from engine.motion import Motion
-from engine.skeleton import Skeleton
-from engine.units import SourceFrame
+from motion_composer.engine.errors import ExportError
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.motion import Motion
+from motion_composer.engine.skeleton import Skeleton
+from motion_composer.engine.units import SourceFrame
 
 #: lengths: written with 6 decimals, so a value moves by at most 5e-7 file units
 POS_TOL = 1e-6
@@ -279,7 +279,7 @@ def test_write_goes_through_a_temporary_file_and_rename(tmp_path, monkeypatch):
         seen.append((Path(src), Path(dst), Path(src).read_text(), out.read_text()))
         return real_replace(src, dst)
 
-    monkeypatch.setattr(engine.fileio.os, "replace", spy)
+    monkeypatch.setattr(motion_composer.engine.fileio.os, "replace", spy)
     motion = _tiny_motion(rotate_leaf=False)
     write_bvh(motion, out)
     assert len(seen) == 1
@@ -308,8 +308,8 @@ def test_failed_rename_leaves_the_old_file_intact(tmp_path, monkeypatch):
     def broken(src, dst):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(engine.fileio.os, "replace", broken)
-    with pytest.raises(engine.fileio.FileWriteError, match="No space left on device"):
+    monkeypatch.setattr(motion_composer.engine.fileio.os, "replace", broken)
+    with pytest.raises(motion_composer.engine.fileio.FileWriteError, match="No space left on device"):
         write_bvh(_tiny_motion(rotate_leaf=False), out)
     assert out.read_bytes() == old
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.bvh"]

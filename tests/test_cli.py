@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from bvh_cases import CASES, WALK
 from conftest import REPO, clip_path, shared_path
-from engine.formats.bvh import read_bvh
-from engine.describe import describe_motion
+from motion_composer.engine.formats.bvh import read_bvh
+from motion_composer.engine.describe import describe_motion
 
 FAIR = clip_path("fair1_child8_jumping.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -262,7 +262,7 @@ def console_script() -> str | None:
 
 
 def _commands():
-    yield pytest.param([sys.executable, "-m", "app.cli"], id="python -m app.cli")
+    yield pytest.param([sys.executable, "-m", "motion_composer.app.cli"], id="python -m motion_composer.app.cli")
     script = console_script()
     yield pytest.param([script] if script else None, id="motion-composer script")
 
@@ -292,7 +292,7 @@ def test_subprocess_good_and_bad(command, tmp_path):
 def test_subprocess_binary_file(tmp_path):
     path = tmp_path / "picture.bvh"
     path.write_bytes(bytes(range(256)) * 8)
-    result = subprocess.run([sys.executable, "-m", "app.cli", "info", str(path)],
+    result = subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "info", str(path)],
                             capture_output=True, cwd=REPO, env=_env(), timeout=120)
     assert result.returncode == 2
     err = result.stderr.decode()

@@ -23,14 +23,14 @@ from pathlib import Path
 import pytest
 
 import cli_fuzz
-from app.cli import main
+from motion_composer.app.cli import main
 from conftest import CLIPS, REPO, SHARED_DATA
 
 CASES = int(os.environ.get("MC_FUZZ_CASES", "200"))
 SEED = int(os.environ.get("MC_FUZZ_SEED", "13"))
 #: cases per driver process
 CHUNK = 150
-#: every this many cases one runs as its own process (``python -m app.cli``, and every other
+#: every this many cases one runs as its own process (``python -m motion_composer.app.cli``, and every other
 #: one the ``motion-composer`` console script when it is on PATH)
 SUBPROCESS_EVERY = 20
 WALK_60 = REPO / "tests" / "data" / "walk_first_60.bvh"
@@ -48,7 +48,7 @@ def _env():
 
 
 def _cli(*argv, cwd=REPO, timeout=cli_fuzz.CASE_TIMEOUT_S):
-    return subprocess.run([sys.executable, "-m", "app.cli", *map(str, argv)],
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", *map(str, argv)],
                           capture_output=True, text=True, cwd=cwd, env=_env(), timeout=timeout)
 
 
@@ -101,7 +101,7 @@ def _run_driver(cases, folder: Path) -> dict[str, dict]:
 
 def _run_subprocess(case: cli_fuzz.Case, script: str | None) -> dict:
     """``case`` as its own process: the ``motion-composer`` console script when ``script``,
-    else ``python -m app.cli``."""
+    else ``python -m motion_composer.app.cli``."""
     if script:
         proc = subprocess.run([script, *case.argv], capture_output=True, text=True, cwd=REPO,
                               env=_env(), timeout=cli_fuzz.CASE_TIMEOUT_S)
@@ -175,12 +175,12 @@ def test_help_still_prints_the_usage():
 
 
 def test_an_unexpected_exception_exits_3_with_its_traceback(monkeypatch, capsys):
-    import app.cli
+    import motion_composer.app.cli
 
     def broken(args):
         raise ZeroDivisionError("an injected bug")
 
-    monkeypatch.setattr(app.cli, "cmd_info", broken)
+    monkeypatch.setattr(motion_composer.app.cli, "cmd_info", broken)
     assert main(["info", str(WALK_60)]) == 3
     err = capsys.readouterr().err
     assert err.startswith("Traceback (most recent call last):")
@@ -190,12 +190,12 @@ def test_an_unexpected_exception_exits_3_with_its_traceback(monkeypatch, capsys)
 
 def test_a_bug_in_one_batch_clip_exits_3_with_its_traceback(seeds, monkeypatch, capsys,
                                                             tmp_path):
-    import engine.scene
+    import motion_composer.engine.scene
 
     def broken(self, **kwargs):
         raise ZeroDivisionError("an injected bug")
 
-    monkeypatch.setattr(engine.scene.Scene, "solve", broken)
+    monkeypatch.setattr(motion_composer.engine.scene.Scene, "solve", broken)
     code = main(["batch", str(seeds.projects[0]), str(seeds.walk), "-o", str(tmp_path / "out"),
                  "--workers", "1"])
     err = capsys.readouterr().err
@@ -211,7 +211,7 @@ def test_the_window_without_a_display_says_so_in_one_line(platform, tmp_path):
            if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     if platform is not None:
         env["QT_QPA_PLATFORM"] = platform
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--demo"], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "--demo"], capture_output=True,
                           text=True, cwd=tmp_path, env=env, timeout=60)
     assert (proc.returncode, proc.stdout) == (2, "")
     assert proc.stderr == ("motion-composer: error: no display: run it under xvfb-run, or use "
@@ -222,7 +222,7 @@ def test_a_screenshot_without_a_display_draws_offscreen(tmp_path):
     env = {k: v for k, v in _env().items()
            if k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
     shot = tmp_path / "window.png"
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--demo", "--screenshot", str(shot)],
+    proc = subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "--demo", "--screenshot", str(shot)],
                           capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ("motion-composer: note: no display: drawing offscreen, without the "
@@ -261,7 +261,7 @@ def test_a_one_frame_clip_with_auto_contacts(tmp_path, capsys):
     assert main(["retarget", str(pose), "--target", str(CLIPS / "cmu_rest_tpose.bvh"),
                  "-o", str(out), "--auto-contacts"]) == 0
     assert capsys.readouterr().err == ""
-    from engine.formats import read_motion
+    from motion_composer.engine.formats import read_motion
     assert read_motion(out).num_frames == 1
 
 

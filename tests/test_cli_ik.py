@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from app.cli import main
-from engine import forward_kinematics, read_bvh
+from motion_composer.app.cli import main
+from motion_composer.engine import forward_kinematics, read_bvh
 from ik_fixtures import MAX_TO_HOLDEN
 from conftest import clip_path
 

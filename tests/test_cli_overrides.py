@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from conftest import clip_path, shared_path
 from detect_cases import renamed, without_joint, world_positions, written_in
-from engine.formats import read_motion
-from engine.project import load_project
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.project import load_project
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -29,12 +29,12 @@ def cli(capsys, *argv):
 def ambiguous_walk(tmp_path):
     """The bundled CMU walk rescaled to a 0.95 m child in centimetres and numbered (a generic
     exporter's file): it reads as a 2.41 m person in inches unless told (one warning line)."""
-    from engine.kinematics import fk_arrays
+    from motion_composer.engine.kinematics import fk_arrays
     motion = renamed(read_motion(WALK))
     points = fk_arrays(motion.skeleton, motion.rotations, motion.translations).all_positions()
     k = 0.95 / np.median(np.ptp(points[..., 1], axis=1))
     import dataclasses
-    from engine.skeleton import EndSite
+    from motion_composer.engine.skeleton import EndSite
     sk = motion.skeleton
     small = motion.replace(translations=motion.translations * k, skeleton=dataclasses.replace(
         sk, offsets=sk.offsets * k,

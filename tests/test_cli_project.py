@@ -12,13 +12,13 @@ import sys
 import numpy as np
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from conftest import REPO, clip_path
-from engine import forward_kinematics, read_bvh
-from engine.formats.bvh import format_bvh
-from engine.project import (VERSION, MissingSourceError, ProjectError, load_project,
+from motion_composer.engine import forward_kinematics, read_bvh
+from motion_composer.engine.formats.bvh import format_bvh
+from motion_composer.engine.project import (VERSION, MissingSourceError, ProjectError, load_project,
                             open_project)
-from engine.scene import evaluate_project
+from motion_composer.engine.scene import evaluate_project
 from ik_fixtures import MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")
@@ -172,13 +172,13 @@ def test_export_in_a_real_process(session, tmp_path):
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     bad = tmp_path / "broken.mcp"
     bad.write_text((session / "walk.mcp").read_text().replace('"pairs": {', '"pairs": [', 1))
-    result = subprocess.run([sys.executable, "-m", "app.cli", "export", str(bad), "-o",
+    result = subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "export", str(bad), "-o",
                              str(tmp_path / "o.bvh")], capture_output=True, text=True,
                             cwd=REPO, env=env, timeout=120)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
     assert str(bad) in result.stderr and "not valid JSON" in result.stderr
-    good = subprocess.run([sys.executable, "-m", "app.cli", "export", str(session / "walk.mcp"),
+    good = subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "export", str(session / "walk.mcp"),
                            "-o", str(tmp_path / "o.bvh")], capture_output=True, text=True,
                           cwd=REPO, env=env, timeout=120)
     assert good.returncode == 0, good.stderr
@@ -186,6 +186,6 @@ def test_export_in_a_real_process(session, tmp_path):
 
 
 def test_project_errors_are_motion_composer_errors():
-    from engine.errors import MotionComposerError
+    from motion_composer.engine.errors import MotionComposerError
     assert issubclass(ProjectError, MotionComposerError)
     assert issubclass(MissingSourceError, ProjectError)

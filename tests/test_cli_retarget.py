@@ -21,17 +21,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from blender_util import blender_or_skip, run_blender_import
 from conftest import REPO, SHARED_DATA, clip_path, resolve, shared_path
 from test_cli import console_script
-from engine import forward_kinematics, read_bvh
-from engine.conversion.correspondence import Correspondence
-from engine.describe import stature
-from engine.conversion import BindOptions, bind
-from engine.conversion import RootOptions
-from engine.conversion import retarget
-from engine.rotations import angle_between
+from motion_composer.engine import forward_kinematics, read_bvh
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.describe import stature
+from motion_composer.engine.conversion import BindOptions, bind
+from motion_composer.engine.conversion import RootOptions
+from motion_composer.engine.conversion import retarget
+from motion_composer.engine.rotations import angle_between
 from test_retarget import CMU_TO_BANDAI, bone_deviation
 
 WALK = clip_path("cmu_131_01_walk.bvh")      # CMU-MAX names, +Y, CMU units, 994 frames
@@ -213,7 +213,7 @@ def test_retarget_with_an_explicit_map(case, capsys, tmp_path):
 
 def _command():
     script = console_script()
-    return [script] if script else [sys.executable, "-m", "app.cli"]
+    return [script] if script else [sys.executable, "-m", "motion_composer.app.cli"]
 
 
 def test_retarget_as_a_real_process(capsys, tmp_path):

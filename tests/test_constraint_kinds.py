@@ -12,12 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine import read_bvh
-from engine.correction.constraints import KINDS, Constraint, ConstraintError, ConstraintKind
-from engine.correction.constraints.base import DRAWINGS
-from engine.correction.ik import TaskState, rotvec_to_quat
-from engine.kinematics import fk_arrays
-from engine.quaternions import qmul, to_matrix
+from motion_composer.engine import read_bvh
+from motion_composer.engine.correction.constraints import (KINDS, Constraint, ConstraintError,
+                                                           ConstraintKind)
+from motion_composer.engine.correction.constraints.base import DRAWINGS
+from motion_composer.engine.correction.ik import TaskState, rotvec_to_quat
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.quaternions import qmul, to_matrix
 
 from conftest import REPO, clip_path
 

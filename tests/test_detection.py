@@ -8,9 +8,9 @@ import pytest
 
 from conftest import BUNDLED_BVH, SHARED_BVH, clip_path, shared_path
 from detect_cases import renamed, without_joint, world_positions, written_in
-from engine.formats import read_motion
-from engine.formats.bvh import parse_bvh
-from engine.units import UNITS, detect_units
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.formats.bvh import parse_bvh
+from motion_composer.engine.units import UNITS, detect_units
 
 #: units and up axis of every real file, as its README gives them
 EXPECTED = {
@@ -77,7 +77,7 @@ def test_makehuman_cmu_skeleton_in_decimetres_is_not_cmu_units():
 
 def _scaled(skeleton, k):
     import dataclasses
-    from engine.skeleton import EndSite
+    from motion_composer.engine.skeleton import EndSite
     return dataclasses.replace(skeleton, offsets=skeleton.offsets * k,
                                end_sites=[EndSite(s.parent, s.offset * k, s.name)
                                           for s in skeleton.end_sites])

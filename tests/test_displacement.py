@@ -4,12 +4,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.correction.enforcement import enforce
-from engine.correction.constraints import Constraint
-from engine.correction.displacement import ROOT, Curve, DisplacementMap, reduce_keys
-from engine.errors import MotionComposerError
-from engine import forward_kinematics
-from engine.rotations import angle_between
+from motion_composer.engine.correction.enforcement import enforce
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.correction.displacement import (ROOT, Curve, DisplacementMap,
+                                                            reduce_keys)
+from motion_composer.engine.errors import MotionComposerError
+from motion_composer.engine import forward_kinematics
+from motion_composer.engine.rotations import angle_between
 from ik_fixtures import walk_on_holden
 
 

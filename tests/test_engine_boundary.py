@@ -33,8 +33,8 @@ FORBIDDEN = ("PySide6", "shiboken6", "PyQt5", "PyQt6", "PySide2", "shiboken2", "
              "pyqtgraph", "OpenGL")
 
 #: submodules that must be found, so that an empty package walk cannot pass unnoticed
-KNOWN_SUBMODULES = {"engine.formats.bvh", "engine.kinematics", "engine.quaternions",
-                    "engine.rotations", "engine.skeleton", "engine.motion"}
+KNOWN_SUBMODULES = {"motion_composer.engine.formats.bvh", "motion_composer.engine.kinematics", "motion_composer.engine.quaternions",
+                    "motion_composer.engine.rotations", "motion_composer.engine.skeleton", "motion_composer.engine.motion"}
 
 
 def forbidden_name(module: str | None) -> str | None:
@@ -54,10 +54,10 @@ _CHILD = textwrap.dedent("""
         return sorted(m for m in sys.modules if m.split(".", 1)[0] in forbidden)
 
     report = {"preloaded": gui_modules(), "steps": []}
-    import engine
+    from motion_composer import engine
     report["engine_file"] = engine.__file__
     report["steps"].append(["engine", gui_modules()])
-    names = sorted(m.name for m in pkgutil.walk_packages(engine.__path__, "engine."))
+    names = sorted(m.name for m in pkgutil.walk_packages(engine.__path__, "motion_composer.engine."))
     for name in names:
         importlib.import_module(name)
         report["steps"].append([name, gui_modules()])
@@ -179,9 +179,9 @@ def _qualified(obj) -> str:
 
 
 def _stages():
-    from engine.conversion import bind, compose, convert, retarget
-    from engine.correction.enforcement import enforce
-    from engine.correction.ik import solve_frames
+    from motion_composer.engine.conversion import bind, compose, convert, retarget
+    from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.correction.ik import solve_frames
     return {_qualified(f): f.__name__ for f in (bind, convert, compose, retarget, enforce,
                                                 solve_frames)}
 
@@ -260,7 +260,7 @@ class _Resolver:
         import importlib
         if module in self.modules:
             return list(self.bindings(module))
-        if module.split(".", 1)[0] != "engine":
+        if module.split(".")[:2] != ["motion_composer", "engine"]:
             return []
         mod = importlib.import_module(module)
         return list(getattr(mod, "__all__", [n for n in vars(mod) if not n.startswith("_")]))
@@ -271,7 +271,7 @@ class _Resolver:
         parts = dotted.split(".")
         if depth > 20:
             return None
-        if parts[0] == "app":
+        if parts[:2] == ["motion_composer", "app"]:
             for i in range(len(parts) - 1, 0, -1):
                 module = ".".join(parts[:i])
                 if module in self.modules:
@@ -279,7 +279,7 @@ class _Resolver:
                     return (self.resolve(".".join([target] + parts[i + 1:]), depth + 1)
                             if target else None)
             return None
-        if parts[0] != "engine":
+        if parts[:2] != ["motion_composer", "engine"]:
             return None
         for i in range(len(parts), 0, -1):
             try:
@@ -323,7 +323,7 @@ def stage_calls(modules: dict[str, str], packages=frozenset()) -> list[str]:
 def app_modules() -> tuple[dict[str, str], frozenset]:
     modules, packages = {}, set()
     for path in sorted(APP.rglob("*.py")):
-        parts = list(path.relative_to(REPO).with_suffix("").parts)
+        parts = ["motion_composer"] + list(path.relative_to(REPO).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts.pop()
             packages.add(".".join(parts))
@@ -333,7 +333,7 @@ def app_modules() -> tuple[dict[str, str], frozenset]:
 
 def test_app_asks_the_scene_for_every_derived_stage():
     modules, packages = app_modules()
-    assert {"app.cli", "app.gui.document", "app.gui.main_window"} <= set(modules)
+    assert {"motion_composer.app.cli", "motion_composer.app.gui.document", "motion_composer.app.gui.main_window"} <= set(modules)
     problems = stage_calls(modules, packages)
     assert not problems, ("app/ must ask the scene (engine.scene.Scene: binding, composed, "
                           "motion, solve, preview) instead of running the engine's stages "
@@ -341,39 +341,40 @@ def test_app_asks_the_scene_for_every_derived_stage():
 
 
 @pytest.mark.parametrize("source", [
-    "from engine.conversion import bind as b\nb(p, t, c)",
-    "import engine.conversion.binding as eb\neb.bind(p, t, c)",
-    "import engine.correction.enforcement\nengine.correction.enforcement.enforce(m, [])",
-    "import engine\nengine.conversion.retarget(p, t, c)",
-    "def f():\n    from engine.correction.ik import solve_frames\n    return solve_frames",
-    "from engine.conversion import converter\nrun = converter.convert",
-    "from engine import conversion as c\nc.composer.compose(b, p, 0.01)",
-    "import importlib\nimportlib.import_module('engine.conversion.composer').compose(b, p, 1)",
-    "from engine.correction import enforcement\njobs.run(enforcement.enforce)",
-    "from engine.conversion import *\nconvert(b, p)",
+    "from motion_composer.engine.conversion import bind as b\nb(p, t, c)",
+    "import motion_composer.engine.conversion.binding as eb\neb.bind(p, t, c)",
+    "import motion_composer.engine.correction.enforcement\nmotion_composer.engine.correction.enforcement.enforce(m, [])",
+    "from motion_composer import engine\nengine.conversion.retarget(p, t, c)",
+    "def f():\n    from motion_composer.engine.correction.ik import solve_frames\n    return solve_frames",
+    "from motion_composer.engine.conversion import converter\nrun = converter.convert",
+    "from motion_composer.engine import conversion as c\nc.composer.compose(b, p, 0.01)",
+    "import importlib\nimportlib.import_module('motion_composer.engine.conversion.composer').compose(b, p, 1)",
+    "from motion_composer.engine.correction import enforcement\njobs.run(enforcement.enforce)",
+    "from motion_composer.engine.conversion import *\nconvert(b, p)",
 ])
 def test_the_stage_check_sees_planted_calls(source):
-    assert stage_calls({"app.gui.planted": source}), source
+    assert stage_calls({"motion_composer.app.gui.planted": source}), source
 
 
 def test_the_stage_check_follows_app_reexports_and_relative_imports():
-    modules = {"app.gui": "", "app.gui.helpers": "from engine.conversion import bind as run\n",
-               "app.gui.panel": "from .helpers import run\nrun(p, t, c)\n",
-               "app.gui.other": "from app.gui import helpers\nhelpers.run(p, t, c)\n"}
-    found = stage_calls(modules, {"app.gui"})
-    assert any(f.startswith("app.gui.panel:2: uses bind") for f in found), found
-    assert any(f.startswith("app.gui.other:2: uses bind") for f in found), found
-    assert any(f.startswith("app.gui.helpers:1: imports bind") for f in found), found
+    modules = {"motion_composer.app.gui": "", "motion_composer.app.gui.helpers": "from motion_composer.engine.conversion import bind as run\n",
+               "motion_composer.app.gui.panel": "from .helpers import run\nrun(p, t, c)\n",
+               "motion_composer.app.gui.other": "from motion_composer.app.gui import helpers\nhelpers.run(p, t, c)\n"}
+    found = stage_calls(modules, {"motion_composer.app.gui"})
+    assert any(f.startswith("motion_composer.app.gui.panel:2: uses bind") for f in found), found
+    assert any(f.startswith("motion_composer.app.gui.other:2: uses bind") for f in found), found
+    assert any(f.startswith("motion_composer.app.gui.helpers:1: imports bind")
+               for f in found), found
 
 
 @pytest.mark.parametrize("source", [
-    "from engine.conversion import automap\ncorr = automap(t.skeleton, p.skeleton)",
-    "from engine.conversion import BindOptions, RootOptions\nBindOptions()",
-    "from engine.scene import Scene\nScene.empty().solve()",
-    "import engine.scene as es\nes.evaluate_project(project).motion",
+    "from motion_composer.engine.conversion import automap\ncorr = automap(t.skeleton, p.skeleton)",
+    "from motion_composer.engine.conversion import BindOptions, RootOptions\nBindOptions()",
+    "from motion_composer.engine.scene import Scene\nScene.empty().solve()",
+    "import motion_composer.engine.scene as es\nes.evaluate_project(project).motion",
     "bind = lambda *a: a\nbind(1)",                    # a local name, not the engine's
     "def convert(x):\n    return x\nconvert(1)",
-    "from app.gui.qt import QtCore",
+    "from motion_composer.app.gui.qt import QtCore",
 ])
 def test_the_stage_check_leaves_other_calls(source):
-    assert stage_calls({"app.gui.planted": source}) == [], source
+    assert stage_calls({"motion_composer.app.gui.planted": source}) == [], source

@@ -17,11 +17,11 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from conftest import REPO, clip_path, shared_path
-from engine.errors import ExportError
-from engine.formats import read_character, read_motion, write_motion
-from engine.formats.bvh import format_bvh, read_bvh
-from engine.kinematics import forward_kinematics
-from engine.motion import export_selection, parse_frame_range
+from motion_composer.engine.errors import ExportError
+from motion_composer.engine.formats import read_character, read_motion, write_motion
+from motion_composer.engine.formats.bvh import format_bvh, read_bvh
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.motion import export_selection, parse_frame_range
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 ELY = "target_mixamo_ely.glb"
@@ -150,7 +150,7 @@ def test_rotation_only_is_a_bvh_option(robot_dance, tmp_path):
 
 # --------------------------------------------------------------------------- command line
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "app.cli", *map(str, args)], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", *map(str, args)], cwd=REPO,
                           capture_output=True, text=True, timeout=600)
 
 

@@ -21,13 +21,13 @@ import warnings
 import numpy as np
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from conftest import REPO, SHARED_BVH, clip_path, shared_path
-from engine.errors import GLTFError, MotionComposerError
-from engine.formats import read_character
-from engine.limits import MAX_MAGNITUDE, all_usable, problem
-from engine.project import load_project
-from engine.project.model import ProjectError
+from motion_composer.engine.errors import GLTFError, MotionComposerError
+from motion_composer.engine.formats import read_character
+from motion_composer.engine.limits import MAX_MAGNITUDE, all_usable, problem
+from motion_composer.engine.project import load_project
+from motion_composer.engine.project.model import ProjectError
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -79,7 +79,7 @@ def _mutated(tmp_path, source, name, old: bytes, new: bytes, *, line_starts: byt
 
 def _subprocess(*argv):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, "-m", "app.cli", *map(str, argv)],
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", *map(str, argv)],
                           capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
 
 
@@ -278,7 +278,7 @@ def test_viewport_normals_match_pyqtgraph_where_it_has_them_and_are_zero_where_n
     """The viewport's numpy normals on the fox's mesh (which has degenerate triangles):
     the same as pyqtgraph's per-vertex loop where that is finite, zero (not NaN) elsewhere."""
     pytest.importorskip("pyqtgraph")
-    from app.gui.viewport import SkinMeshData, vertex_normals
+    from motion_composer.app.gui.viewport import SkinMeshData, vertex_normals
     import pyqtgraph.opengl as gl
 
     character = read_character(shared_path("target_fox.glb"))

@@ -19,17 +19,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.cli import main
+from motion_composer.app.cli import main
 from conftest import BUNDLED_BVH, REPO, SHARED_BVH, clip_path, shared_path
-from engine import formats
-from engine.errors import (BVHError, FileFormatError, GLTFError, MotionComposerError,
+from motion_composer.engine import formats
+from motion_composer.engine.errors import (BVHError, FileFormatError, GLTFError, MotionComposerError,
                            UnknownFormatError, UnsupportedFormatError)
-from engine.formats import (BVH, FORMATS, GLB, GLTF, HEAD_BYTES, open_filters, output_format,
+from motion_composer.engine.formats import (BVH, FORMATS, GLB, GLTF, HEAD_BYTES, open_filters, output_format,
                             output_suffixes, read_character, read_motion, read_performer,
                             save_filters, sniff, with_output_suffix, write_motion)
-from engine.formats.bvh import read_bvh
-from engine.formats.gltf import read_gltf
-from engine.project import Project, ProjectError, Source, read_sources
+from motion_composer.engine.formats.bvh import read_bvh
+from motion_composer.engine.formats.gltf import read_gltf
+from motion_composer.engine.project import Project, ProjectError, Source, read_sources
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")

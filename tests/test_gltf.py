@@ -32,13 +32,13 @@ from scipy.spatial.transform import Rotation
 
 from blender_util import blender_or_skip
 from conftest import clip_path, shared_path
-from engine.conversion.automap import automap
-from engine.formats.bvh import read_bvh, write_bvh
-from engine.errors import FileFormatError, GLTFError, MotionComposerError
-from engine.formats.gltf import Character, read_gltf, write_gltf
-from engine.kinematics import forward_kinematics
-from engine.conversion import retarget
-from engine.skinning import joint_matrices, skin_character, skin_vertices
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.formats.bvh import read_bvh, write_bvh
+from motion_composer.engine.errors import FileFormatError, GLTFError, MotionComposerError
+from motion_composer.engine.formats.gltf import Character, read_gltf, write_gltf
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.conversion import retarget
+from motion_composer.engine.skinning import joint_matrices, skin_character, skin_vertices
 
 ROBOT = "target_robot_expressive.glb"
 FOX = "target_fox.glb"
@@ -851,7 +851,7 @@ def test_retarget_cmu_walk_onto_robot_exports(robot, retargeted):
 
 # =========================================================================== the CLI
 def _info(capsys, *args):
-    from app.cli import main
+    from motion_composer.app.cli import main
     code = main(["info", *map(str, args)])
     out, err = capsys.readouterr()
     return code, out, err
@@ -989,8 +989,8 @@ def test_blender_reads_what_we_read_and_write(tmp_path, robot, fox, retargeted):
 
 
 def test_the_retarget_command_takes_a_gltf_character_and_writes_glb(tmp_path, capsys):
-    from app.cli import main
-    from engine.formats.gltf import read_gltf
+    from motion_composer.app.cli import main
+    from motion_composer.engine.formats.gltf import read_gltf
     robot = shared_path("target_robot_expressive.glb")
     out = tmp_path / "walk_on_robot.glb"
     code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(robot),
@@ -1004,5 +1004,5 @@ def test_the_retarget_command_takes_a_gltf_character_and_writes_glb(tmp_path, ca
     bvh = tmp_path / "walk_on_robot.bvh"
     assert main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(robot),
                  "-o", str(bvh)]) == 0
-    from engine import read_bvh
+    from motion_composer.engine import read_bvh
     assert read_bvh(bvh).num_frames == 994

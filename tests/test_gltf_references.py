@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from conftest import shared_path
-from engine.errors import GLTFError
-from engine.formats.gltf import read_gltf
+from motion_composer.engine.errors import GLTFError
+from motion_composer.engine.formats.gltf import read_gltf
 
 ROBOT = "target_robot_expressive.glb"
 

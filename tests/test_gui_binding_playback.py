@@ -16,15 +16,16 @@ import pytest
 pytest.importorskip("PySide6")
 pytest.importorskip("pytestqt")
 
-from app.gui.qt import QtCore, QtWidgets  # noqa: E402
-from app.gui.binding_panel import BindingPanel  # noqa: E402
-from app.gui.commands import push_correspondence, push_options, push_sources  # noqa: E402
-from app.gui.document import Document  # noqa: E402
-from app.gui.playback import PlaybackBar  # noqa: E402
-from engine import read_bvh  # noqa: E402
-from engine.conversion.correspondence import Correspondence  # noqa: E402
-from engine.conversion import BindOptions  # noqa: E402
-from engine.conversion import RootOptions  # noqa: E402
+from motion_composer.app.gui.qt import QtCore, QtWidgets  # noqa: E402
+from motion_composer.app.gui.binding_panel import BindingPanel  # noqa: E402
+from motion_composer.app.gui.commands import (push_correspondence, push_options,  # noqa: E402
+                                              push_sources)
+from motion_composer.app.gui.document import Document  # noqa: E402
+from motion_composer.app.gui.playback import PlaybackBar  # noqa: E402
+from motion_composer.engine import read_bvh  # noqa: E402
+from motion_composer.engine.conversion.correspondence import Correspondence  # noqa: E402
+from motion_composer.engine.conversion import BindOptions  # noqa: E402
+from motion_composer.engine.conversion import RootOptions  # noqa: E402
 
 from conftest import clip_path  # noqa: E402
 from gui_support import WAIT_MS  # noqa: E402

@@ -21,16 +21,16 @@ if not os.environ.get("DISPLAY") and not os.environ.get("QT_QPA_PLATFORM"):
 pytest.importorskip("PySide6")
 pytest.importorskip("pytestqt")
 
-from app.gui.qt import QtCore, QtGui, QtWidgets  # noqa: E402
-from app.gui.commands import push_correspondence, push_pair, push_sources  # noqa: E402
-from app.gui.correspondence_panel import (CorrespondencePanel, JointTree,  # noqa: E402
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets  # noqa: E402
+from motion_composer.app.gui.commands import push_correspondence, push_pair, push_sources  # noqa: E402
+from motion_composer.app.gui.correspondence_panel import (CorrespondencePanel, JointTree,  # noqa: E402
                                           required_joints)
-from app.gui.document import Document  # noqa: E402
-from engine.formats.bvh import read_bvh  # noqa: E402
+from motion_composer.app.gui.document import Document  # noqa: E402
+from motion_composer.engine.formats.bvh import read_bvh  # noqa: E402
 from tests.conftest import clip_path, shared_path  # noqa: E402
 from gui_support import WAIT_MS  # noqa: E402
 
-automap_module = pytest.importorskip("engine.conversion.automap")
+automap_module = pytest.importorskip("motion_composer.engine.conversion.automap")
 
 Qt = QtCore.Qt
 LEFT = Qt.MouseButton.LeftButton

@@ -25,12 +25,12 @@ if sys.version_info < (3, 12) and PySide6.__version__.startswith("6.12."):
     pytest.skip("PySide6 6.12.0 aborts Python 3.11 (it leaks references to None); "
                 "pyproject.toml pins PySide6 below 6.12", allow_module_level=True)
 
-from app.gui.qt import QtCore, QtWidgets  # noqa: E402
-from app.gui.commands import push_constraints  # noqa: E402
-from app.gui.curve_editor import CurveEditor  # noqa: E402
-from engine.correction.constraints import Constraint  # noqa: E402
-from engine.correction.enforcement import enforce  # noqa: E402
-from engine.correction.displacement import ROOT  # noqa: E402
+from motion_composer.app.gui.qt import QtCore, QtWidgets  # noqa: E402
+from motion_composer.app.gui.commands import push_constraints  # noqa: E402
+from motion_composer.app.gui.curve_editor import CurveEditor  # noqa: E402
+from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
+from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
+from motion_composer.engine.correction.displacement import ROOT  # noqa: E402
 
 from gui_support import WAIT_MS, demo_document  # noqa: E402
 

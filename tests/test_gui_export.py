@@ -9,11 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.gui.export_dialog import ExportOptions, ExportOptionsDialog
-from app.gui.qt import QtCore, QtWidgets
+from motion_composer.app.gui.export_dialog import ExportOptions, ExportOptionsDialog
+from motion_composer.app.gui.qt import QtCore, QtWidgets
 from conftest import clip_path
-from engine.formats import read_motion
-from engine.kinematics import forward_kinematics
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.kinematics import forward_kinematics
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -21,7 +21,7 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
     QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                              QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))

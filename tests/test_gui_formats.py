@@ -5,10 +5,11 @@ import shutil
 
 import pytest
 
-from app.gui.export_dialog import ExportOptions
-from app.gui.qt import QtCore
+from motion_composer.app.gui.export_dialog import ExportOptions
+from motion_composer.app.gui.qt import QtCore
 from conftest import clip_path, shared_path
-from engine.formats import open_filters, read_character, read_motion, save_filters, sniff
+from motion_composer.engine.formats import (open_filters, read_character, read_motion,
+                                            save_filters, sniff)
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -16,7 +17,7 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
     QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                              QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))

@@ -7,10 +7,10 @@ import pytest
 
 pytest.importorskip("PySide6")
 
-from app.gui.qt import QtCore  # noqa: E402
-from app.gui.ik_panel import IKPanel  # noqa: E402
-from engine.correction.constraints import Constraint  # noqa: E402
-from engine.correction.ik import IKOptions  # noqa: E402
+from motion_composer.app.gui.qt import QtCore  # noqa: E402
+from motion_composer.app.gui.ik_panel import IKPanel  # noqa: E402
+from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
+from motion_composer.engine.correction.ik import IKOptions  # noqa: E402
 from gui_support import demo_document  # noqa: E402
 
 ENTER = QtCore.Qt.Key.Key_Return

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from app.gui.import_options import ImportOptionsDialog
-from app.gui.qt import QtCore, QtWidgets
+from motion_composer.app.gui.import_options import ImportOptionsDialog
+from motion_composer.app.gui.qt import QtCore, QtWidgets
 from conftest import clip_path, shared_path
 from detect_cases import renamed, written_in
-from engine.formats import read_motion
-from engine.project import load_project, save_project
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.project import load_project, save_project
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -17,7 +17,7 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
     QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                              QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
@@ -115,7 +115,7 @@ def test_a_doubtful_file_says_so_in_the_dialog_and_the_status_bar(window, monkey
                                                                  tmp_path):
     # Bandai's walk written three times too large in centimetres (a 4 m person)
     import dataclasses
-    from engine.skeleton import EndSite
+    from motion_composer.engine.skeleton import EndSite
     motion = read_motion(shared_path("bandai1_walk_normal_001.bvh"))
     sk = motion.skeleton
     giant = motion.replace(translations=motion.translations * 3, skeleton=dataclasses.replace(

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.gui.qt import QtCore
+from motion_composer.app.gui.qt import QtCore
 from conftest import REPO, clip_path
 from gui_support import WAIT_MS
 
@@ -16,7 +16,7 @@ DEMO = REPO / "resources" / "demo" / "demo.mcp"
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
     QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                              QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
@@ -51,7 +51,7 @@ def test_the_demo_opens_ready_to_play(window):
 
 
 def test_edits_are_undoable_and_named_and_the_title_shows_them(window):
-    from app.gui.commands import push_pair
+    from motion_composer.app.gui.commands import push_pair
     window.open_project(DEMO)
     doc = window.doc
     before = doc.motion.rotations.copy()
@@ -66,8 +66,8 @@ def test_edits_are_undoable_and_named_and_the_title_shows_them(window):
 
 
 def test_save_as_open_and_recent(window, tmp_path):
-    from app.gui.commands import push_options
-    from engine.conversion import RootOptions
+    from motion_composer.app.gui.commands import push_options
+    from motion_composer.engine.conversion import RootOptions
     path = _demo_copy(tmp_path)
     window.open_project(path)
     push_options(window.doc, root_options=RootOptions(mode="in-place"), text="In place")
@@ -94,7 +94,7 @@ def test_import_export_and_automatic_mapping(window, tmp_path):
     assert window.undo_action.text() == "&Undo Import target cmu_rest_tpose.bvh"
     out = tmp_path / "out.bvh"
     assert window.export_bvh(out)
-    from engine import read_bvh
+    from motion_composer.engine import read_bvh
     assert read_bvh(out).num_frames == 994
 
 
@@ -124,7 +124,7 @@ def test_a_moved_clip_is_asked_for(window, tmp_path):
 
 
 def test_closing_with_unsaved_changes_asks(window, qtbot):
-    from app.gui.commands import push_pair
+    from motion_composer.app.gui.commands import push_pair
     window.open_project(DEMO)
     push_pair(window.doc, "Head", None)
     window.answers = ["cancel"]
@@ -157,8 +157,8 @@ def test_long_work_runs_in_a_thread_with_progress_and_cancel(window, qtbot):
 
 
 def test_autosave_is_offered_at_the_next_start(window, qtbot, tmp_path):
-    from app.gui.commands import push_pair
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.commands import push_pair
+    from motion_composer.app.gui.main_window import MainWindow
     path = _demo_copy(tmp_path)
     window.open_project(path)
     push_pair(window.doc, "Head", None)
@@ -174,13 +174,13 @@ def test_autosave_is_offered_at_the_next_start(window, qtbot, tmp_path):
 
 
 def test_the_command_line_opens_the_window(monkeypatch):
-    import app.cli
-    import app.gui.main
+    import motion_composer.app.cli
+    import motion_composer.app.gui.main
     calls = []
-    monkeypatch.setattr(app.gui.main, "run", lambda *a, **k: calls.append((a, k)) or 0)
-    assert app.cli.main([]) == 0
-    assert app.cli.main(["some.mcp"]) == 0
-    assert app.cli.main(["--demo"]) == 0
+    monkeypatch.setattr(motion_composer.app.gui.main, "run", lambda *a, **k: calls.append((a, k)) or 0)
+    assert motion_composer.app.cli.main([]) == 0
+    assert motion_composer.app.cli.main(["some.mcp"]) == 0
+    assert motion_composer.app.cli.main(["--demo"]) == 0
     assert calls[0][0] == (None,) and calls[1][0] == ("some.mcp",)
     assert calls[2][1]["demo"] is True
 

@@ -6,13 +6,13 @@ import pytest
 
 pytest.importorskip("PySide6")
 
-from app.gui.qt import QtWidgets  # noqa: E402, F401  (Qt set up first)
-from app.gui.correspondence_panel import CorrespondencePanel  # noqa: E402
-from app.gui.document import Document  # noqa: E402
+from motion_composer.app.gui.qt import QtWidgets  # noqa: E402, F401  (Qt set up first)
+from motion_composer.app.gui.correspondence_panel import CorrespondencePanel  # noqa: E402
+from motion_composer.app.gui.document import Document  # noqa: E402
 from conftest import clip_path  # noqa: E402
-from engine.conversion.correspondence import BY_HAND, Correspondence  # noqa: E402
-from engine.formats import read_motion  # noqa: E402
-from engine.project import Source  # noqa: E402
+from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence  # noqa: E402
+from motion_composer.engine.formats import read_motion  # noqa: E402
+from motion_composer.engine.project import Source  # noqa: E402
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -72,7 +72,7 @@ def test_a_replaced_target_keeps_the_hand_pairs_that_fit_and_auto_maps_the_rest(
 
 
 def test_a_replaced_performer_drops_what_falls_past_its_end(doc):
-    from engine.correction.constraints import Constraint
+    from motion_composer.engine.correction.constraints import Constraint
     hand = doc.pose("target").positions[900, doc.scene.target.skeleton.index["LeftHand"]]
     doc.edit("Add reach", constraints=(Constraint("LeftHand", "position", {"point": hand},
                                                   880, 890, 910, 920, name="late"),))

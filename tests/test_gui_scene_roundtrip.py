@@ -12,16 +12,16 @@ import dataclasses
 
 import pytest
 
-from app.gui.qt import QtCore
+from motion_composer.app.gui.qt import QtCore
 from conftest import clip_path
-from engine.conversion import BindOptions, RootOptions
-from engine.conversion.correspondence import BY_HAND, Correspondence
-from engine.correction.constraints import KINDS, Constraint
-from engine.correction.contacts import ContactOptions
-from engine.correction.displacement import ROOT, Curve, DisplacementMap
-from engine.correction.ik import IKOptions
-from engine.formats import read_motion
-from engine.project import (Project, Source, ViewerState, embed_sources, project_to_json,
+from motion_composer.engine.conversion import BindOptions, RootOptions
+from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
+from motion_composer.engine.correction.constraints import KINDS, Constraint
+from motion_composer.engine.correction.contacts import ContactOptions
+from motion_composer.engine.correction.displacement import ROOT, Curve, DisplacementMap
+from motion_composer.engine.correction.ik import IKOptions
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.project import (Project, Source, ViewerState, embed_sources, project_to_json,
                             save_project)
 from ik_fixtures import MAX_TO_HOLDEN
 
@@ -161,7 +161,7 @@ def saved(tmp_path, request):
 
 
 def test_the_document_saves_what_it_opened(qtbot, saved, tmp_path):
-    from app.gui.document import Document
+    from motion_composer.app.gui.document import Document
     project, path = saved
     doc = Document()
     doc.open(path)
@@ -177,7 +177,7 @@ def test_the_document_saves_what_it_opened(qtbot, saved, tmp_path):
 
 @pytest.mark.parametrize("name", FIELDS)
 def test_an_edit_and_its_undo_save_the_same_bytes(qtbot, saved, tmp_path, name):
-    from app.gui.document import Document
+    from motion_composer.app.gui.document import Document
     project, path = saved
     doc = Document()
     doc.open(path)
@@ -206,7 +206,7 @@ def test_an_edit_and_its_undo_save_the_same_bytes(qtbot, saved, tmp_path, name):
 # --------------------------------------------------------------------------- the window
 @pytest.fixture
 def window(qtbot, tmp_path, monkeypatch):
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
     QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                              QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))

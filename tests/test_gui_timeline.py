@@ -18,18 +18,18 @@ pytest.importorskip("PySide6")
 pytest.importorskip("pytestqt")
 pytest.importorskip("pyqtgraph")
 
-from app.gui.qt import QtCore, QtGui  # noqa: E402
-from app.gui.commands import push_constraints  # noqa: E402
-from app.gui.inspector import ConstraintInspector  # noqa: E402
-from app.gui.live import LiveSolver, live_solver  # noqa: E402
-from app.gui.timeline import FIELDS, ConstraintTimeline, moved_range  # noqa: E402
-from engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
+from motion_composer.app.gui.qt import QtCore, QtGui  # noqa: E402
+from motion_composer.app.gui.commands import push_constraints  # noqa: E402
+from motion_composer.app.gui.inspector import ConstraintInspector  # noqa: E402
+from motion_composer.app.gui.live import LiveSolver, live_solver  # noqa: E402
+from motion_composer.app.gui.timeline import FIELDS, ConstraintTimeline, moved_range  # noqa: E402
+from motion_composer.engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
                                        overlapping, retimed, window_problem)
-from engine.correction.constraints import Constraint  # noqa: E402
-from engine.correction.contacts import (contact_constraints, detect_contacts,  # noqa: E402
+from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
+from motion_composer.engine.correction.contacts import (contact_constraints, detect_contacts,  # noqa: E402
                                         find_feet)
-from engine.correction.enforcement import enforce  # noqa: E402
-from engine.kinematics import forward_kinematics  # noqa: E402
+from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
+from motion_composer.engine.kinematics import forward_kinematics  # noqa: E402
 
 from gui_support import WAIT_MS, demo_document  # noqa: E402
 
@@ -511,7 +511,7 @@ def test_inspector_follows_selection_and_undo(inspector, timeline, doc):
 
 
 def test_the_inspector_lists_the_kinds_of_the_registry(inspector):
-    from engine.correction.constraints import KINDS
+    from motion_composer.engine.correction.constraints import KINDS
     texts = [inspector.kind.itemText(i) for i in range(inspector.kind.count())]
     assert texts == [k.choice_label(v) for k in KINDS.values() for v in k.variants]
     assert sorted(inspector._page) == sorted(KINDS)
@@ -663,7 +663,7 @@ def test_pending_inspector_step_commits_before_another_edit(qtbot, inspector, ti
 
 
 def test_empty_document(qtbot):
-    from app.gui.document import Document
+    from motion_composer.app.gui.document import Document
     d = Document()
     tl = ConstraintTimeline(d)
     insp = ConstraintInspector(d, tl)

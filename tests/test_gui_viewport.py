@@ -10,7 +10,7 @@ from gui_support import WAIT_MS, demo_document, require_gl
 @pytest.fixture()
 def view(qtbot):
     require_gl()
-    from app.gui.viewport import Viewport
+    from motion_composer.app.gui.viewport import Viewport
     doc = demo_document()
     v = Viewport(doc)
     qtbot.addWidget(v)
@@ -33,7 +33,7 @@ def _pixels(v, rgb, tol=40):
 
 def test_both_skeletons_are_drawn_where_forward_kinematics_puts_them(view):
     doc, v = view
-    from app.gui.viewport import to_view
+    from motion_composer.app.gui.viewport import to_view
     fig = v.figures["target"]
     pos = doc.pose("target").positions[300]
     np.testing.assert_allclose(fig.points - fig.offset, to_view(pos), atol=1e-9)
@@ -53,7 +53,7 @@ def test_the_view_follows_the_frame(view):
 
 
 def test_clicking_a_joint_selects_it_everywhere(view, qtbot):
-    from app.gui.qt import QtCore
+    from motion_composer.app.gui.qt import QtCore
     doc, v = view
     j = doc.scene.target.skeleton.index["LeftHand"]
     x, y = v.project(v.figures["target"].points[[j]])[0]
@@ -74,7 +74,7 @@ def test_clicking_a_joint_selects_it_everywhere(view, qtbot):
 
 
 def test_orbit_pan_zoom_and_frame_all(view, qtbot):
-    from app.gui.qt import QtCore
+    from motion_composer.app.gui.qt import QtCore
     doc, v = view
     az, dist, center = v.opts["azimuth"], v.opts["distance"], v.opts["center"]
     qtbot.mousePress(v, QtCore.Qt.MouseButton.LeftButton, pos=QtCore.QPoint(400, 300))
@@ -106,8 +106,8 @@ def test_hiding_and_overlaying(view):
 
 def test_constraint_goals_are_drawn(view):
     doc, v = view
-    from app.gui.commands import push_constraints
-    from engine.correction.constraints import Constraint, floor_constraint
+    from motion_composer.app.gui.commands import push_constraints
+    from motion_composer.engine.correction.constraints import Constraint, floor_constraint
     hand = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + 0.1}, 280, 290,
                                       310, 320),
@@ -121,9 +121,9 @@ def test_each_kind_draws_its_goal_as_it_says(view):
     """A trajectory draws its path and the point of the frame; an orientation the goal's
     axes at the joint (x along the goal's x)."""
     doc, v = view
-    from app.gui.commands import push_constraints
-    from app.gui.viewport import to_view
-    from engine.correction.constraints import Constraint
+    from motion_composer.app.gui.commands import push_constraints
+    from motion_composer.app.gui.viewport import to_view
+    from motion_composer.engine.correction.constraints import Constraint
     sk = doc.scene.target.skeleton
     pos = doc.pose("target").positions
     hand, head = sk.index["LeftHand"], sk.index["Head"]
@@ -151,7 +151,7 @@ def test_each_kind_draws_its_goal_as_it_says(view):
 def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot, tmp_path):
     require_gl()
     from conftest import clip_path, shared_path
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     robot = shared_path("target_robot_expressive.glb")
     w = MainWindow()
     qtbot.addWidget(w)
@@ -170,7 +170,7 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
     assert first.shape == second.shape and first.shape[0] > 1000
     assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
     # exported onto the character as glTF, with its mesh
-    from engine.formats.gltf import read_gltf
+    from motion_composer.engine.formats.gltf import read_gltf
     assert w.export_bvh(tmp_path / "out.glb")
     back = read_gltf(tmp_path / "out.glb")
     assert back.skeleton.names == doc.scene.target.skeleton.names and back.meshes
@@ -178,9 +178,9 @@ def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtb
 
 
 def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
-    from app.gui.qt import QtCore
-    from app.gui.commands import push_constraints
-    from engine.correction.constraints import Constraint
+    from motion_composer.app.gui.qt import QtCore
+    from motion_composer.app.gui.commands import push_constraints
+    from motion_composer.engine.correction.constraints import Constraint
     doc, v = view
     hand = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftHand"]]
     push_constraints(doc, [Constraint("LeftHand", "position", {"point": hand + [0.05, 0.1, 0]},

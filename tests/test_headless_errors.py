@@ -19,7 +19,7 @@ def _window(tmp_path, *args, **env_extra) -> subprocess.CompletedProcess:
     env["XDG_STATE_HOME"] = str(tmp_path / "state")
     env["PYTHONPATH"] = str(REPO)                              # these sources, from anywhere
     # from another folder: nothing may depend on the current directory
-    return subprocess.run([sys.executable, "-m", "app.cli", *args], cwd=tmp_path, env=env,
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", *args], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=60,
                           stdin=subprocess.DEVNULL)
 

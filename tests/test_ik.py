@@ -4,14 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import forward_kinematics
-from engine.correction.constraints import Constraint, ConstraintError, constraints_from_json, \
+from motion_composer.engine import forward_kinematics
+from motion_composer.engine.correction.constraints import Constraint, ConstraintError, constraints_from_json, \
     constraints_to_json, floor_constraint
-from engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
-from engine.correction.enforcement import enforce
-from engine.correction.ik import IKOptions
-from engine.quaternions import qconj, qmul
-from engine.rotations import angle_between
+from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
+from motion_composer.engine.correction.enforcement import enforce
+from motion_composer.engine.correction.ik import IKOptions
+from motion_composer.engine.quaternions import qconj, qmul
+from motion_composer.engine.rotations import angle_between
 from ik_fixtures import run_on_bandai, walk_on_bandai, walk_on_holden
 
 
@@ -86,7 +86,7 @@ def test_the_output_ramp_interpolates_the_chain_between_end_and_smooth_out(hand_
     u = (mid - c.end) / (c.smooth_out - c.end)
     a = result.motion.rotations[c.end, chain]
     b = result.motion.rotations[c.smooth_out, chain]
-    from engine.quaternions import qpow
+    from motion_composer.engine.quaternions import qpow
     expected = qmul(qpow(qmul(b, qconj(a)), u), a)
     assert np.degrees(angle_between(result.motion.rotations[mid, chain], expected)).max() < 1e-6
     others = [k for k in range(sk.num_joints) if k not in chain]

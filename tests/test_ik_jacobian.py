@@ -4,11 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.correction.constraints import KINDS
-from engine.correction.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
+from motion_composer.engine.correction.constraints import KINDS
+from motion_composer.engine.correction.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
                                   solve_frames, task_error_and_jacobian)
-from engine.kinematics import fk_arrays
-from engine.quaternions import qmul
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.quaternions import qmul
 from ik_fixtures import walk_on_holden
 
 EPS = 1e-6

@@ -10,18 +10,18 @@ import pickle
 import numpy as np
 import pytest
 
-from app.cli import IK_FLAGS, main
+from motion_composer.app.cli import IK_FLAGS, main
 from conftest import REPO, clip_path
-from engine import forward_kinematics
-from engine.batch import process_clip, recipe_from_project
-from engine.correction.constraints import Constraint
-from engine.correction.enforcement import enforce
-from engine.correction.ik import IKOptions
-from engine.errors import IKOptionsError, MotionComposerError
-from engine.formats.bvh import write_bvh
-from engine.project import (VERSION, ProjectError, load_project, open_project,
+from motion_composer.engine import forward_kinematics
+from motion_composer.engine.batch import process_clip, recipe_from_project
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.correction.enforcement import enforce
+from motion_composer.engine.correction.ik import IKOptions
+from motion_composer.engine.errors import IKOptionsError, MotionComposerError
+from motion_composer.engine.formats.bvh import write_bvh
+from motion_composer.engine.project import (VERSION, ProjectError, load_project, open_project,
                             project_from_json, project_to_json, save_project)
-from engine.scene import Scene, evaluate_project, solve_project
+from motion_composer.engine.scene import Scene, evaluate_project, solve_project
 from ik_fixtures import walk_on_holden
 
 DATA = REPO / "tests" / "data"

@@ -35,10 +35,10 @@ import pytest
 
 from blender_util import blender_or_skip, run_blender_import
 from conftest import BUNDLED_BVH, SHARED_BVH, SHARED_DATA, all_bvh_params, resolve
-from engine.formats.bvh import read_bvh, write_bvh
-from engine.describe import stature
-from engine.kinematics import forward_kinematics
-from engine.motion import Motion
+from motion_composer.engine.formats.bvh import read_bvh, write_bvh
+from motion_composer.engine.describe import stature
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.motion import Motion
 
 bvhio = pytest.importorskip("bvhio")
 

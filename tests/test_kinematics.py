@@ -15,9 +15,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import all_bvh_params, resolve
-from engine.formats.bvh import BVHRecord, detect_position_modes, parse_bvh_text, read_bvh
-from engine.describe import stature
-from engine.kinematics import fk_arrays, forward_kinematics
+from motion_composer.engine.formats.bvh import (BVHRecord, detect_position_modes, parse_bvh_text,
+                                                read_bvh)
+from motion_composer.engine.describe import stature
+from motion_composer.engine.kinematics import fk_arrays, forward_kinematics
 
 #: position channels that ADD to the OFFSET, per file (from ../shared/data/README.md: the
 #: CC3 hip-rooted export); everywhere else they replace it (roots, and every Bandai joint)

@@ -27,21 +27,21 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import REPO, clip_path, shared_path
-from engine import read_bvh
-from engine.formats.bvh import format_bvh
-from engine.correction.constraints import Constraint
-from engine.conversion.correspondence import Correspondence
-from engine.correction.displacement import Curve, DisplacementMap
-from engine.errors import MotionComposerError
-from engine.kinematics import forward_kinematics
-from engine.scene import Scene, evaluate_project, solve_project
-from engine.project import (MIGRATIONS, VERSION, MissingSourceError, Project, ProjectError,
+from motion_composer.engine import read_bvh
+from motion_composer.engine.formats.bvh import format_bvh
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.correction.displacement import Curve, DisplacementMap
+from motion_composer.engine.errors import MotionComposerError
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.scene import Scene, evaluate_project, solve_project
+from motion_composer.engine.project import (MIGRATIONS, VERSION, MissingSourceError, Project, ProjectError,
                             Source, ViewerState, autosave_path, backup_path, check_project,
                             discard_autosave, embed_sources, find_autosave,
                             load_project, open_project, project_from_json, project_to_json,
                             read_sources, save_project, write_autosave)
-from engine.conversion import BindOptions
-from engine.conversion import RootOptions
+from motion_composer.engine.conversion import BindOptions
+from motion_composer.engine.conversion import RootOptions
 from ik_fixtures import MAX_TO_BANDAI, MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")
@@ -588,7 +588,7 @@ def test_one_backup_of_the_previous_version(tmp_path):
 
 _CHILD = r"""
 import dataclasses, os, sys, time
-from engine import project as P
+from motion_composer.engine import project as P
 path, mode, original = sys.argv[1], sys.argv[2], sys.argv[3]
 a = P.load_project(original, check_sources=False)
 b = a.replace(viewer=dataclasses.replace(a.viewer, current_frame=a.viewer.current_frame + 1))

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from engine.quaternions import axis_angle, from_euler, qconj, qmul, qrot, qslerp
-from engine.rotations import euler_to_quat, quat_to_euler
+from motion_composer.engine.quaternions import axis_angle, from_euler, qconj, qmul, qrot, qslerp
+from motion_composer.engine.rotations import euler_to_quat, quat_to_euler
 
 RNG_SEED = 20240611
 N = 2000

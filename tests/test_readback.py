@@ -15,10 +15,11 @@ import pytest
 from blender_util import blender_or_skip
 from conftest import SHARED_BVH, clip_path, shared_path
 from detect_cases import world_positions
-from engine.conversion.automap import automap
-from engine.formats import read_character, read_motion, read_performer, write_motion
-from engine.project import Project, Source
-from engine.scene import Scene
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.formats import (read_character, read_motion, read_performer,
+                                            write_motion)
+from motion_composer.engine.project import Project, Source
+from motion_composer.engine.scene import Scene
 
 TARGETS = ["target_mixamo_ely.glb", "target_mixamo_mannequin.glb",
            "target_robot_expressive.glb", "cmu_rest_tpose.bvh", "fair1_child8_jumping.bvh"]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from app.gui.qt import QtCore
+from motion_composer.app.gui.qt import QtCore
 from conftest import REPO, clip_path
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs POSIX signals")
@@ -27,9 +27,9 @@ CHILD_TIMEOUT_S = 90.0
 
 _CHILD = r"""
 import os, sys
-import app.gui.main_window as mw
+import motion_composer.app.gui.main_window as mw
 mw.AUTOSAVE_MS = 50          # autosave soon after the edit (the parent waits on the file)
-from app.gui.qt import QtCore, application
+from motion_composer.app.gui.qt import QtCore, application
 settings = sys.argv[2]
 QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
 QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat, QtCore.QSettings.Scope.UserScope,
@@ -45,7 +45,7 @@ project = sys.argv[1]
 if project:
     if not window.open_project(project):
         fail("did not open")
-    from app.gui.commands import push_pair
+    from motion_composer.app.gui.commands import push_pair
     push_pair(window.doc, "Head", None)
 else:                                     # an unsaved session: two clips imported
     for side, clip in (("performer", sys.argv[3]), ("target", sys.argv[4])):
@@ -83,7 +83,7 @@ def _answering(w, answers: list[bool]):
 @pytest.fixture()
 def make_window(qtbot, tmp_path, monkeypatch):
     """Windows answering the recovery question with the answers given."""
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     _settings(tmp_path, monkeypatch)
     made = []
 
@@ -134,7 +134,7 @@ def crashed(tmp_path_factory) -> Path:
     (Head unmapped) was autosaved; tests copy it."""
     folder = tmp_path_factory.mktemp("crashed")
     path = _demo_copy(folder)
-    from engine.project import autosave_path
+    from motion_composer.engine.project import autosave_path
     _crash(str(path), folder / "child-settings", folder / "child-state",
            lambda: autosave_path(path).exists())
     return folder
@@ -163,7 +163,7 @@ def _open_from_command_line(w, path, auto):
     """``motion-composer P.mcp``: what :func:`app.gui.main.run` does with the window before
     its event loop (not run itself here: a finished ``app.exec()`` stops the timers of the
     tests that come after it in this process)."""
-    from app.gui.main import start
+    from motion_composer.app.gui.main import start
     start(w, str(path))
     return w, _state(w, auto)
 
@@ -194,7 +194,7 @@ ENTRIES = {"command line": _open_from_command_line, "File > Open": _open_with_di
 @pytest.mark.parametrize("entry", list(ENTRIES))
 def test_a_killed_session_is_offered_through_every_entry(crashed, tmp_path, make_window,
                                                          entry, accept):
-    from engine.project import autosave_path
+    from motion_composer.engine.project import autosave_path
     path = _copy_crashed(crashed, tmp_path)
     auto = autosave_path(path)
     assert auto.exists() and auto.stat().st_mtime_ns > path.stat().st_mtime_ns
@@ -221,8 +221,8 @@ def test_a_killed_session_is_offered_through_every_entry(crashed, tmp_path, make
 
 def test_a_killed_unsaved_session_is_offered_at_start(tmp_path, make_window, monkeypatch,
                                                       qtbot):
-    from app.gui.main import start
-    from engine.project import autosave_path
+    from motion_composer.app.gui.main import start
+    from motion_composer.engine.project import autosave_path
     state = tmp_path / "state"
     session = _crash("", tmp_path / "child-settings", state,
                      lambda: any(state.glob("motion-composer/untitled-*.autosave")))
@@ -260,8 +260,8 @@ def test_a_killed_unsaved_session_is_offered_at_start(tmp_path, make_window, mon
 def test_the_timer_autosaves_an_edit_even_when_the_scene_is_not_ready(make_window, tmp_path,
                                                                       qtbot):
     import dataclasses
-    from app.gui.commands import push_correspondence
-    from engine.project import autosave_path, load_project
+    from motion_composer.app.gui.commands import push_correspondence
+    from motion_composer.engine.project import autosave_path, load_project
     path = _demo_copy(tmp_path / "p")
     w = make_window()
     assert w.open_project(path)
@@ -284,8 +284,8 @@ def test_the_timer_autosaves_an_edit_even_when_the_scene_is_not_ready(make_windo
 
 def test_an_autosave_survives_cancel_another_project_new_and_a_failed_save(make_window,
                                                                            tmp_path):
-    from app.gui.commands import push_pair
-    from engine.project import autosave_path
+    from motion_composer.app.gui.commands import push_pair
+    from motion_composer.engine.project import autosave_path
     path = _demo_copy(tmp_path / "a")
     other = _demo_copy(tmp_path / "b")
     w = make_window(True)
@@ -312,8 +312,8 @@ def test_an_autosave_survives_cancel_another_project_new_and_a_failed_save(make_
 
 def test_saving_removes_the_autosave_and_closing_with_discard_is_a_decline(make_window,
                                                                            tmp_path):
-    from app.gui.commands import push_pair
-    from engine.project import autosave_path, find_autosave
+    from motion_composer.app.gui.commands import push_pair
+    from motion_composer.engine.project import autosave_path, find_autosave
     path = _demo_copy(tmp_path / "a")
     w = make_window()
     assert w.open_project(path)
@@ -334,7 +334,7 @@ def test_saving_removes_the_autosave_and_closing_with_discard_is_a_decline(make_
 
 
 def test_two_unsaved_sessions_keep_their_own_autosaves(make_window):
-    from engine.project import autosave_path
+    from motion_composer.engine.project import autosave_path
     first, second = make_window(), make_window()
     for w in (first, second):
         w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
@@ -350,7 +350,7 @@ def test_two_unsaved_sessions_keep_their_own_autosaves(make_window):
 # --------------------------------------------------------------------------- stale temporaries
 _SAVER = r"""
 import os, sys, time
-from engine import project as P
+from motion_composer.engine import project as P
 path, original = sys.argv[1], sys.argv[2]
 project = P.load_project(original, check_sources=False)
 real = os.fsync
@@ -364,8 +364,8 @@ P.save_project(project, path)
 
 
 def test_a_killed_saves_leftover_goes_at_the_next_save_once_stale(tmp_path):
-    from engine.fileio import STALE_TMP_S, remove_stale_temporaries
-    from engine.project import load_project, project_to_json, save_project
+    from motion_composer.engine.fileio import STALE_TMP_S, remove_stale_temporaries
+    from motion_composer.engine.project import load_project, project_to_json, save_project
     folder = tmp_path / "p"
     original = _demo_copy(folder)
     path = original.with_name("walk.mcp")

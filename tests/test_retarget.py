@@ -6,15 +6,15 @@ import json
 import numpy as np
 import pytest
 
-from engine import forward_kinematics, read_bvh
-from engine.formats.bvh import format_bvh, parse_bvh
-from engine.conversion.correspondence import Correspondence
-from engine.errors import MappingError, MotionComposerError
-from engine.quaternions import qconj, qmul
-from engine.conversion import BindOptions, bind
-from engine.conversion import RootOptions
-from engine.conversion import retarget
-from engine.rotations import angle_between
+from motion_composer.engine import forward_kinematics, read_bvh
+from motion_composer.engine.formats.bvh import format_bvh, parse_bvh
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.errors import MappingError, MotionComposerError
+from motion_composer.engine.quaternions import qconj, qmul
+from motion_composer.engine.conversion import BindOptions, bind
+from motion_composer.engine.conversion import RootOptions
+from motion_composer.engine.conversion import retarget
+from motion_composer.engine.rotations import angle_between
 from conftest import all_bvh_params, clip_path, resolve, shared_path
 
 CMU_TO_BANDAI = {  # target (Bandai) -> performer (CMU MotionBuilder names)

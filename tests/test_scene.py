@@ -15,17 +15,17 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from app.cli import main as cli_main
+from motion_composer.app.cli import main as cli_main
 from conftest import clip_path, shared_path
-from engine.conversion import BindOptions, RootOptions
-from engine.conversion.automap import automap
-from engine.conversion.correspondence import BY_HAND, Correspondence
-from engine.correction.constraints import Constraint
-from engine.correction.displacement import Curve, DisplacementMap
-from engine.formats import read_motion, read_performer, write_motion
-from engine.motion import Motion
-from engine.project import Project, Source, open_project, save_project
-from engine.scene import Scene, evaluate_project, remap
+from motion_composer.engine.conversion import BindOptions, RootOptions
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.correction.displacement import Curve, DisplacementMap
+from motion_composer.engine.formats import read_motion, read_performer, write_motion
+from motion_composer.engine.motion import Motion
+from motion_composer.engine.project import Project, Source, open_project, save_project
+from motion_composer.engine.scene import Scene, evaluate_project, remap
 from ik_fixtures import MAX_TO_HOLDEN
 
 WALK = clip_path("cmu_131_01_walk.bvh")

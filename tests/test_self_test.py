@@ -19,7 +19,7 @@ def _self_test(tmp_path, **env_extra) -> subprocess.CompletedProcess:
     if not env.get("DISPLAY") and not env.get("WAYLAND_DISPLAY"):
         env["QT_QPA_PLATFORM"] = "offscreen"
     env["XDG_CONFIG_HOME"] = str(tmp_path / "config")          # leave the user's alone
-    return subprocess.run([sys.executable, "-m", "app.cli", "--self-test"], cwd=REPO, env=env,
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", "--self-test"], cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=90)
 
 
@@ -61,16 +61,16 @@ def test_a_broken_demo_fails_the_self_test_with_its_reason(tmp_path):
 
 
 def test_the_command_line_passes_the_self_test_option(monkeypatch):
-    import app.cli
-    import app.gui.main
+    import motion_composer.app.cli
+    import motion_composer.app.gui.main
     calls = []
-    monkeypatch.setattr(app.gui.main, "run", lambda *a, **k: calls.append((a, k)) or 0)
-    assert app.cli.main(["--self-test"]) == 0
+    monkeypatch.setattr(motion_composer.app.gui.main, "run", lambda *a, **k: calls.append((a, k)) or 0)
+    assert motion_composer.app.cli.main(["--self-test"]) == 0
     assert calls == [((), {"self_test": True})]
 
 
 def test_resources_are_found_from_the_sources_and_in_the_bundle(monkeypatch, tmp_path):
-    from app.resources import is_frozen, resource_path
+    from motion_composer.app.resources import is_frozen, resource_path
     assert not is_frozen()
     assert resource_path("demo/demo.mcp") == REPO / "resources" / "demo" / "demo.mcp"
     assert resource_path("icons/motion-composer.png").is_file()
@@ -82,7 +82,7 @@ def test_resources_are_found_from_the_sources_and_in_the_bundle(monkeypatch, tmp
 
 
 def test_the_window_uses_the_bundled_demo_and_icon(monkeypatch):
-    import app.gui.main as main
+    import motion_composer.app.gui.main as main
     assert main.DEMO_PROJECT == REPO / "resources" / "demo" / "demo.mcp"
     assert main.DEMO_PROJECT.is_file() and main.ICON.is_file()
     monkeypatch.setenv("MC_DEMO_PROJECT", "/elsewhere/x.mcp")

@@ -15,10 +15,10 @@ import pytest
 
 from blender_util import blender_or_skip
 from conftest import REPO, clip_path
-from engine import read_bvh
-from engine.formats.gltf import read_gltf, write_gltf
-from engine.kinematics import forward_kinematics
-from engine.skinning import skin_character
+from motion_composer.engine import read_bvh
+from motion_composer.engine.formats.gltf import read_gltf, write_gltf
+from motion_composer.engine.kinematics import forward_kinematics
+from motion_composer.engine.skinning import skin_character
 from test_gltf import BLENDER_GLTF_SCRIPT
 
 CHARACTER = REPO / "tests" / "data" / "test_character.glb"
@@ -83,7 +83,7 @@ def test_skinning_follows_the_swing(character):
 
 
 def test_the_cli_reads_it_and_retargets_the_bundled_walk_onto_it(tmp_path, capsys):
-    from app.cli import main
+    from motion_composer.app.cli import main
     assert main(["info", str(CHARACTER), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["frames"] == FRAMES and len(data["joints"]) == JOINTS
@@ -103,7 +103,7 @@ def test_the_cli_reads_it_and_retargets_the_bundled_walk_onto_it(tmp_path, capsy
 def test_the_window_draws_it_as_a_skinned_mesh(qtbot, tmp_path):
     from gui_support import require_gl
     require_gl()
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     w = MainWindow()
     qtbot.addWidget(w)
     w.show_error = lambda message: pytest.fail(message)

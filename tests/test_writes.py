@@ -23,9 +23,9 @@ from pathlib import Path
 import pytest
 
 from conftest import REPO, clip_path
-from engine.fileio import FileWriteError, atomic_write, check_output_path
-from engine.project import load_project, save_project
-from engine.project.files import backup_path
+from motion_composer.engine.fileio import FileWriteError, atomic_write, check_output_path
+from motion_composer.engine.project import load_project, save_project
+from motion_composer.engine.project.files import backup_path
 
 WALK = clip_path("cmu_131_01_walk.bvh")
 TPOSE = clip_path("cmu_rest_tpose.bvh")
@@ -38,7 +38,7 @@ def _env():
 
 
 def cli(*argv, cwd=REPO):
-    return subprocess.run([sys.executable, "-m", "app.cli", *map(str, argv)],
+    return subprocess.run([sys.executable, "-m", "motion_composer.app.cli", *map(str, argv)],
                           capture_output=True, text=True, cwd=cwd, env=_env(), timeout=300)
 
 
@@ -229,7 +229,7 @@ def test_two_batch_runs_into_one_folder(session):
     for k in range(3):
         clips.append(session / f"walk{k}.bvh")
         shutil.copy(WALK, clips[-1])
-    first = subprocess.Popen([sys.executable, "-m", "app.cli", "batch", str(session / "p.mcp"),
+    first = subprocess.Popen([sys.executable, "-m", "motion_composer.app.cli", "batch", str(session / "p.mcp"),
                               *map(str, clips), "-o", str(out), "--workers", "1"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              cwd=REPO, env=_env())

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from app.gui.commands import push_options
-from app.gui.qt import QtCore, QtWidgets
-from engine.conversion import BindOptions
-from engine.conversion import RootOptions
+from motion_composer.app.gui.commands import push_options
+from motion_composer.app.gui.qt import QtCore, QtWidgets
+from motion_composer.engine.conversion import BindOptions
+from motion_composer.engine.conversion import RootOptions
 
 __all__ = ["BindingPanel", "ReferenceChooser"]
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.gui.qt import QtGui
-from engine.conversion.correspondence import Correspondence
+from motion_composer.app.gui.qt import QtGui
+from motion_composer.engine.conversion.correspondence import Correspondence
 
 __all__ = ["push_scene", "replace_scene", "push_sources", "push_correspondence", "push_pair", "push_options",
            "push_constraints", "push_displacement", "merge_id"]
@@ -73,7 +73,7 @@ def push_sources(doc, performer=None, performer_path=None, target=None, target_p
                  text: str = "Import") -> None:
     """Set the performer and/or the target as one command, keeping the map as it is (the
     window's import re-maps: :meth:`app.gui.document.Document.set_source`)."""
-    from engine.project import Source
+    from motion_composer.engine.project import Source
     before = after = doc.scene
     for role, motion, path in (("performer", performer, performer_path),
                                ("target", target, target_path)):

@@ -24,10 +24,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.gui.commands import push_correspondence
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.conversion.correspondence import BY_HAND, Correspondence
-from engine.errors import MotionComposerError
+from motion_composer.app.gui.commands import push_correspondence
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
+from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["CorrespondencePanel", "JointTree", "LinkView", "MappingModel", "MappingTable",
            "required_joints", "REQUIRED_ROLES", "MIME_TYPE"]
@@ -70,7 +70,7 @@ def required_joints(skeleton) -> dict[str, str]:
         return {}
     fallback = {skeleton.names[0]: "root"}
     try:
-        from engine.conversion.automap import identify
+        from motion_composer.engine.conversion.automap import identify
     except ImportError:
         return fallback
     try:
@@ -911,7 +911,7 @@ class CorrespondencePanel(QtWidgets.QWidget):
         if doc.scene.target is None or doc.scene.performer is None:
             return
         try:
-            from engine.conversion.automap import automap
+            from motion_composer.engine.conversion.automap import automap
         except ImportError:
             self.show_error("Auto-map", "Automatic mapping is not available in this build; "
                             "map the joints by hand.")

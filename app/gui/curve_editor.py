@@ -41,9 +41,10 @@ import numpy as np
 import pyqtgraph as pg
 from scipy.spatial.transform import Rotation
 
-from app.gui.commands import push_displacement
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.correction.displacement import INTERPOLATIONS, ROOT, Curve, DisplacementMap
+from motion_composer.app.gui.commands import push_displacement
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.engine.correction.displacement import (INTERPOLATIONS, ROOT, Curve,
+                                                            DisplacementMap)
 
 __all__ = ["CurveEditor", "KeyGraph", "UNITS", "CHANNEL_COLORS"]
 

@@ -23,15 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from app.gui.jobs import JobRunner
-from app.gui.qt import QtCore, QtGui
-from engine.errors import MotionComposerError
-from engine.kinematics import WorldPose, forward_kinematics
-from engine.motion import Motion
-from engine.project import (MissingSourceError, autosave_path, check_project, find_autosave,
+from motion_composer.app.gui.jobs import JobRunner
+from motion_composer.app.gui.qt import QtCore, QtGui
+from motion_composer.engine.errors import MotionComposerError
+from motion_composer.engine.kinematics import WorldPose, forward_kinematics
+from motion_composer.engine.motion import Motion
+from motion_composer.engine.project import (MissingSourceError, autosave_path, check_project, find_autosave,
                             load_project, new_session, project_from_json, read_sources,
                             remove_autosave_file, save_project, write_autosave)
-from engine.scene import Scene
+from motion_composer.engine.scene import Scene
 
 __all__ = ["Document"]
 
@@ -195,7 +195,7 @@ class Document(QtCore.QObject):
         ``solve``: the new scene's correction is solved in the background (``regenerate``
         makes the automatic constraints again). ``merge``: consecutive edits with the same
         key become one step. False when nothing changes."""
-        from app.gui.commands import push_scene
+        from motion_composer.app.gui.commands import push_scene
         current = self._scene
         if not solve and all(_same(getattr(current.project, k), v) for k, v in changes.items()):
             return False
@@ -208,7 +208,7 @@ class Document(QtCore.QObject):
     def set_source(self, role: str, motion: Motion, source, text: str) -> None:
         """Replace the performer or target (one command): the map is redone, keeping the
         pairs set by hand that still fit (:meth:`engine.scene.Scene.with_source`)."""
-        from app.gui.commands import push_scene
+        from motion_composer.app.gui.commands import push_scene
         current = self._scene
         after = current.with_source(role, motion, source)
         push_scene(self, text, current, after)
@@ -247,7 +247,7 @@ class Document(QtCore.QObject):
     def _solved(self, scene: Scene, outcome: tuple) -> None:
         result, self.solve_seconds = outcome
         self._pending.pop(scene, None)
-        from app.gui.commands import replace_scene
+        from motion_composer.app.gui.commands import replace_scene
         replace_scene(self, scene, result)
         if self._scene is scene:
             old, self._scene = self._scene, _with_viewer(result, self._scene.project.viewer)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from engine.motion import MAX_FPS, Motion
+from motion_composer.engine.motion import MAX_FPS, Motion
 
 from .qt import QtWidgets
 

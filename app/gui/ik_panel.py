@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.errors import IKOptionsError
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.engine.errors import IKOptionsError
 
 __all__ = ["IKPanel", "FIELDS"]
 

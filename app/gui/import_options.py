@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.gui.qt import QtWidgets
-from engine.units import AXES, UNITS
+from motion_composer.app.gui.qt import QtWidgets
+from motion_composer.engine.units import AXES, UNITS
 
 DETECTED = "detected"
 MODES = ("absolute", "relative")

@@ -29,10 +29,10 @@ import dataclasses
 
 import numpy as np
 
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from app.gui.live import live_solver
-from engine.correction.constraints import KINDS, Constraint, ConstraintError
-from engine.rotations import euler_to_quat, quat_to_euler
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.app.gui.live import live_solver
+from motion_composer.engine.correction.constraints import KINDS, Constraint, ConstraintError
+from motion_composer.engine.rotations import euler_to_quat, quat_to_euler
 
 __all__ = ["ConstraintInspector", "Vec3Edit", "KIND_CHOICES", "converted"]
 

@@ -7,8 +7,8 @@ request always wins and nothing is refused. Signals come back on the GUI thread.
 """
 from __future__ import annotations
 
-from app.gui.qt import QtCore
-from app.gui.worker import Job
+from motion_composer.app.gui.qt import QtCore
+from motion_composer.app.gui.worker import Job
 
 __all__ = ["JobRunner"]
 

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import time
 
-from app.gui.commands import push_constraints
-from app.gui.qt import QtCore
-from engine.errors import MotionComposerError
+from motion_composer.app.gui.commands import push_constraints
+from motion_composer.app.gui.qt import QtCore
+from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["LiveSolver", "live_solver", "BUDGET"]
 

@@ -6,8 +6,8 @@ import sys
 import time
 from pathlib import Path
 
-from app.resources import resource_path
-from engine.errors import MotionComposerError
+from motion_composer.app.resources import resource_path
+from motion_composer.engine.errors import MotionComposerError
 
 REPO_RESOURCES = resource_path("")           # the source tree's resources/, or the bundle's
 DEMO_PROJECT = resource_path("demo/demo.mcp")
@@ -71,7 +71,7 @@ def _check_display(*, headless: bool) -> None:
 
 
 def _set_icon(app, window) -> None:
-    from app.gui.qt import QtGui
+    from motion_composer.app.gui.qt import QtGui
     app.setDesktopFileName("motion-composer")       # matches packaging/motion-composer.desktop
     if ICON.is_file():
         icon = QtGui.QIcon(str(ICON))
@@ -106,14 +106,14 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
             (drawn on Qt's offscreen platform then), before Qt is started.
     """
     _check_display(headless=self_test or screenshot is not None)
-    from app.gui.qt import QtCore, application
-    from app.runtime import tune_allocator
+    from motion_composer.app.gui.qt import QtCore, application
+    from motion_composer.app.runtime import tune_allocator
 
     tune_allocator()
     if self_test:
         return _run_self_test()
     app = application()
-    from app.gui.main_window import MainWindow
+    from motion_composer.app.gui.main_window import MainWindow
     window = MainWindow()
     _set_icon(app, window)
     headless = screenshot is not None or app.platformName() in HEADLESS_PLATFORMS
@@ -163,7 +163,7 @@ def _gl_expected(app) -> bool:
 
 def _count_pixels(image, rgb, tol: int = 40) -> int:
     import numpy as np
-    from app.gui.qt import QtGui
+    from motion_composer.app.gui.qt import QtGui
     image = image.convertToFormat(QtGui.QImage.Format.Format_RGB32)
     arr = np.frombuffer(image.constBits(), dtype=np.uint8).reshape(
         image.height(), image.bytesPerLine() // 4, 4)[:, :image.width(), :3][..., ::-1]
@@ -305,13 +305,13 @@ def _run_self_test() -> int:
         # no trace in the user's settings (recent files) or autosave folder
         os.environ["XDG_STATE_HOME"] = os.path.join(scratch, "state")
         try:
-            from app.gui.qt import QtCore, application
+            from motion_composer.app.gui.qt import QtCore, application
             QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
             QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
                                      QtCore.QSettings.Scope.UserScope,
                                      os.path.join(scratch, "settings"))
             app = application()
-            from app.gui.main_window import MainWindow
+            from motion_composer.app.gui.main_window import MainWindow
             window = MainWindow()
             _set_icon(app, window)
             _without_dialogs(window)

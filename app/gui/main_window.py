@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from app.gui.document import Document
-from app.gui.viewport import Viewport
-from engine.errors import MotionComposerError
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.app.gui.document import Document
+from motion_composer.app.gui.viewport import Viewport
+from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
 
@@ -48,16 +48,16 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ building
     def _build_docks(self) -> None:
-        from app.gui.binding_panel import BindingPanel
-        from app.gui.correspondence_panel import CorrespondencePanel
-        from app.gui.curve_editor import CurveEditor
-        from app.gui.playback import PlaybackBar
+        from motion_composer.app.gui.binding_panel import BindingPanel
+        from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
+        from motion_composer.app.gui.curve_editor import CurveEditor
+        from motion_composer.app.gui.playback import PlaybackBar
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
         self.binding_panel = BindingPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self.curve_editor = CurveEditor(self.doc)
-        from app.gui.ik_panel import IKPanel
+        from motion_composer.app.gui.ik_panel import IKPanel
         self.ik_panel = IKPanel(self.doc)
         ik_page = QtWidgets.QWidget()
         ik_box = QtWidgets.QVBoxLayout(ik_page)
@@ -73,8 +73,8 @@ class MainWindow(QtWidgets.QMainWindow):
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
-            from app.gui.inspector import ConstraintInspector
-            from app.gui.timeline import ConstraintTimeline
+            from motion_composer.app.gui.inspector import ConstraintInspector
+            from motion_composer.app.gui.timeline import ConstraintTimeline
             self.timeline = ConstraintTimeline(self.doc)
             self.inspector = ConstraintInspector(self.doc, self.timeline)
             self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
@@ -266,7 +266,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.viewport.frame_all()
 
     def _locate(self, role: str, missing: str) -> str:
-        from engine.formats import open_filters
+        from motion_composer.engine.formats import open_filters
         return self.ask_open_path(f"The {role} clip {missing} has moved: where is it?",
                                   open_filters())
 
@@ -302,7 +302,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.statusBar().showMessage(f"Autosave failed: {exc}", 10000)
 
     def import_dialog(self, side: str) -> None:
-        from engine.formats import open_filters
+        from motion_composer.engine.formats import open_filters
         path = self.ask_open_path(f"Import {side}", open_filters())
         if not path:
             return
@@ -315,8 +315,8 @@ class MainWindow(QtWidgets.QMainWindow):
         showing what detection found); ``{}`` for a glTF character (metres, +Y up by
         definition) and for a file that cannot be read (:meth:`import_file` says why);
         ``None`` when the user cancels."""
-        from app.gui.import_options import ImportOptionsDialog
-        from engine.formats import read_motion, sniff
+        from motion_composer.app.gui.import_options import ImportOptionsDialog
+        from motion_composer.engine.formats import read_motion, sniff
         try:
             if sniff(path).mesh:
                 return {}
@@ -335,8 +335,8 @@ class MainWindow(QtWidgets.QMainWindow):
         by hand that still fit are kept, the rest auto-mapped). ``options`` (``units``,
         ``scale``, ``up_axis``, ``position_mode``) override detection for a BVH file and are
         kept in the project; a doubt about what was detected is shown in the status bar."""
-        from engine.formats import read_motion, read_performer
-        from engine.project import Source
+        from motion_composer.engine.formats import read_motion, read_performer
+        from motion_composer.engine.project import Source
 
         def load():
             # the file's content says its format; a glTF character can only be the target
@@ -357,7 +357,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_error("Nothing to export yet: import a performer and a target and map "
                             "them first.")
             return
-        from engine.formats import save_filters, with_output_suffix
+        from motion_composer.engine.formats import save_filters, with_output_suffix
         path = self.ask_save_path("Export", save_filters())
         if not path:
             return
@@ -370,8 +370,8 @@ class MainWindow(QtWidgets.QMainWindow):
         (.glb/.gltf) with the character's mesh and skin when the target is a glTF character;
         ``options`` (:class:`~app.gui.export_dialog.ExportOptions`) choose frames, frame rate
         and channels (default: all frames, as they are)."""
-        from engine.formats import write_motion
-        from engine.motion import export_selection
+        from motion_composer.engine.formats import write_motion
+        from motion_composer.engine.motion import export_selection
         from .export_dialog import ExportOptions
         options = options or ExportOptions()
 
@@ -392,7 +392,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return False
         if not self.ask_yes_no(f"Motion Composer found unsaved work from an earlier session "
                                f"({auto}). Recover it?"):
-            from engine.project import remove_autosave_file
+            from motion_composer.engine.project import remove_autosave_file
             remove_autosave_file(auto)
             return False
         ok = self._guard(self.doc.recover, auto, project_path, self._locate)

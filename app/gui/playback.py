@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
 
 __all__ = ["PlaybackBar", "SPEEDS"]
 

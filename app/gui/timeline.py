@@ -32,13 +32,14 @@ import dataclasses
 
 import numpy as np
 
-from app.gui.qt import QtCore, QtGui, QtWidgets  # noqa: F401  (Qt set up before pyqtgraph)
+from motion_composer.app.gui.qt import (QtCore, QtGui,  # noqa: F401  (Qt set up before pyqtgraph)
+                                        QtWidgets)
 
 import pyqtgraph as pg  # noqa: E402
 
-from app.gui.live import live_solver  # noqa: E402
-from engine.correction.preview import retimed  # noqa: E402
-from engine.correction.constraints import Constraint, ConstraintError  # noqa: E402
+from motion_composer.app.gui.live import live_solver  # noqa: E402
+from motion_composer.engine.correction.preview import retimed  # noqa: E402
+from motion_composer.engine.correction.constraints import Constraint, ConstraintError  # noqa: E402
 
 __all__ = ["ConstraintTimeline", "ConstraintRow", "FIELDS", "moved_range", "retimed",
            "row_label", "COLORS"]

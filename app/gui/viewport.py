@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.gui.qt import QtCore, QtGui, QtWidgets
-from engine.quaternions import to_matrix
+from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.engine.quaternions import to_matrix
 
 import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
 
@@ -229,7 +229,7 @@ class Viewport(gl.GLViewWidget):
         return None if pose is None else to_view(pose.positions[0, 0])
 
     def _size(self) -> float:
-        from engine.describe import stature
+        from motion_composer.engine.describe import stature
         m = self.doc.scene.target if self.doc.scene.target is not None else self.doc.scene.performer
         if m is None:
             return 1.7
@@ -290,7 +290,7 @@ class Viewport(gl.GLViewWidget):
             if self.skin is not None:
                 self.skin.setVisible(False)
             return
-        from engine.skinning import skin_character
+        from motion_composer.engine.skinning import skin_character
         f = min(doc.scene.viewer.current_frame, motion.num_frames - 1)
         parts = skin_character(character, motion, frames=[f])
         verts = np.concatenate([p[0] for p in parts])
@@ -541,7 +541,7 @@ class Viewport(gl.GLViewWidget):
             i, c, point, off = goal
             px = self.project(point[None])[0]
             if np.hypot(px[0] - ev.position().x(), px[1] - ev.position().y()) <= 14:
-                from app.gui.live import live_solver
+                from motion_composer.app.gui.live import live_solver
                 self._goal_drag = (i, c, off, live_solver(self.doc))
                 self._goal_drag[3].begin()
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 import threading
 import traceback
 
-from app.gui.qt import QtCore
-from engine.errors import MotionComposerError
+from motion_composer.app.gui.qt import QtCore
+from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["Job"]
 

@@ -15,12 +15,12 @@ sys.path.insert(0, str(HERE.parent.parent))
 
 import numpy as np  # noqa: E402
 
-from engine import forward_kinematics, read_bvh  # noqa: E402
-from engine.conversion.automap import automap  # noqa: E402
-from engine.correction.constraints import Constraint  # noqa: E402
-from engine.project import Project, Source, ViewerState, save_project  # noqa: E402
-from engine.scene import solve_project  # noqa: E402
-from engine.conversion import retarget  # noqa: E402
+from motion_composer.engine import forward_kinematics, read_bvh  # noqa: E402
+from motion_composer.engine.conversion.automap import automap  # noqa: E402
+from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
+from motion_composer.engine.project import Project, Source, ViewerState, save_project  # noqa: E402
+from motion_composer.engine.scene import solve_project  # noqa: E402
+from motion_composer.engine.conversion import retarget  # noqa: E402
 
 PERFORMER = HERE.parent / "clips" / "cmu_131_01_walk.bvh"
 TARGET = HERE.parent / "clips" / "fair1_child8_jumping.bvh"

@@ -28,8 +28,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent.parent
 sys.path.insert(0, str(REPO))
 
-from engine import Motion, read_bvh  # noqa: E402
-from engine.formats.gltf import Mesh, read_gltf, write_gltf  # noqa: E402
+from motion_composer.engine import Motion, read_bvh  # noqa: E402
+from motion_composer.engine.formats.gltf import Mesh, read_gltf, write_gltf  # noqa: E402
 
 SKELETON = REPO / "resources" / "clips" / "cmu_rest_tpose.bvh"
 OUTPUTS = (REPO / "tests" / "data" / "test_character.glb",
