@@ -50,3 +50,21 @@ def demo_document():
     doc = Document()
     doc.load_scene(Scene(project, read_bvh(performer), read_bvh(target)))
     return doc
+
+
+def quiet_window(qtbot, tmp_path, monkeypatch):
+    """A real :class:`MainWindow` whose settings and autosaves live in ``tmp_path`` and which
+    asks nothing: errors are kept in ``w.errors``, closing discards. Tests set other answers
+    (``ask_yes_no``, ``ask_open_path``...) on the window they get."""
+    from motion_composer.app.gui.main_window import MainWindow
+    from motion_composer.app.gui.qt import QtCore
+    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
+    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
+                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    w = MainWindow()
+    w.errors = []
+    w.show_error = w.errors.append
+    w.ask_unsaved = lambda: "discard"
+    qtbot.addWidget(w)
+    return w

@@ -11,6 +11,7 @@ import pytest
 
 from motion_composer.app.gui.export_dialog import ExportOptions, ExportOptionsDialog
 from motion_composer.app.gui.qt import QtCore, QtWidgets
+from gui_support import quiet_window
 from conftest import clip_path
 from motion_composer.engine.formats import read_motion
 from motion_composer.engine.kinematics import forward_kinematics
@@ -21,16 +22,7 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from motion_composer.app.gui.main_window import MainWindow
-    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
-                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    w = MainWindow()
-    w.errors = []
-    w.show_error = w.errors.append
-    w.ask_unsaved = lambda: "discard"
-    qtbot.addWidget(w)
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
     assert w.import_file("performer", WALK) and w.import_file("target", TPOSE), w.errors
     return w
 

@@ -6,7 +6,8 @@ import shutil
 import pytest
 
 from motion_composer.app.gui.export_dialog import ExportOptions
-from motion_composer.app.gui.qt import QtCore
+from motion_composer.app.gui.qt import QtCore  # noqa: F401  (Qt set up before the widgets)
+from gui_support import quiet_window
 from conftest import clip_path, shared_path
 from motion_composer.engine.formats import (open_filters, read_character, read_motion,
                                             save_filters, sniff)
@@ -17,17 +18,8 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from motion_composer.app.gui.main_window import MainWindow
-    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
-                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    w = MainWindow()
-    w.errors = []
-    w.show_error = w.errors.append
-    w.ask_unsaved = lambda: "discard"
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
     w.ask_export_options = lambda motion: ExportOptions()      # File > Export's defaults
-    qtbot.addWidget(w)
     return w
 
 

@@ -6,6 +6,7 @@ import pytest
 
 from motion_composer.app.gui.import_options import ImportOptionsDialog
 from motion_composer.app.gui.qt import QtCore, QtWidgets
+from gui_support import quiet_window
 from conftest import clip_path, shared_path
 from detect_cases import renamed, written_in
 from motion_composer.engine.formats import read_motion
@@ -17,16 +18,7 @@ TPOSE = clip_path("cmu_rest_tpose.bvh")
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from motion_composer.app.gui.main_window import MainWindow
-    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
-                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    w = MainWindow()
-    w.errors = []
-    w.show_error = w.errors.append
-    w.ask_unsaved = lambda: "discard"
-    qtbot.addWidget(w)
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
     return w
 
 

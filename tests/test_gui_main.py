@@ -9,26 +9,17 @@ import pytest
 
 from motion_composer.app.gui.qt import QtCore
 from conftest import REPO, clip_path
-from gui_support import WAIT_MS
+from gui_support import WAIT_MS, quiet_window
 
 DEMO = REPO / "resources" / "demo" / "demo.mcp"
 
 
 @pytest.fixture()
 def window(qtbot, tmp_path, monkeypatch):
-    from motion_composer.app.gui.main_window import MainWindow
-    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
-                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    w = MainWindow()
-    errors = []
-    w.show_error = errors.append
-    w.errors = errors
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
     w.answers = []
     w.ask_unsaved = lambda: w.answers.pop(0) if w.answers else "discard"
     w.ask_yes_no = lambda question: True
-    qtbot.addWidget(w)
     yield w
     w.doc.undo_stack.setClean()
 

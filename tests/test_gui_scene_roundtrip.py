@@ -13,6 +13,7 @@ import dataclasses
 import pytest
 
 from motion_composer.app.gui.qt import QtCore
+from gui_support import quiet_window
 from conftest import clip_path
 from motion_composer.engine.conversion import BindOptions, RootOptions
 from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
@@ -206,17 +207,8 @@ def test_an_edit_and_its_undo_save_the_same_bytes(qtbot, saved, tmp_path, name):
 # --------------------------------------------------------------------------- the window
 @pytest.fixture
 def window(qtbot, tmp_path, monkeypatch):
-    from motion_composer.app.gui.main_window import MainWindow
-    QtCore.QSettings.setDefaultFormat(QtCore.QSettings.Format.IniFormat)
-    QtCore.QSettings.setPath(QtCore.QSettings.Format.IniFormat,
-                             QtCore.QSettings.Scope.UserScope, str(tmp_path / "settings"))
-    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
-    w = MainWindow()
-    w.errors = []
-    w.show_error = w.errors.append
-    w.ask_unsaved = lambda: "discard"
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
     w.ask_yes_no = lambda question: False
-    qtbot.addWidget(w)
     w.show()
     yield w
     w.doc.undo_stack.setClean()

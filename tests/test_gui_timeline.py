@@ -21,7 +21,7 @@ pytest.importorskip("pyqtgraph")
 from motion_composer.app.gui.qt import QtCore, QtGui  # noqa: E402
 from motion_composer.app.gui.commands import push_constraints  # noqa: E402
 from motion_composer.app.gui.inspector import ConstraintInspector  # noqa: E402
-from motion_composer.app.gui.live import LiveSolver, live_solver  # noqa: E402
+from motion_composer.app.gui.live import live_solver  # noqa: E402
 from motion_composer.app.gui.timeline import FIELDS, ConstraintTimeline, moved_range  # noqa: E402
 from motion_composer.engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
                                        overlapping, retimed, window_problem)
