@@ -382,6 +382,8 @@ def cmd_retarget(args) -> int:
         constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor,
         ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
+    for line in result.report["warnings"]:
+        print(f"motion-composer: warning: {line}", file=sys.stderr)
     written = _write_output(args, result.motion, character)  # mesh and skin when it has
     if args.save_map:
         correspondence.save(args.save_map)

@@ -172,6 +172,7 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
                           root=RootOptions(**recipe.root), auto_contacts=recipe.auto_contacts,
                           floor=recipe.floor, ik_options=IKOptions(**recipe.ik))
         result = Scene(project, performer, target).solve(regenerate=True)
+        summary["warnings"] += result.report["warnings"]
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         out = output_path(recipe, clip, out_dir)
         write_bvh(result.motion, out)

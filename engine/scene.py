@@ -110,7 +110,9 @@ class Solution:
         scene: the scene with the constraints solved and their correction as keys.
         constraints: every constraint enforced.
         correction: the dense IK result (``None`` without enabled constraints).
-        report: JSON-ready figures (residuals, contact drift, timings).
+        report: JSON-ready figures (residuals, contact drift, timings) and ``"warnings"``:
+            lines on what the settings asked for but could not do (feet for automatic
+            contacts, :meth:`Scene.contact_warnings`).
     """
 
     scene: "Scene"
@@ -337,6 +339,25 @@ class Scene:
                         out.append(floor_constraint(joint, composed.num_frames, p.floor))
         return out
 
+    def contact_warnings(self) -> list[str]:
+        """Why automatic contacts (``auto_contacts``) cannot pin some or all feet, one line
+        each: no feet found on the target or the performer, or performer feet the map leaves
+        unmapped. Empty when every foot is pinned or automatic contacts are off."""
+        if not self.project.auto_contacts or not self.has_sources:
+            return []
+        performer_feet = [a for a, _ in find_feet(self.performer.skeleton)]
+        mapped = set(self.correspondence.pairs.values())
+        unmapped = [a for a in performer_feet if a not in mapped]
+        if not find_feet(self.target.skeleton) and len(unmapped) == len(performer_feet):
+            return ["no feet found on the target: no automatic contacts"]
+        if not performer_feet:
+            return ["no feet found on the performer: no automatic contacts"]
+        if len(unmapped) == len(performer_feet):
+            return [f"the performer's feet ({', '.join(unmapped)}) are not mapped to the "
+                    "target: no automatic contacts"]
+        return [f"the performer's foot {a} is not mapped to the target: no automatic "
+                "contacts on it" for a in unmapped]
+
     def contacts(self) -> list:
         """The performer's foot contacts (on mapped feet) under the project's options."""
         mapped = set(self.correspondence.pairs.values())
@@ -363,6 +384,7 @@ class Scene:
                                       "(a performer, a target and a map are needed)")
         timings["conversion_s"] = time.perf_counter() - t0
         chosen = list(self.constraints if constraints is None else constraints)
+        warnings = self.contact_warnings() if regenerate else []
         if regenerate:
             t0 = time.perf_counter()
             chosen = [c for c in chosen if not c.auto] + self.automatic_constraints()
@@ -378,6 +400,7 @@ class Scene:
                             for k, v in correction.seconds.items()})
         scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
+        report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 
     def preview(self, constraints: list, *, base_constraints: list | None = None,

@@ -238,14 +238,14 @@ class Document(QtCore.QObject):
 
         def work(progress, cancel):
             t0 = time.perf_counter()
-            solved = scene.solve(progress=progress, cancel=cancel, **kwargs).scene
-            return solved, time.perf_counter() - t0
+            solution = scene.solve(progress=progress, cancel=cancel, **kwargs)
+            return solution.scene, time.perf_counter() - t0, solution.report["warnings"]
 
         self.jobs.run("Solving", work, lambda result: self._solved(scene, result),
                       on_end=lambda outcome: self._solve_ended(scene, outcome))
 
     def _solved(self, scene: Scene, outcome: tuple) -> None:
-        result, self.solve_seconds = outcome
+        result, self.solve_seconds, warnings = outcome
         self._pending.pop(scene, None)
         from motion_composer.app.gui.commands import replace_scene
         replace_scene(self, scene, result)
@@ -254,6 +254,8 @@ class Document(QtCore.QObject):
             self._preview = None
             self._emit_changes(old, self._scene)
             self.motionChanged.emit()
+        for line in warnings:
+            self.noted.emit(f"Warning: {line}")
         self.solved.emit()
 
     def _solve_ended(self, scene: Scene, outcome: str) -> None:

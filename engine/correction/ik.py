@@ -531,7 +531,8 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     step = dq[:, 3:].reshape(nb, len(joints), 3)
     # at most step_cap for any joint in one step, scaling the whole step alike so that it
     # stays in the null space of the higher priorities
-    biggest = np.linalg.norm(step, axis=-1).max(axis=1)
+    # initial: a task on the root alone turns no joint
+    biggest = np.linalg.norm(step, axis=-1).max(axis=1, initial=0.0)
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)

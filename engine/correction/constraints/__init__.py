@@ -37,6 +37,10 @@ KINDS: dict[str, ConstraintKind] = {k.name: k for k in (position.KIND, trajector
                                                         plane.KIND, orientation.KIND)}
 PLANE_SIDES = plane.KIND.variants
 
+#: the largest weight: a task's rows scaled further only drown the other tasks of its level
+#: in rounding error
+MAX_WEIGHT = 1e6
+
 
 @dataclass(frozen=True, eq=False)
 class Constraint:
@@ -83,10 +87,11 @@ class Constraint:
                 or self.priority < 1:
             raise ConstraintError(f"{label}: priority must be a whole number from 1 (highest), "
                                   f"not {self.priority!r}", "priority")
-        if not (isinstance(self.weight, (int, float)) and limits.problem(self.weight) is None
-                and self.weight > 0):
+        if isinstance(self.weight, bool) or not (
+                isinstance(self.weight, (int, float)) and limits.problem(self.weight) is None
+                and 0 < self.weight <= MAX_WEIGHT):
             raise ConstraintError(f"{label}: weight must be a positive number of at most "
-                                  f"{limits.MAX_MAGNITUDE:g}, not {self.weight!r}", "weight")
+                                  f"{MAX_WEIGHT:g}, not {self.weight!r}", "weight")
         if not isinstance(self.goal, dict):
             raise ConstraintError(f"{label}: goal must be an object, not {self.goal!r}", "goal")
         goal = self.kind_object.validate(dict(self.goal), self.start, self.end, label)

@@ -60,13 +60,28 @@ def unit_vector(v: np.ndarray) -> np.ndarray:
     return v if abs(norm - 1.0) <= 1e-12 else v / norm
 
 
+def numbers(value, field: str, label: str, what: str) -> np.ndarray:
+    """``value`` (numbers, or nested lists of them) as a float array; a
+    :class:`ConstraintError` on ``field`` saying ``what`` it must be when an element is not a
+    number (a string, a boolean, null) or the lists are ragged."""
+    def plain(v) -> bool:
+        if isinstance(v, np.ndarray):
+            return v.dtype.kind in "iuf"
+        if isinstance(v, (list, tuple)):
+            return all(plain(x) for x in v)
+        return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+    try:
+        if not plain(value):
+            raise ValueError
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConstraintError(f"{label}: {field} must be {what}, not {value!r}",
+                              field) from None
+
+
 def vector(value, n: int, field: str, label: str) -> np.ndarray:
     """``value`` as ``n`` finite floats; a :class:`ConstraintError` on ``field`` otherwise."""
-    try:
-        arr = np.array(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise ConstraintError(f"{label}: {field} must be {n} numbers, not {value!r}",
-                              field) from None
+    arr = numbers(value, field, label, f"{n} numbers").reshape(-1)
     if arr.shape != (n,) or not limits.all_usable(arr):
         raise ConstraintError(f"{label}: {field} must be {n} finite numbers of magnitude at "
                               f"most {limits.MAX_MAGNITUDE:g}, not {value!r}", field)

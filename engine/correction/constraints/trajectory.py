@@ -10,18 +10,10 @@ import numpy as np
 
 from ... import limits
 from . import position
-from .base import ConstraintError, GoalField
+from .base import ConstraintError, GoalField, numbers
 from .position import PositionKind
 
 __all__ = ["TrajectoryKind", "KIND"]
-
-
-def _array(value, field: str, label: str) -> np.ndarray:
-    try:
-        return np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ConstraintError(f"{label}: {field} must be rows of numbers, not {value!r}",
-                              field) from None
 
 
 class TrajectoryKind(PositionKind):
@@ -43,7 +35,8 @@ class TrajectoryKind(PositionKind):
 
     def validate(self, goal, start, end, label):
         if "points" in goal:
-            pts = _array(goal["points"], "goal.points", label)
+            pts = numbers(goal["points"], "goal.points", label,
+                          "rows of [x, y, z] numbers, one per frame")
             n = end - start + 1
             if pts.ndim != 2 or pts.shape != (n, 3) or not limits.all_usable(pts):
                 raise ConstraintError(f"{label}: goal.points must hold one [x, y, z] per "
@@ -52,7 +45,8 @@ class TrajectoryKind(PositionKind):
                                       f"shape {pts.shape}", "goal.points")
             return {"points": pts}
         if "keys" in goal:
-            keys = _array(goal["keys"], "goal.keys", label)
+            keys = numbers(goal["keys"], "goal.keys", label,
+                           "rows of [frame, x, y, z] numbers, all of one length")
             if keys.ndim != 2 or keys.shape[1] != 4 or len(keys) < 1 or \
                     not limits.all_usable(keys) or np.any(np.diff(keys[:, 0]) <= 0):
                 raise ConstraintError(f"{label}: goal.keys must be [[frame, x, y, z], ...] "
