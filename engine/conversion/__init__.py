@@ -28,7 +28,8 @@ Unmapped target joints keep their bound local rotation (they follow their parent
 target chain has more joints than the performer maps (CC3's spine under CMU's), the
 ``distribute="even"`` default spreads the chain's turn evenly over its joints and then corrects
 the chain so that its end still lies exactly along the virtual bone; ``"first"`` puts it all on
-the chain's first joint.
+the chain's first joint. A branching joint keeps its whole turn (it also places its other bones:
+a hand's thumb does not hang from the metacarpal of its primary finger), so its twist is kept.
 """
 from .automap import automap
 from .binding import BindOptions, Binding, bind, is_upright, reference_pose

@@ -144,7 +144,7 @@ class Binding:
         performer_rest_positions: ``(Jp, 3)`` [m] performer positions in its reference pose.
         bones: per mapped target joint, its virtual bones (see :class:`_Bones`).
         chains: per mapped target joint, the unmapped joints between it and its primary
-            child (turned together with ``distribute="even"``).
+            child (turned together with ``distribute="even"``); none for a branching joint.
         body_root: the top-most mapped target joint (its translation follows the performer).
         above_mapped: ``(J,)`` joints with a mapped descendant (the only unmapped joints whose
             world rotation conversion needs).
@@ -403,10 +403,12 @@ def _rolls_by_bones(ref: np.ndarray) -> bool:
 
 def _chains(tsk: Skeleton, bones: dict) -> dict[int, list[int]]:
     """Per mapped target joint with a primary bone, the unmapped joints between it and its
-    primary child, top first."""
+    primary child, top first. A branching joint has none: its turn also places its other
+    bones and carries its twist (a hand's thumb hangs off the hand, not off the metacarpal
+    towards its primary finger), so it is not spread down one of them."""
     chains: dict[int, list[int]] = {}
     for j, b in bones.items():
-        if b.children:
+        if b.children and not b.roll_by_bones:
             path = []
             k = tsk.parents[b.children[0]]
             while k != j:
