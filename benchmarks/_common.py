@@ -180,10 +180,12 @@ class Row:
     note: str = ""
 
 
-def print_table(title: str, rows: list[Row]) -> None:
-    """Print ``rows`` as an aligned plain-text table with PASS/MISS per target."""
+def print_table(title: str, rows: list[Row], *, loaded: bool = False) -> None:
+    """Print ``rows`` as an aligned plain-text table with PASS/MISS per target (LOADED
+    instead where ``loaded``: the machine was too busy for the figure to be judged)."""
     header = ("measure", "figure", "target", "result", "")
-    cells = [(r.what, r.value, r.target, "" if r.ok is None else ("PASS" if r.ok else "MISS"),
+    cells = [(r.what, r.value, r.target,
+              "" if r.ok is None else ("LOADED" if loaded else "PASS" if r.ok else "MISS"),
               r.note) for r in rows]
     widths = [max(len(str(c[i])) for c in [header, *cells]) for i in range(4)]
     line = "  ".join("-" * w for w in widths)
@@ -197,7 +199,8 @@ def print_table(title: str, rows: list[Row]) -> None:
     print(line)
     targets = [r for r in rows if r.ok is not None]
     met = sum(1 for r in targets if r.ok)
-    print(f"{met} of {len(targets)} targets met")
+    print(f"{met} of {len(targets)} targets met" + (" (machine loaded: not judged)"
+                                                     if loaded else ""))
 
 
 def environment() -> str:

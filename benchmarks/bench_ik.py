@@ -13,9 +13,16 @@ Measures, on one core (BLAS threads pinned to 1 before numpy loads):
   handle;
 * with ``--with-warm-start``, the paper's own scheme for comparison: the same job solved
   frame by frame with a warm start from t - 1 (no target; it reaches the same posture; about
-  a minute).
+  a minute);
+* scaling: contact building (detection and constraints) on the walk tiled to 10,000 and
+  40,000 frames, timed in this process: the 40k/10k ratio (target <= 4.4, linear), and the
+  peak memory of IK with automatic contacts on 100,000 frames, measured in a fresh
+  subprocess as ``ru_maxrss`` above its baseline once the tiled clip is converted (target
+  < 1 GB).
 
-Figures are medians of ``--repeat`` runs (5) after a warm-up. This is a report, not a test.
+Figures are medians of ``--repeat`` runs (5) after a warm-up. The load average is printed;
+above 1 the targets read LOADED instead of PASS or MISS (a busy machine's figures are not
+judged). This is a report, not a test.
 """
 from __future__ import annotations
 
@@ -28,13 +35,65 @@ from _common import prepare  # noqa: E402
 ALLOCATOR = prepare(one_core=True)    # as motion-composer sets itself up
 
 import argparse  # noqa: E402
+import json  # noqa: E402
+import os  # noqa: E402
+import time  # noqa: E402
+
 import numpy as np  # noqa: E402
 
-from _common import (Row, environment, fmt_seconds, print_table, time_runs,  # noqa: E402
-                     SHARED_DATA)
+from _common import (Row, environment, fmt_seconds, max_rss_mib, print_table,  # noqa: E402
+                     proc_status_mib, run_child, time_runs, SHARED_DATA)
 
 FPS_TARGET = 1000.0
 EDIT_TARGET = 0.1           # [s]
+SCALING_TARGET = 4.4        # 40k/10k time ratio of contact building
+SCALING_FRAMES = (10_000, 40_000)
+MEMORY_FRAMES = 100_000
+MEMORY_TARGET = 1024.0      # [MiB] peak above baseline
+WALK = SHARED_DATA / "cmu_max_131_01_walk.bvh"
+BANDAI = SHARED_DATA / "bandai1_walk_normal_001.bvh"
+
+
+def _tiled_job(frames: int):
+    """The walk repeated to ``frames`` frames, and its conversion onto Bandai."""
+    from motion_composer.engine import read_bvh
+    from motion_composer.engine.conversion import retarget
+    from motion_composer.engine.conversion.automap import automap
+    performer, target = read_bvh(WALK), read_bvh(BANDAI)
+    corr = automap(target.skeleton, performer.skeleton)
+    tiled = performer.frames(np.resize(np.arange(performer.num_frames), frames))
+    return tiled, retarget(tiled, target, corr), corr
+
+
+def _contact_building(performer, composed, corr):
+    from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts
+    return contact_constraints(detect_contacts(performer), performer, composed, corr.pairs)
+
+
+def _child_memory(frames: int) -> None:
+    """Print, as JSON, the peak memory of contacts and IK on the tiled walk above the
+    baseline of the converted clip."""
+    from motion_composer.engine.correction.enforcement import enforce
+    performer, composed, corr = _tiled_job(frames)
+    baseline = max_rss_mib()
+    t0 = time.perf_counter()
+    cons = _contact_building(performer, composed, corr)
+    enforce(composed, cons)
+    print(json.dumps({"baseline_mib": baseline, "peak_above_mib": max_rss_mib() - baseline,
+                      "hwm_mib": proc_status_mib("VmHWM"), "constraints": len(cons),
+                      "seconds": time.perf_counter() - t0}))
+
+
+def _scaling():
+    """Seconds of contact building on the tiled walk of each of ``SCALING_FRAMES``."""
+    jobs = [_tiled_job(n) for n in SCALING_FRAMES]
+    _contact_building(*jobs[0])                                     # warm-up
+    out = []
+    for job in jobs:
+        t0 = time.perf_counter()
+        _contact_building(*job)
+        out.append(time.perf_counter() - t0)
+    return out
 
 
 
@@ -43,7 +102,16 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--with-warm-start", action="store_true",
                         help="also time the paper's frame-by-frame scheme (about a minute)")
+    parser.add_argument("--child-memory", type=int, metavar="FRAMES", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.child_memory:
+        _child_memory(args.child_memory)
+        return
+    if not (WALK.is_file() and BANDAI.is_file()):
+        sys.exit(f"error: this benchmark needs {WALK} and {BANDAI} (set MC_SHARED_DATA)")
+    load = os.getloadavg()[0]
+    # first, while this process is small (ru_maxrss carries over into a child)
+    memory = run_child(Path(__file__), ["--child-memory", str(MEMORY_FRAMES)], timeout=1800)
 
     from motion_composer.engine import forward_kinematics, read_bvh
     from motion_composer.engine.correction.constraints import Constraint
@@ -52,11 +120,7 @@ def main() -> None:
     from motion_composer.engine.correction.enforcement import enforce
     from motion_composer.engine.conversion import retarget
 
-    walk = SHARED_DATA / "cmu_max_131_01_walk.bvh"
-    bandai = SHARED_DATA / "bandai1_walk_normal_001.bvh"
-    if not (walk.is_file() and bandai.is_file()):
-        sys.exit(f"error: this benchmark needs {walk} and {bandai} (set MC_SHARED_DATA)")
-    performer, target = read_bvh(walk), read_bvh(bandai)
+    performer, target = read_bvh(WALK), read_bvh(BANDAI)
     from motion_composer.engine.conversion.automap import automap
     corr = automap(target.skeleton, performer.skeleton)
     how = "automatic mapping"
@@ -93,9 +157,14 @@ def main() -> None:
     warm = (time_runs(lambda: enforce(composed, job, warm_start=True), 1, warmup=0,
                       label="warm start") if args.with_warm_start else None)
     fps = F / full.median
+    short, long = _scaling()
+    ratio = long / short
+    load = max(load, os.getloadavg()[0])
 
     print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
-    print(f"{walk.name} ({F} frames) onto {bandai.name}'s skeleton, {how}; "
+    print(f"load average (1 min, the highest seen): {load:.2f}"
+          + (" - over 1: targets read LOADED, not judged" if load > 1 else ""))
+    print(f"{WALK.name} ({F} frames) onto {BANDAI.name}'s skeleton, {how}; "
           f"{len(contacts)} contacts -> {len(cons)} constraints, plus a hand constraint\n")
     print_table("Whole-body IK (two passes)", [
         Row("whole clip, both passes (median)", fmt_seconds(full.median), "",
@@ -111,7 +180,16 @@ def main() -> None:
             residual <= 1e-3),
         Row("planted-foot drift, direct conversion", f"{drift_d * 1000:.1f} mm", ""),
         Row("planted-foot drift, with contacts", f"{drift_c * 1000:.2f} mm", ""),
-    ])
+        Row(f"contact building, {SCALING_FRAMES[0]:,} / {SCALING_FRAMES[1]:,} frames",
+            f"{fmt_seconds(short)} / {fmt_seconds(long)}", ""),
+        Row(f"  ratio {SCALING_FRAMES[1] // 1000}k/{SCALING_FRAMES[0] // 1000}k", f"{ratio:.2f}",
+            f"<= {SCALING_TARGET}", ratio <= SCALING_TARGET),
+        Row(f"IK with automatic contacts, {MEMORY_FRAMES:,} frames: peak memory",
+            f"{memory['peak_above_mib']:,.0f} MiB", f"< {MEMORY_TARGET:,.0f} MiB",
+            memory["peak_above_mib"] < MEMORY_TARGET,
+            note=f"above a baseline of {memory['baseline_mib']:,.0f} MiB; "
+                 f"{memory['constraints']:,} constraints in {fmt_seconds(memory['seconds'])}"),
+    ], loaded=load > 1)
 
 
 if __name__ == "__main__":

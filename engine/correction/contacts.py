@@ -171,6 +171,11 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             spans[previous[target]][1] = min(spans[previous[target]][1], before.end + half)
         spans[i] = [lo, min(F - 1, c.end + ramp)]
         previous[target] = i
+    # each joint's planted height, once per joint (not per contact: linear in the clip)
+    planted_t = {t: max(0.0, np.percentile(t_pos[:, sk.index[t], 1] - ground, 5.0))
+                 for t in {by_performer[contacts[i].joint] for i in spans}}
+    planted_p = {p: np.percentile(p_pos[:, performer.skeleton.index[p], 1] - p_floor, 5.0)
+                 for p in {contacts[i].joint for i in spans}}
     out = []
     for i in order:
         if i not in spans:
@@ -180,12 +185,10 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         smooth_in, smooth_out = spans[i]
         j = sk.index[target]
         pj = performer.skeleton.index[c.joint]
-        planted_t = max(0.0, np.percentile(t_pos[:, j, 1] - ground, 5.0))
-        planted_p = np.percentile(p_pos[:, pj, 1] - p_floor, 5.0)
         window = slice(c.start, c.end + 1)
-        lift = float(np.median(p_pos[window, pj, 1] - p_floor)) - planted_p
+        lift = float(np.median(p_pos[window, pj, 1] - p_floor)) - planted_p[c.joint]
         goal = np.median(t_pos[window, j], axis=0)
-        goal[1] = t_floor + planted_t + max(lift, 0.0) * ratio
+        goal[1] = t_floor + planted_t[target] + max(lift, 0.0) * ratio
         name = f"contact {target} {c.start}-{c.end}"
         out.append(Constraint(joint=target, kind="position", goal={"point": goal},
                               smooth_in=smooth_in, start=c.start, end=c.end,

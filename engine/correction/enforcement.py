@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,12 @@ from ..kinematics import fk_arrays
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize, qpow_many
 
-__all__ = ["Correction", "enforce", "describe_residuals"]
+__all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FRAMES"]
+
+#: Frames solved together at most: a long clip is solved in chunks of this many frames so
+#: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
+#: same as the whole batch's: every frame is solved on its own).
+CHUNK_FRAMES = 2048
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +66,8 @@ class Correction:
         rotvecs: ``(F, J, 3)`` [rad] dense rotation offsets (parent frame, ``exp(r) * local``).
         root: ``(F, 3)`` [m] root translation offsets.
         residual: constraint index -> ``(F,)`` the task's residual at each frame where it was
-            solved (metres; radians for orientation; NaN where not solved).
+            solved (metres; radians for orientation; NaN where not solved); a
+            :class:`Residuals` mapping, which keeps only the solved frames.
         iterations: ``(F,)`` solver iterations per frame in pass two.
         seconds: wall time of each pass.
     """
@@ -78,6 +85,33 @@ class Correction:
         return DisplacementMap.from_dense(self.motion.skeleton, self.rotvecs, self.root,
                                           rotation_tolerance=rotation_tolerance,
                                           translation_tolerance=translation_tolerance)
+
+
+class Residuals(Mapping):
+    """Constraint index -> ``(F,)`` its residual at each frame where it was solved (NaN
+    elsewhere), built on access from the solved frames alone: a long clip with thousands of
+    contacts keeps memory linear in the clip, not in contacts x frames."""
+
+    def __init__(self, num_frames: int, count: int):
+        self._num_frames = num_frames
+        self._parts: dict[int, list] = {i: [] for i in range(count)}
+
+    def add(self, index: int, frames: np.ndarray, values: np.ndarray) -> None:
+        """Record constraint ``index``'s residual ``values`` at ``frames`` (both ``(n,)``)."""
+        self._parts[index].append((frames, values))
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        parts = self._parts[index]
+        out = np.full(self._num_frames, np.nan)
+        for frames, values in parts:
+            out[frames] = values
+        return out
+
+    def __iter__(self):
+        return iter(self._parts)
+
+    def __len__(self) -> int:
+        return len(self._parts)
 
 
 def _check(constraints, composed: Motion) -> list:
@@ -141,6 +175,7 @@ class _Problem:
     warm_start: bool
     progress: object
     cancel: object
+    chunk_frames: int = CHUNK_FRAMES
 
     @property
     def skeleton(self):
@@ -162,7 +197,7 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
     sk, F = problem.skeleton, problem.num_frames
     rot = attraction_rot.copy()
     tra = attraction_tra.copy()
-    residual = {i: np.full(F, np.nan) for i in range(len(problem.cons))}
+    residual = Residuals(F, len(problem.cons))
     iters = np.zeros(F, dtype=np.intp)
     slots = _assign_slots(entries, problem.cons, sk, F)
     if not slots:
@@ -178,18 +213,35 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
         res, it = _solve_in_time_order(problem, tasks, frames, rot, tra, attraction_rot,
                                        attraction_tra)
     else:
-        r, t, res, it = solve_frames(sk, tasks, rot[frames], tra[frames],
-                                     attraction_rot[frames], attraction_tra[frames, 0],
-                                     problem.options)
-        rot[frames], tra[frames] = r, t
+        res, it = _solve_in_chunks(problem, tasks, frames, rot, tra, attraction_rot,
+                                   attraction_tra)
     iters[frames] = it
     for col, sl in enumerate(slots):
         owner = sl["owner"][frames]
-        for i in np.unique(owner[owner >= 0]):
-            sel = owner == i
-            residual[int(i)][frames[sel]] = res[sel, col]
+        order = np.argsort(owner, kind="stable")         # each owner's frames, in one sort
+        ids, first = np.unique(owner[order], return_index=True)
+        for i, sel in zip(ids, np.split(order, first[1:])):
+            if i >= 0:
+                residual.add(int(i), frames[sel], res[sel, col])
     problem.check_cancel()
     return rot, tra, residual, iters
+
+
+def _solve_in_chunks(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
+                     attraction_tra):
+    """``frames`` solved as batches of at most ``problem.chunk_frames``, each from its
+    attraction posture; ``rot`` and ``tra`` are updated in place. Returns residuals ``(n, T)``
+    and iterations ``(n,)``."""
+    res = np.zeros((len(frames), len(tasks)))
+    it = np.zeros(len(frames), dtype=np.intp)
+    for lo in range(0, len(frames), problem.chunk_frames):
+        part = slice(lo, lo + problem.chunk_frames)
+        f = frames[part]
+        rot[f], tra[f], res[part], it[part] = solve_frames(
+            problem.skeleton, [task.take(part) for task in tasks], rot[f], tra[f],
+            attraction_rot[f], attraction_tra[f, 0], problem.options)
+        problem.check_cancel()
+    return res, it
 
 
 def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
@@ -315,7 +367,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 
 
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
-            warm_start: bool = False, progress=None, cancel=None) -> Correction:
+            warm_start: bool = False, progress=None, cancel=None,
+            chunk_frames: int = CHUNK_FRAMES) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -328,6 +381,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         progress: called with a fraction in [0, 1].
         cancel: called between batches; returning True stops with
             :class:`~engine.errors.MotionComposerError`.
+        chunk_frames: at most this many frames are solved as one batch (bounds the memory
+            of a long clip; the result does not depend on it); >= 1.
     """
     from ..describe import stature
 
@@ -335,7 +390,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     options = options if options is not None else IKOptions()
     if options.scale is None:
         options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
-    problem = _Problem(composed, cons, options, warm_start, progress, cancel)
+    if chunk_frames < 1:
+        raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
+    problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames)
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1 = _pass_one(problem)
