@@ -68,3 +68,32 @@ def quiet_window(qtbot, tmp_path, monkeypatch):
     w.ask_unsaved = lambda: "discard"
     qtbot.addWidget(w)
     return w
+
+
+def skinned_character_in_window(qtbot, tmp_path, character):
+    """Import the bundled CMU walk as performer and ``character`` (a glTF file) as target in a
+    real window, and read the skinned mesh's vertices at frames 100 and 400 and the character
+    exported back as GLB: ``(doc, viewport, first, second, exported)``."""
+    import pytest
+    from conftest import clip_path
+    from motion_composer.app.gui.main_window import MainWindow
+    from motion_composer.engine.formats.gltf import read_gltf
+    require_gl()
+    w = MainWindow()
+    qtbot.addWidget(w)
+    w.show_error = lambda message: pytest.fail(message)
+    w.resize(1200, 800)
+    w.show()
+    assert w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
+    assert w.import_file("target", character)
+    doc, v = w.doc, w.viewport
+    assert doc.scene.ready and doc.scene.character is not None
+    assert v.skin is not None and v.skin.visible()
+    doc.set_frame(100)
+    first = v.skin.opts["meshdata"].vertexes().copy()
+    doc.set_frame(400)
+    second = v.skin.opts["meshdata"].vertexes().copy()
+    assert w.export_bvh(tmp_path / "out.glb")
+    exported = read_gltf(tmp_path / "out.glb")
+    doc.undo_stack.setClean()
+    return doc, v, first, second, exported

@@ -149,32 +149,14 @@ def test_each_kind_draws_its_goal_as_it_says(view):
 
 
 def test_a_gltf_character_is_drawn_as_a_skinned_mesh_that_follows_the_motion(qtbot, tmp_path):
-    require_gl()
-    from conftest import clip_path, shared_path
-    from motion_composer.app.gui.main_window import MainWindow
+    from conftest import shared_path
+    from gui_support import skinned_character_in_window
     robot = shared_path("target_robot_expressive.glb")
-    w = MainWindow()
-    qtbot.addWidget(w)
-    w.show_error = lambda message: pytest.fail(message)
-    w.resize(1200, 800)
-    w.show()
-    assert w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
-    assert w.import_file("target", robot)
-    doc, v = w.doc, w.viewport
-    assert doc.scene.ready and doc.scene.character is not None
-    assert v.skin is not None and v.skin.visible()
-    doc.set_frame(100)
-    first = v.skin.opts["meshdata"].vertexes().copy()
-    doc.set_frame(400)
-    second = v.skin.opts["meshdata"].vertexes()
+    doc, _v, first, second, back = skinned_character_in_window(qtbot, tmp_path, robot)
     assert first.shape == second.shape and first.shape[0] > 1000
     assert np.abs(first - second).max() > 0.05            # the mesh moves with the motion
     # exported onto the character as glTF, with its mesh
-    from motion_composer.engine.formats.gltf import read_gltf
-    assert w.export_bvh(tmp_path / "out.glb")
-    back = read_gltf(tmp_path / "out.glb")
     assert back.skeleton.names == doc.scene.target.skeleton.names and back.meshes
-    doc.undo_stack.setClean()
 
 
 def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):

@@ -101,30 +101,12 @@ def test_the_cli_reads_it_and_retargets_the_bundled_walk_onto_it(tmp_path, capsy
 
 
 def test_the_window_draws_it_as_a_skinned_mesh(qtbot, tmp_path):
-    from gui_support import require_gl
-    require_gl()
-    from motion_composer.app.gui.main_window import MainWindow
-    w = MainWindow()
-    qtbot.addWidget(w)
-    w.show_error = lambda message: pytest.fail(message)
-    w.resize(1200, 800)
-    w.show()
-    assert w.import_file("performer", clip_path("cmu_131_01_walk.bvh"))
-    assert w.import_file("target", CHARACTER)
-    doc, v = w.doc, w.viewport
-    assert doc.scene.ready and doc.scene.character is not None
-    assert v.skin is not None and v.skin.visible()
-    doc.set_frame(100)
-    first = v.skin.opts["meshdata"].vertexes().copy()
-    doc.set_frame(400)
-    second = v.skin.opts["meshdata"].vertexes()
+    from gui_support import skinned_character_in_window
+    doc, _v, first, second, back = skinned_character_in_window(qtbot, tmp_path, CHARACTER)
     assert first.shape == second.shape == (VERTICES, 3)
     assert np.abs(first - second).max() > 0.05                 # the mesh moves with the motion
-    assert w.export_bvh(tmp_path / "out.glb")
-    back = read_gltf(tmp_path / "out.glb")
     assert back.skeleton.names == doc.scene.target.skeleton.names
     assert back.num_vertices == VERTICES
-    doc.undo_stack.setClean()
 
 
 @pytest.mark.blender
