@@ -14,6 +14,7 @@ __all__ = [
     "FileFormatError",
     "BVHError",
     "GLTFError",
+    "FBXError",
     "UnknownFormatError",
     "UnsupportedFormatError",
     "ExportError",
@@ -63,6 +64,22 @@ class GLTFError(FileFormatError):
                  where: str | None = None):
         self.where = where
         super().__init__(f"{where}: {problem}" if where else problem, path)
+        self.problem = problem
+
+
+class FBXError(FileFormatError):
+    """An FBX file (binary or ASCII) that is malformed, truncated or holds what the reader
+    cannot use.
+
+    Attributes:
+        where: the part of the file (``"node Objects/Model at byte 1234"``, ``"header"``), or
+            ``None``.
+    """
+
+    def __init__(self, problem: str, path: str | os.PathLike | None = None,
+                 where: str | None = None, line: int | None = None):
+        self.where = where
+        super().__init__(f"{where}: {problem}" if where else problem, path, line)
         self.problem = problem
 
 

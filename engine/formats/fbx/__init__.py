@@ -1,0 +1,1 @@
+"""FBX: the document tree (:mod:`.nodes`) and its binary form (:mod:`.binary`)."""
