@@ -986,11 +986,64 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         for cols in pos_cols:
             column_decimals[list(cols.values())] = length_decimals
         values = np.where(np.abs(values) < 0.5 * 10.0 ** -column_decimals, 0.0, values)
-        row_fmt = " ".join(f"%.{d}f" for d in column_decimals)
-        out.extend(row_fmt % tuple(row) for row in values.tolist())
+        if F:
+            out.append(_format_rows(values, column_decimals))
     else:
         out.extend("" for _ in range(F))
     return "\n".join(out) + "\n"
+
+
+def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
+    """The rows of ``values`` ``(F, C)`` in fixed point with ``decimals[c]`` digits after the
+    point in column ``c``, values separated by a space and rows by a newline: the text of
+    ``"%.6f"``-style formatting, character for character, built for all values at once.
+
+    ``rint(|v| 10^d)`` of the rounded product is the correctly rounded value of the exact
+    product (what ``%`` formatting rounds) unless the product lies within its rounding error of
+    a half (a near tie) or beyond 2^52; those few values are formatted one by one.
+    """
+    F, C = values.shape
+    scale = 10.0 ** decimals                                 # exact up to 22 decimals
+    with np.errstate(over="ignore", invalid="ignore"):      # huge: infinite, formatted alone
+        mag = np.abs(values) * scale
+        near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51) | ~(mag < 2.0 ** 52)
+                | (decimals > 22))
+    number = np.where(near, 0.0, np.rint(mag)).astype(np.int64)     # the digits, no point
+    negative = np.signbit(values)
+    # digits written: those of the number, at least one before the point
+    least = int(decimals.min()) + 1
+    length = np.full((F, C), least)
+    power = 10 ** least
+    while power <= number.max(initial=0):
+        length += number >= power
+        power *= 10
+    length = np.maximum(length, decimals + 1)
+    exact = {(int(f), int(c)): f"{values[f, c]:.{decimals[c]}f}".encode("ascii")
+             for f, c in zip(*np.nonzero(near))}
+    chars = int((length + negative).max(initial=0))          # sign and digits
+    width = max([chars + 2] + [len(text) + 1 for text in exact.values()])   # point, separator
+    cells = np.zeros((F, C, width), dtype=np.uint8)          # right-aligned, NUL-padded
+    cells[:, :, -1] = ord(" ")
+    cells[:, -1, -1] = ord("\n")
+    rest = number
+    for p in range(chars):                                   # digits from the right, then "-"
+        char = np.where(p < length, rest % 10 + ord("0"),
+                        np.where(negative & (p == length), ord("-"), 0))
+        rest = rest // 10
+        after = (p >= decimals) & (decimals > 0)             # (C,): left of the point there
+        for at, where in ((width - 2 - p, ~after), (width - 3 - p, after)):
+            if where.all():
+                cells[:, :, at] = char
+            elif where.any():
+                plane = cells[:, :, at]
+                plane[...] = np.where(where, char, plane)
+    for d in np.unique(decimals[decimals > 0]):              # "%.0f" writes no point
+        plane = cells[:, :, width - 2 - d]
+        plane[...] = np.where(decimals == d, ord("."), plane)
+    for (f, c), text in exact.items():
+        cells[f, c, :-1] = 0
+        cells[f, c, width - 1 - len(text):-1] = np.frombuffer(text, dtype=np.uint8)
+    return cells[cells != 0].tobytes()[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
