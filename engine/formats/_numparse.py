@@ -8,38 +8,107 @@ and exponent notation and white space, tokens of at most 24 characters, every no
 ``columns`` numbers, every value finite. Anything else (``nan``, a stray character, a
 misplaced sign, a row of the wrong length) makes it return ``None``; the caller then parses
 line by line, which also words the error.
+
+The block is parsed a piece of about a megabyte at a time, so that the temporaries stay small
+beside the values of a large file (a 72 MB file's values are 61 MB).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["parse_number_rows"]
+__all__ = ["parse_number_rows", "parse_number_pieces", "file_pieces"]
 
 #: the bytes of numbers in decimal or exponent notation, and white space
 _VALID_BYTES = b"0123456789.-+eE \t\n\r\f\v"
 #: the longest token taken: longer than any number a real file writes
 _MAX_WIDTH = 24
+#: characters parsed at a time (then up to the end of the line)
+_PIECE = 1 << 20
 
 
-def parse_number_rows(data: bytes, columns: int):
+def parse_number_rows(data: bytes | str, columns: int, *, start: int = 0,
+                      rows: int | None = None, limit: float = np.inf):
     """Parse white-space separated decimals laid out ``columns`` to a non-blank line.
+
+    ``data[start:]`` is the block (text must be ASCII to pass); with ``rows`` given, a block of
+    another number of rows is refused too, and the values go straight into one array; a value
+    of magnitude above ``limit`` refuses the block.
 
     Returns ``(values, rows)`` with ``values`` of shape ``(rows, columns)``, or ``None`` when the
     block is not plain decimal notation with exactly ``columns`` finite numbers on every
     non-blank line.
     """
+    return parse_number_pieces(_pieces(data, start), columns, rows=rows, limit=limit)
+
+
+def _pieces(data: bytes | str, start: int):
+    """``data[start:]`` as ASCII bytes in pieces of whole lines (None for text that is not
+    ASCII)."""
+    newline = b"\n" if isinstance(data, bytes) else "\n"
+    pos, size = start, len(data)
+    while pos < size:
+        end = data.find(newline, pos + _PIECE)
+        end = size if end < 0 else end + 1
+        piece = data[pos:end]
+        yield piece if isinstance(piece, bytes) else (
+            piece.encode("ascii") if piece.isascii() else None)
+        pos = end
+
+
+def file_pieces(handle, carry: bytes = b""):
+    """``carry`` then the rest of the binary file ``handle``, in pieces of whole lines of
+    about :data:`_PIECE` bytes: a large file's block is parsed without being read whole."""
+    while True:
+        chunk = handle.read(_PIECE)
+        if not chunk:
+            if carry:
+                yield carry
+            return
+        chunk = carry + chunk
+        cut = chunk.rfind(b"\n") + 1
+        if cut:
+            yield chunk[:cut]
+        carry = chunk[cut:]
+
+
+def parse_number_pieces(pieces, columns: int, *, rows: int | None = None,
+                        limit: float = np.inf):
+    """:func:`parse_number_rows` of a block given as pieces of whole lines (bytes; a None
+    piece refuses the block)."""
+    parts, count = [], 0
+    out = None if rows is None else np.empty((rows, columns))
+    for piece in pieces:
+        values = None if piece is None else _parse_piece(piece, columns)
+        if values is None or not np.all(np.abs(values) <= limit):
+            return None
+        if out is not None:
+            if count + len(values) > rows:
+                return None
+            out[count:count + len(values)] = values
+        else:
+            parts.append(values)
+        count += len(values)
+    if out is not None:
+        return (out, count) if count == rows else None
+    if not parts:
+        return np.zeros((0, columns)), 0
+    return (np.concatenate(parts) if len(parts) > 1 else parts[0]), count
+
+
+def _parse_piece(data: bytes, columns: int) -> np.ndarray | None:
+    """``(rows, columns)`` values of whole lines of ``data``, or None."""
     if data.translate(None, _VALID_BYTES) or _longest_token(data) > _MAX_WIDTH:
         return None
     lines = data.decode("ascii").split("\n")
     if not any(line.strip() for line in lines):
-        return np.zeros((0, columns)), 0
+        return np.zeros((0, columns))
     try:
         values = np.loadtxt(lines, dtype=float, comments=None, ndmin=2)
     except ValueError:                     # a token that is no number, or a ragged row
         return None
     if values.shape[1] != columns or not np.isfinite(values).all():
         return None
-    return values, values.shape[0]
+    return values
 
 
 def _longest_token(data: bytes) -> int:
