@@ -991,7 +991,13 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             continue
         flat = q.transpose(1, 0, 2).reshape(-1, 4)                 # joint-major for unwrap
         angles = quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order))
-        angles = np.unwrap(angles, period=360.0, axis=1) if F > 1 else angles
+        # unwrapping changes nothing in a curve where no step reaches half a turn (but the
+        # sign of zeros, which the rows do not write): only the curves that jump are unwrapped
+        if F > 1:
+            jumps = np.any(np.abs(np.diff(angles, axis=1)) >= 180.0, axis=1)    # (Jg, n)
+            g, k = np.nonzero(jumps)
+            if len(g):
+                angles[g, :, k] = np.unwrap(angles[g, :, k], period=360.0, axis=1)
         if len(order) < 3:
             back = euler_to_quat(angles.reshape(-1, len(order)), order).reshape(len(joints), F, 4)
             err = np.abs(np.sum(back * flat.reshape(len(joints), F, 4), axis=-1))
@@ -1086,12 +1092,13 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     negative = np.signbit(values)
     # digits written: those of the number, at least one before the point
     least = int(decimals.min()) + 1
-    length = np.full((F, C), least)
+    length = np.full((F, C), least, dtype=np.uint8)
     power = 10 ** least
-    while power <= number.max(initial=0):
+    top = number.max(initial=0)
+    while power <= top:
         length += number >= power
         power *= 10
-    length = np.maximum(length, decimals + 1)
+    length = np.maximum(length, (decimals + 1).astype(np.uint8))
     exact = {(int(f), int(c)): f"{values[f, c]:.{decimals[c]}f}".encode("ascii")
              for f, c in zip(*np.nonzero(near))}
     chars = int((length + negative).max(initial=0))          # sign and digits
@@ -1099,11 +1106,14 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     cells = np.zeros((F, C, width), dtype=np.uint8)          # right-aligned, NUL-padded
     cells[:, :, -1] = ord(" ")
     cells[:, -1, -1] = ord("\n")
+    sign = np.where(negative, ord("-"), 0).astype(np.uint8)
     rest = number
     for p in range(chars):                                   # digits from the right, then "-"
-        char = np.where(p < length, rest % 10 + ord("0"),
-                        np.where(negative & (p == length), ord("-"), 0))
+        char = (rest % 10).astype(np.uint8)
+        char += ord("0")
         rest = rest // 10
+        if p >= least:                                       # past some token's last digit
+            char = np.where(p < length, char, np.where(p == length, sign, np.uint8(0)))
         after = (p >= decimals) & (decimals > 0)             # (C,): left of the point there
         for at, where in ((width - 2 - p, ~after), (width - 3 - p, after)):
             if where.all():
