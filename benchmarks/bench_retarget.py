@@ -106,7 +106,7 @@ def main() -> None:
         rows += [
             Row(f"{where}: FK of the performer (reference)", fmt_seconds(ref.median),
                 note=f"median; {ref.spread()}"),
-            ratio_row(f"  conversion / reference", conv, ref, RATIO_TARGET),
+            ratio_row("  conversion / reference", conv, ref, RATIO_TARGET),
             Row("  frames per second", f"{fps:,.0f}", f">= {FPS_TARGET:,.0f}",
                 fps >= FPS_TARGET),
             Row("  staged: convert + compose", fmt_seconds(timed["staged"].median),

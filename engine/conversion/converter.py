@@ -13,7 +13,6 @@ from ..kinematics import fk_components, joint_major
 from ..motion import Motion
 from ..quaternions import (cconj, cmul, components, cquat_between, crot, ctwist_about,
                            interleaved, qconj, qmul, qpow)
-from ..skeleton import Skeleton
 from .binding import Binding
 
 __all__ = ["RootOptions", "IntermediatePose", "convert"]
