@@ -77,6 +77,7 @@ _KEY_SIZE = 9
 _SELECTED_SIZE = 12
 _PICK_PX = 10            # how near (pixels) a double-click must be to a curve to key it
 _PICK_KEY_PX = 7         # how near (pixels) a click must be to a key to pick it
+_LABEL_LANES = 3         # lines of constraint names at the top of the plot
 
 
 def _label(joint: str) -> str:
@@ -534,10 +535,12 @@ class CurveEditor(QtWidgets.QWidget):
         self.handles = TangentHandles(self)
         self.view_box.addItem(self.handles)
         self.view_box.sigRangeChanged.connect(self._place_range_labels)
-        self.legend = pg.LegendItem(offset=(-10, 10), labelTextColor=_FOREGROUND,
+        # below the lines of constraint names
+        self.legend = pg.LegendItem(offset=(-10, 58), labelTextColor=_FOREGROUND,
                                     brush=pg.mkBrush(20, 20, 22, 170),
                                     pen=pg.mkPen(90, 90, 90))
         self.legend.setParentItem(self.view_box)
+        self._legend_other = pg.PlotDataItem(pen=pg.mkPen(170, 170, 170, 160, width=1))
         self._legend_base = pg.PlotDataItem(pen=pg.mkPen(170, 170, 170, 160, width=1.2,
                                                          style=Qt.PenStyle.DashLine))
 
@@ -773,6 +776,7 @@ class CurveEditor(QtWidgets.QWidget):
             axis = _axis(channel)
             if self.channel_buttons[axis].isChecked():
                 self.legend.addItem(self.curves[axis], f"{channel} offset")
+        self.legend.addItem(self._legend_other, "other layers (thin)")
         if self.base_check.isChecked():
             self.legend.addItem(self._legend_base, "base motion (right axis)")
 
@@ -807,24 +811,42 @@ class CurveEditor(QtWidgets.QWidget):
         self._place_range_labels()
 
     def _place_range_labels(self, *_args) -> None:
-        """Each constraint's name at the top of its active band, elided to the band's width
-        and to the room before the next name starts, in pixels (on every zoom or pan)."""
+        """Each constraint's name at the top of its active band, in one of
+        :data:`_LABEL_LANES` lines of text: a name goes in the first line that is free where
+        its band starts (else in the line that frees first) and is elided to its band's width
+        and to the room before the next name on its line, in pixels (again on every zoom or
+        pan), so that names never overlap."""
         labels = self.range_labels
         if not labels:
             return
         (x0, x1), (y0, y1) = self.view_box.viewRange()
-        px = self.view_box.viewPixelSize()[0]
-        if not px > 0:
+        px, py = self.view_box.viewPixelSize()
+        if not (px > 0 and py > 0):
             return
         metrics = QtGui.QFontMetrics(labels[0][0].textItem.font())
-        starts = sorted(max(start, x0) for _, _, start, _ in labels)
-        for label, name, start, end in labels:
+        order = sorted(range(len(labels)), key=lambda k: (max(labels[k][2], x0), k))
+        lane_end = [-math.inf] * _LABEL_LANES
+        lanes: list[list[int]] = [[] for _ in range(_LABEL_LANES)]
+        for k in order:
+            _label, name, start, end = labels[k]
             left = max(start, x0)
-            later = [x for x in starts if x > left]
-            room = (min([end, x1] + later[:1]) - left) / px - 6
-            text = metrics.elidedText(name, Qt.TextElideMode.ElideRight, int(max(room, 0)))
-            label.setText(text if room >= metrics.horizontalAdvance("…") else "")
-            label.setPos(left, y1)
+            free = [n for n in range(_LABEL_LANES) if lane_end[n] <= left]
+            lane = free[0] if free else int(np.argmin(lane_end))
+            want = min(metrics.horizontalAdvance(name) + 8, (end - left) / px) * px
+            lane_end[lane] = left + want
+            lanes[lane].append(k)
+        for lane, members in enumerate(lanes):
+            for n, k in enumerate(members):
+                label, name, start, end = labels[k]
+                left = max(start, x0)
+                stop = min(end, x1)
+                if n + 1 < len(members):
+                    stop = min(stop, max(labels[members[n + 1]][2], x0))
+                room = (stop - left) / px - 6
+                text = metrics.elidedText(name, Qt.TextElideMode.ElideRight,
+                                          int(max(room, 0)))
+                label.setText(text if room >= metrics.horizontalAdvance("\u2026") * 3 else "")
+                label.setPos(left, y1 - lane * metrics.height() * py)
 
     def range_label_texts(self) -> list[str]:
         """The constraint names as drawn (elided), in constraint order."""
