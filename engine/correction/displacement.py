@@ -182,18 +182,38 @@ class Curve:
                "interpolation": list(self.interpolation)}
         if any(m != "auto" for m in self.tangents):
             out["tangents"] = list(self.tangents)
-            out["slopes_in"] = self.slopes[:, 0].tolist()
-            out["slopes_out"] = self.slopes[:, 1].tolist()
+            out["slopes"] = self.slopes[:, 1].tolist()
+            if "broken" in self.tangents:
+                out["slopes_in"] = self.slopes[:, 0].tolist()
         return out
 
     @classmethod
     def from_dict(cls, data: dict) -> "Curve":
-        slopes = None
-        if "slopes_in" in data or "slopes_out" in data:
-            slopes = np.stack([np.asarray(data["slopes_in"], dtype=float),
-                               np.asarray(data["slopes_out"], dtype=float)], axis=-1)
+        """The curve of :meth:`to_dict`'s data: ``slopes`` are the stored out slopes (the
+        one slope of an aligned key), ``slopes_in`` the in slopes of broken keys (where a
+        key is not broken its in slope is its out slope)."""
         return cls(data["frames"], data["values"], tuple(data.get("interpolation", ())),
-                   tuple(data.get("tangents", ())), slopes)
+                   tuple(data.get("tangents", ())),
+                   stored_slopes(data.get("tangents", ()), data.get("slopes"),
+                                 data.get("slopes_in")))
+
+
+def stored_slopes(tangents, out, slopes_in) -> np.ndarray | None:
+    """``(K, 2)`` in and out slopes from a file's per-key ``out`` slopes and, for broken
+    keys, ``slopes_in`` (None without ``out``: no stored slopes)."""
+    if out is None:
+        return None
+    out = np.asarray(out, dtype=float).reshape(-1)
+    broken = np.array([m == "broken" for m in tangents], dtype=bool)
+    inward = out.copy()
+    if slopes_in is not None:
+        given = np.asarray(slopes_in, dtype=float).reshape(-1)
+        if len(given) != len(out):
+            raise MotionComposerError(f"a curve needs one in slope per key ({len(out)} "
+                                      f"keys, {len(given)} in slopes)")
+        if len(broken) == len(out):
+            inward[broken] = given[broken]
+    return np.stack([inward, out], axis=-1)
 
 
 def _per_key(kinds, default: str, count: int, what: str, allowed) -> tuple[str, ...]:
@@ -374,8 +394,8 @@ def fit_keys(signal: np.ndarray, tolerance: float, *, spacing: int = FIT_SPACING
     a smooth stretch with a key every ``spacing`` frames. Each fit is a banded linear
     system, so the cost is linear in the clip.
 
-    Keys are ``smooth`` with ``aligned`` tangents (the fitted slope on both sides); the zero
-    keys at window ends are ``flat``.
+    Keys are ``smooth`` with ``aligned`` tangents (the fitted slope on both sides; zero at
+    the zero keys of window ends).
     """
     y = np.asarray(signal, dtype=float).reshape(-1)
     n = len(y)
@@ -383,7 +403,7 @@ def fit_keys(signal: np.ndarray, tolerance: float, *, spacing: int = FIT_SPACING
         return Curve([], [])
     if n == 1:
         return Curve([0.0], [y[0]])
-    frames, values, slopes, modes = [], [], [], []
+    frames, values, slopes = [], [], []
     for a, b in _windows(np.abs(y) > tolerance * 1e-3, spacing):
         lo, hi = max(a - 1, 0), min(b + 1, n - 1)
         keys, v, m = _fit_window(y, lo, hi, lo < a, hi > b, tolerance, spacing)
@@ -394,10 +414,10 @@ def fit_keys(signal: np.ndarray, tolerance: float, *, spacing: int = FIT_SPACING
             frames.append(float(key))
             values.append(0.0 if pinned else float(v[k]))
             slopes.append((0.0, 0.0) if pinned else (float(m[k]), float(m[k])))
-            modes.append("flat" if pinned else "aligned")
     if not frames:
         return Curve([0.0], [0.0])
-    return Curve(frames, values, ("smooth",) * len(frames), tuple(modes), slopes)
+    return Curve(frames, values, ("smooth",) * len(frames), ("aligned",) * len(frames),
+                 slopes)
 
 
 def _windows(active: np.ndarray, gap: int) -> list[tuple[int, int]]:

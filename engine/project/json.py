@@ -17,7 +17,8 @@ from ..conversion.correspondence import Correspondence
 from ..correction.constraints import KINDS, Constraint, ConstraintError
 from ..correction.contacts import ContactOptions
 from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS, TANGENTS,
-                                       TRANSLATION_CHANNELS, Curve, DisplacementMap, Layer)
+                                       TRANSLATION_CHANNELS, Curve, DisplacementMap, Layer,
+                                       stored_slopes)
 from ..correction.ik import IKOptions
 from ..errors import IKOptionsError, MotionComposerError
 from ..units import AXES, UNITS
@@ -476,7 +477,7 @@ def _displacement(d: dict, parent: str) -> DisplacementMap:
     for i, item in enumerate(_list(d.get("channels", []), f"{parent}.channels")):
         where = f"{parent}.channels[{i}]"
         c = _obj(item, where, required=("joint", "channel", "frames", "values"),
-                 optional=("interpolation", "tangents", "slopes_in", "slopes_out"))
+                 optional=("interpolation", "tangents", "slopes", "slopes_in"))
         joint = _str(c["joint"], f"{where}.joint")
         allowed = TRANSLATION_CHANNELS if joint == ROOT else ROTATION_CHANNELS
         channel = _choice(c["channel"], f"{where}.channel", allowed)
@@ -487,15 +488,16 @@ def _displacement(d: dict, parent: str) -> DisplacementMap:
         interp = _names(c.get("interpolation", []), f"{where}.interpolation", INTERPOLATIONS,
                         len(frames))
         tangents = _names(c.get("tangents", []), f"{where}.tangents", TANGENTS, len(frames))
-        slopes = None
-        if "slopes_in" in c or "slopes_out" in c:
-            sides = [[_num(x, f"{where}.{side}[{k}]")
-                      for k, x in enumerate(_list(c.get(side, []), f"{where}.{side}"))]
-                     for side in ("slopes_in", "slopes_out")]
-            if not len(sides[0]) == len(sides[1]) == len(frames):
-                raise _Invalid(f"{where}.slopes_in", f"expected one in and one out slope per "
-                                                     f"key ({len(frames)} keys)")
-            slopes = list(zip(*sides))
+        out, inward = ([_num(x, f"{where}.{side}[{k}]")
+                        for k, x in enumerate(_list(c[side], f"{where}.{side}"))]
+                       if side in c else None for side in ("slopes", "slopes_in"))
+        for side, given in (("slopes", out), ("slopes_in", inward)):
+            if given is not None and len(given) != len(frames):
+                raise _Invalid(f"{where}.{side}", f"expected one slope per key "
+                                                  f"({len(frames)} keys, {len(given)} slopes)")
+        if inward is not None and out is None:
+            raise _Invalid(f"{where}.slopes_in", "in slopes need the (out) slopes beside them")
+        slopes = stored_slopes(tangents, out, inward)
         if (joint, channel) in curves:
             raise _Invalid(where, f"a second curve for {joint} {channel}")
         try:
@@ -504,7 +506,7 @@ def _displacement(d: dict, parent: str) -> DisplacementMap:
             message = str(exc)
             sub = ("interpolation" if "interpolation" in message else
                    "tangents" if "tangent" in message else
-                   "slopes_in" if "slope" in message else
+                   "slopes" if "slope" in message else
                    "frames" if "increase" in message else "values")
             raise _Invalid(f"{where}.{sub}", message) from None
     return DisplacementMap(curves)
