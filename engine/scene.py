@@ -424,12 +424,23 @@ class Scene:
                             for k, v in correction.seconds.items()})
         scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
-        corrected = correction.motion if correction is not None else composed
-        report["quality"] = quality(self.performer, composed, corrected, chosen,
+        # measured on what is delivered: the keys on top of the animator's layers
+        report["quality"] = quality(self.performer, composed, scene.motion, chosen,
                                     correction.residual if correction is not None else None,
                                     self.binding)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
+
+    def quality(self) -> dict | None:
+        """The quality figures (:func:`~engine.correction.quality.quality`) of the motion as
+        it is now, without solving: between solves, what an edit (a key on an animator layer,
+        a moved constraint) breaks in the contacts and the turning speeds. No residuals (no
+        IK ran). None without a final motion."""
+        motion = self.motion
+        if motion is None:
+            return None
+        return quality(self.performer, self.composed, motion, list(self.constraints), None,
+                       self.binding)
 
     def preview(self, constraints: list, *, base_constraints: list | None = None,
                 base_motion: Motion | None = None, whole: bool = True) -> tuple[Motion, str]:

@@ -245,3 +245,19 @@ def test_layers_round_trip_through_a_project_file(demo_solved, tmp_path):
     assert curve.tangents == ("auto", "broken", "auto")
     np.testing.assert_array_equal(curve.tangent_slopes(), tangent.tangent_slopes())
     assert project_to_json(back, tmp_path / "p.mcp") == (tmp_path / "p.mcp").read_text()
+
+
+def test_between_solves_the_quality_figures_show_what_an_edit_breaks(demo_solved):
+    scene = demo_solved.scene
+    before = scene.quality()
+    # a leg key on the edit layer: the planted foot slides, and the figures say so
+    kick = {("LeftUpLeg", "rx"): Curve([100, 130, 160], [0.0, 0.35, 0.0], ("smooth",) * 3)}
+    edited = scene.replace(layers=(Layer("edit", DisplacementMap(kick)),))
+    after = edited.quality()
+    slide_before = np.array(before["per_frame"]["foot_slide_m"])
+    slide_after = np.array(after["per_frame"]["foot_slide_m"])
+    assert slide_after[100:161].max() > slide_before[100:161].max() + 0.01
+    np.testing.assert_array_equal(slide_after[:100], slide_before[:100])
+    # the solve report's figures are those of the delivered (keyed) motion
+    assert demo_solved.report["quality"]["per_frame"]["foot_slide_m"] == \
+        before["per_frame"]["foot_slide_m"]
