@@ -127,13 +127,12 @@ class Curve:
         chord = np.diff(v) / np.diff(f) if len(f) > 1 else np.zeros(0)
         left = np.r_[chord[:1], chord] if len(chord) else np.zeros(len(f))
         right = np.r_[chord, chord[-1:]] if len(chord) else np.zeros(len(f))
-        for k, mode in enumerate(self.tangents):
-            if mode == "auto":
-                out[k] = auto[k]
-            elif mode == "flat":
-                out[k] = 0.0
-            elif mode == "linear":
-                out[k] = (left[k], right[k])
+        modes = np.array(self.tangents, dtype=object)
+        auto_keys = modes == "auto"
+        out[auto_keys] = auto[auto_keys, None]
+        out[modes == "flat"] = 0.0
+        linear = modes == "linear"
+        out[linear] = np.column_stack([left, right])[linear]
         return out
 
     def _auto_slopes(self) -> np.ndarray:
