@@ -9,12 +9,14 @@ made from one another, so an edit recomputes only what it touches::
     binding      <- performer, target, correspondence, bind options      (Anatomic Binding)
     intermediate <- binding, root options                                (Motion Converter)
     composed     <- intermediate                                         (Motion Composer)
-    motion       <- composed, displacement map                           (the final motion)
+    edited       <- composed, animator layers                            (what IK starts from)
+    motion       <- edited, solved layer                                 (the final motion)
 
 A constraint edit therefore binds and converts nothing; a mapping edit re-binds. What was
 computed is counted in ``scene.derived.computed`` (a test reads it). IK never runs implicitly:
 :meth:`Scene.solve` runs the two passes of section 3.3 and returns a :class:`Solution` whose
-``scene`` carries the solved constraints and their correction as displacement keys.
+``scene`` carries the solved constraints and their correction as displacement keys: the solved
+layer, on top of the composed motion with the animator's layers (which a solve keeps).
 
 The command line (``retarget``, ``export``, ``batch``), project files and the window all go
 through a scene, so a result never depends on which of them asked for it.
@@ -108,9 +110,11 @@ class Solution:
     """What :meth:`Scene.solve` gives.
 
     Attributes:
-        scene: the scene with the constraints solved and their correction as keys.
+        scene: the scene with the constraints solved and their correction as keys (the
+            solved layer).
         constraints: every constraint enforced.
-        correction: the dense IK result (``None`` without enabled constraints).
+        correction: the dense IK result (``None`` without enabled constraints), before its
+            keys were fitted.
         report: JSON-ready figures (residuals, contact drift, timings) and ``"warnings"``:
             lines on what the settings asked for but could not do (feet for automatic
             contacts, :meth:`Scene.contact_warnings`).
@@ -123,8 +127,9 @@ class Solution:
 
     @property
     def motion(self) -> Motion:
-        """The dense corrected motion (the IK result itself, before key reduction)."""
-        return self.correction.motion if self.correction is not None else self.scene.composed
+        """The motion delivered: the solved scene's (the keys, as a saved project evaluates
+        to), not the dense IK result."""
+        return self.scene.motion
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +201,10 @@ class Scene:
             curves = p.displacement.restricted_to(names)
             if curves is not p.displacement:
                 changes["displacement"] = curves
+            layers = tuple(layer.replace(displacement=layer.displacement.restricted_to(names))
+                           for layer in p.layers)
+            if any(a.displacement is not b.displacement for a, b in zip(layers, p.layers)):
+                changes["layers"] = layers
         if self.performer is not None:
             last = self.performer.num_frames - 1
             kept = tuple(c for c in changes.get("constraints", p.constraints)
@@ -264,8 +273,13 @@ class Scene:
             return self.derived.get("composed", key, lambda: compose(
                 binding, pose, self.performer.frame_time, name=name))
         composed = self._raw("composed")
-        return self.derived.get("motion", (key, p.displacement),
-                                lambda: p.displacement.apply(composed))
+        layers = tuple((layer.displacement, layer.weight, layer.mute) for layer in p.layers)
+        if stage == "edited":
+            return self.derived.get("edited", (key, layers),
+                                    lambda: _apply_layers(p.layers, composed))
+        edited = self._raw("edited")
+        return self.derived.get("motion", (key, layers, p.displacement),
+                                lambda: p.displacement.apply(edited))
 
     def _value(self, stage: str):
         value = self._raw(stage)
@@ -288,8 +302,15 @@ class Scene:
         return self._value("composed")
 
     @property
+    def edited(self) -> Motion | None:
+        """The direct conversion with the animator's layers applied: what a solve starts
+        from (the IK's attraction posture), or None."""
+        return self._value("edited")
+
+    @property
     def motion(self) -> Motion | None:
-        """The final motion: the direct conversion plus the displacement map (no IK runs)."""
+        """The final motion: the direct conversion, the animator's layers, then the solved
+        layer (no IK runs)."""
         return self._value("motion")
 
     @property
@@ -372,8 +393,10 @@ class Scene:
 
         ``constraints``: the list to enforce (default: the scene's own). With
         ``regenerate``, the automatic constraints are dropped and made again from the
-        project's settings (:meth:`automatic_constraints`) beside the user's. The solved
-        layer replaces the displacement map. ``ik_options`` overrides the project's. Raises
+        project's settings (:meth:`automatic_constraints`) beside the user's. The IK starts
+        from :attr:`edited` (the composed motion with the animator's layers) and its
+        correction, as fitted keys, replaces the solved layer only: the animator's layers are
+        kept bit for bit. ``ik_options`` overrides the project's. Raises
         :class:`~engine.errors.MotionComposerError` (``cancel()`` returning True stops it).
         """
         timings = {}
@@ -394,19 +417,30 @@ class Scene:
         if any(c.enabled for c in chosen):
             t0 = time.perf_counter()
             options = ik_options if ik_options is not None else self.project.ik_options
-            correction = enforce(composed, chosen, options=options,
+            correction = enforce(self.edited, chosen, options=options,
                                  progress=progress, cancel=cancel, warm_start=warm_start)
             timings["ik_s"] = time.perf_counter() - t0
             timings.update({f"ik_{k.replace(' ', '_')}_s": v
                             for k, v in correction.seconds.items()})
         scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
-        corrected = correction.motion if correction is not None else composed
-        report["quality"] = quality(self.performer, composed, corrected, chosen,
+        # measured on what is delivered: the keys on top of the animator's layers
+        report["quality"] = quality(self.performer, composed, scene.motion, chosen,
                                     correction.residual if correction is not None else None,
                                     self.binding)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
+
+    def quality(self) -> dict | None:
+        """The quality figures (:func:`~engine.correction.quality.quality`) of the motion as
+        it is now, without solving: between solves, what an edit (a key on an animator layer,
+        a moved constraint) breaks in the contacts and the turning speeds. No residuals (no
+        IK ran). None without a final motion."""
+        motion = self.motion
+        if motion is None:
+            return None
+        return quality(self.performer, self.composed, motion, list(self.constraints), None,
+                       self.binding)
 
     def preview(self, constraints: list, *, base_constraints: list | None = None,
                 base_motion: Motion | None = None, whole: bool = True) -> tuple[Motion, str]:
@@ -417,7 +451,7 @@ class Scene:
         (mode ``"full"``); otherwise only the frames the change from ``base_constraints`` can
         reach are solved and spliced into ``base_motion`` (mode ``"window"``, see
         :mod:`engine.correction.preview`)."""
-        composed = self.composed
+        composed = self.edited
         if composed is None:
             raise MotionComposerError("nothing to preview: the scene has no direct conversion")
         options = self.project.ik_options
@@ -435,7 +469,8 @@ _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))
 
 
 class ProjectMotion(NamedTuple):
-    """``composed``: the direct conversion; ``motion``: with the displacement map applied."""
+    """``composed``: the direct conversion; ``motion``: with the displacement layers
+    applied."""
 
     composed: Motion
     motion: Motion
@@ -490,6 +525,13 @@ def remap(correspondence: Correspondence, target, performer) -> Correspondence:
     ordered = {t: pairs[t] for t in target.names if t in pairs}
     notes.update({t: correspondence.notes[t] for t in kept if t in correspondence.notes})
     return Correspondence(ordered, notes)
+
+
+def _apply_layers(layers, motion: Motion) -> Motion:
+    """``motion`` with the animator ``layers`` applied in order (muted ones skipped)."""
+    for layer in layers:
+        motion = layer.apply(motion)
+    return motion
 
 
 def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:

@@ -79,12 +79,15 @@ class Correction:
     iterations: np.ndarray
     seconds: dict = field(default_factory=dict)
 
-    def displacement_map(self, *, rotation_tolerance: float = np.radians(0.02),
-                         translation_tolerance: float = 1e-4) -> DisplacementMap:
-        """The correction as editable curves, keys reduced within the tolerances."""
+    def displacement_map(self, *, position_tolerance: float = 1e-4,
+                         rotation_tolerance: float = np.radians(0.02)) -> DisplacementMap:
+        """The correction as editable curves: fitted Hermite keys and slopes
+        (:meth:`DisplacementMap.from_dense`), each joint's channels within
+        ``position_tolerance`` [m] over its lever (at most ``rotation_tolerance`` [rad]),
+        the root's within ``position_tolerance``; exactly zero where the correction is."""
         return DisplacementMap.from_dense(self.motion.skeleton, self.rotvecs, self.root,
-                                          rotation_tolerance=rotation_tolerance,
-                                          translation_tolerance=translation_tolerance)
+                                          position_tolerance=position_tolerance,
+                                          rotation_tolerance=rotation_tolerance)
 
 
 class Residuals(Mapping):

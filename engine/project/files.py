@@ -172,10 +172,12 @@ def _check(project: Project, performer: Motion, target: Motion, check_map: bool)
         if joint >= tsk.num_joints:
             raise _Invalid(f"ik.joint_limits[{i}]", f"joint {joint} is past the target's last "
                                                     f"joint ({tsk.num_joints - 1})")
-    for i, (joint, _) in enumerate(project.displacement.curves):
-        if joint != ROOT and joint not in tsk.index:
-            raise _Invalid(f"displacement.channels[{i}].joint",
-                           _not_a_joint(joint, tsk, "target"))
+    maps = [project.displacement] + [layer.displacement for layer in project.layers]
+    for n, displacement in enumerate(maps):
+        for i, (joint, _) in enumerate(displacement.curves):
+            if joint != ROOT and joint not in tsk.index:
+                raise _Invalid(f"layers[{n}].channels[{i}].joint",
+                               _not_a_joint(joint, tsk, "target"))
     v = project.viewer
     if v.current_frame > F - 1:
         raise _Invalid("viewer.current_frame", f"frame {v.current_frame} is past the last frame "
@@ -217,14 +219,16 @@ def embed_sources(project: Project, roles=ROLES) -> Project:
 
 
 # --------------------------------------------------------------------------- stored keys
-#: key reduction of an IK correction stored in a project [rad], [m]
-ROTATION_TOLERANCE = math.radians(0.01)
-TRANSLATION_TOLERANCE = 5e-5
+#: key fitting of an IK correction stored in a project: [m] per joint over its lever, and at
+#: most [rad] per rotation channel
+POSITION_TOLERANCE = 1e-4
+ROTATION_TOLERANCE = math.radians(0.02)
 
 
 def correction_keys(correction: Correction | None) -> DisplacementMap:
-    """An IK correction as the keys a project stores (tight tolerances: 0.01 degree, 0.05 mm)."""
+    """An IK correction as the keys a project stores (fitted within 0.1 mm per joint above a
+    point of the IK result, at most 0.02 degree per channel)."""
     if correction is None:
         return DisplacementMap()
-    return correction.displacement_map(rotation_tolerance=ROTATION_TOLERANCE,
-                                       translation_tolerance=TRANSLATION_TOLERANCE)
+    return correction.displacement_map(position_tolerance=POSITION_TOLERANCE,
+                                       rotation_tolerance=ROTATION_TOLERANCE)
