@@ -218,6 +218,10 @@ def parse_ascii(data: bytes, path=None) -> Node:
             FBX 6 and older ("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7")
             or a version newer than 7.7.
     """
+    major = re.search(rb"FBXVersion:\s*([0-9]+)", data[:4096])
+    if major and int(major.group(1)) < _OLDEST:
+        raise FBXError("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7", path,
+                       line=data[:major.start()].count(b"\n") + 1)
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -227,10 +231,6 @@ def parse_ascii(data: bytes, path=None) -> Node:
     if "\x00" in text:
         raise FBXError("a NUL byte in ASCII FBX text (the file is corrupt)", path,
                        line=text[:text.index("\x00")].count("\n") + 1)
-    major = re.search(r"FBXVersion:\s*([0-9]+)", text[:4096])
-    if major and int(major.group(1)) < _OLDEST:
-        raise FBXError("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7", path,
-                       line=text[:major.start()].count("\n") + 1)
     nodes = _Parser(text, path).records(0, "")
     version = _version(nodes, path)
     if version < _OLDEST:

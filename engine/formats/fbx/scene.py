@@ -63,7 +63,7 @@ from .ascii import is_ascii_fbx, parse_ascii
 from .binary import is_binary_fbx, parse_binary
 from .nodes import FBX_TICKS_PER_SECOND, Node
 
-__all__ = ["read_fbx", "parse_fbx", "DEFAULT_FPS"]
+__all__ = ["read_fbx", "parse_fbx", "take_motion", "DEFAULT_FPS"]
 
 #: the frame rate of a file whose TimeMode is the default one
 DEFAULT_FPS = 30.0
@@ -1024,3 +1024,27 @@ def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
     root = parse_fbx(data, path)
     doc = _Doc(root, path, ascii_form=not is_binary_fbx(data[:32]))
     return _build(doc, Path(path).stem, fps)
+
+
+def take_motion(character: Character, take: str | None = None) -> Motion:
+    """The take ``take`` of an FBX character (its full name, or the part after its last
+    ``|``, as in Blender's ``Armature|Walk``), by default the first.
+
+    Raises:
+        FBXError: for a file without a take that moves a joint, or an unknown name (the
+            message lists the takes).
+    """
+    takes = character.motions
+    known = ", ".join(repr(m.name) for m in takes)
+    if not takes:
+        raise FBXError("the file holds no take that moves a joint (a character only: use it as "
+                       "the target)", character.path)
+    if take is None:
+        return takes[0]
+    exact = [m for m in takes if m.name == take]
+    short = [m for m in takes if m.name.rsplit("|", 1)[-1] == take]
+    found = exact or short
+    if len(found) != 1:
+        what = "several takes are" if found else "no take is"
+        raise FBXError(f"{what} named {take!r} (takes: {known})", character.path)
+    return found[0]
