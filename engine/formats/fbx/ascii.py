@@ -13,7 +13,8 @@ Typed values, so that the scene reader sees one tree whichever form the file is 
 * arrays are ``numpy.ndarray``: ``int64`` when every value is written as an integer, else
   ``float64`` (the scene reader converts them to what it needs);
 * an object's name ``"Class::Name"`` (the second value of a record directly under
-  ``Objects``) becomes the binary form's ``"Name\\x00\\x01Class"``.
+  ``Objects``, the first of ``SceneInfo``) becomes the binary form's
+  ``"Name\\x00\\x01Class"``.
 
 The root is a :class:`Node` named ``"FBX"`` whose one property is the file's version
 (``FBXHeaderExtension/FBXVersion``, ``numpy.int32``), as :func:`~.binary.parse_binary` gives.
@@ -146,10 +147,10 @@ class _Parser:
                 self.fail(f"expected a comma between the values of {path}, found "
                           f"{text[:40]!r}", at)
             props.append(self.value(path))
-        if parent == "Objects" and len(props) > 1 and isinstance(props[1], str) and \
-                "::" in props[1]:
-            cls, _, obj = props[1].partition("::")
-            props[1] = f"{obj}\x00\x01{cls}"
+        k = 1 if parent == "Objects" else 0 if name == "SceneInfo" else None
+        if k is not None and len(props) > k and isinstance(props[k], str) and "::" in props[k]:
+            cls, _, obj = props[k].partition("::")
+            props[k] = f"{obj}\x00\x01{cls}"
         return Node(name, props, children, offset=line)
 
     def value(self, path: str):

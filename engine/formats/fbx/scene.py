@@ -79,7 +79,8 @@ _ANIMATED = ("Lcl Translation", "Lcl Rotation", "Lcl Scaling")
 # AnimationCurve key flags (FbxAnimCurveDef)
 _CONSTANT, _LINEAR, _CUBIC = 0x2, 0x4, 0x8
 _CONSTANT_NEXT = 0x100
-_TANGENT_TCB = 0x200
+_TANGENT_TCB, _TANGENT_USER = 0x200, 0x400
+_CLAMP, _TIME_INDEPENDENT, _CLAMP_PROGRESSIVE = 0x1000, 0x2000, 0x4000
 _WEIGHTED_RIGHT, _WEIGHTED_NEXT_LEFT = 0x1000000, 0x2000000
 #: how far a bind matrix may stray from a uniformly scaled rotation
 _SCALE_TOL = 1e-3
@@ -403,32 +404,99 @@ def _curve(doc: _Doc, node: Node):
     return times, values, flags, data
 
 
-def _weights(data: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Right and next-left tangent weights of each key (1/3 when not weighted)."""
-    packed = np.ascontiguousarray(data[:, 2], dtype=np.float32).view(np.uint32).astype(np.int64)
-    right = np.where(flags & _WEIGHTED_RIGHT, (packed & 0xFFFF) / 9999.0, 1 / 3)
-    left = np.where(flags & _WEIGHTED_NEXT_LEFT, ((packed >> 16) & 0xFFFF) / 9999.0, 1 / 3)
-    return np.clip(right, 1e-4, 1.0), np.clip(left, 1e-4, 1.0)
+def _auto_slopes(t, v, flags, bias, weight_l, weight_r):
+    """Auto-tangent slopes [value/s] of interior keys ``(N,)`` from their neighbours (the
+    FBX SDK's rule, as ufbx reads it): the chord through the neighbours, blended with the
+    one-sided slopes and pushed by ``bias`` (the stored slope) unless the key is
+    time-independent; zero on a key equal to a neighbour (clamped); clamped so that the curve
+    does not overshoot its neighbours (clamp-progressive, with the keys' tangent weights
+    ``weight_l``, ``weight_r``)."""
+    tp, t0, tn = t[:-2], t[1:-1], t[2:]
+    vp, v0, vn = v[:-2], v[1:-1], v[2:]
+    f = flags[1:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = (vn - vp) / (tn - tp)
+        left, right = (v0 - vp) / (t0 - tp), (vn - v0) / (tn - t0)
+        delta = (t0 - tp) / (tn - tp)
+        blended = 0.5 * slope + 0.5 * (left * (1 - delta) + right * delta)
+        weight = np.abs(bias) / 100.0
+        target = np.where(bias > 0, right, left)
+        pushed = np.where(weight > 1e-4, blended * (1 - weight) + target * weight, blended)
+        extra = np.maximum(weight - 5.0, 0.0)
+        sign = np.where(np.abs(target - blended) > 1e-5, target - blended, bias)
+        pushed = pushed + extra * extra * np.where(sign > 0, 1.0, -1.0) * 40.0
+        slope = np.where(f & _TIME_INDEPENDENT, slope, pushed)
+        sign = np.where(slope >= 0, 1.0, -1.0)
+        range_l, range_r = weight_l * (t0 - tp), weight_r * (tn - t0)
+        limit_l = np.where(range_l > 0, sign * (v0 - vp) / range_l, 0.0)
+        limit_r = np.where(range_r > 0, sign * (vn - v0) / range_r, 0.0)
+        limit = np.minimum(np.where(limit_l > 0, limit_l, 0.0),
+                           np.where(limit_r > 0, limit_r, 0.0))
+        clamped = sign * np.minimum(np.abs(slope), limit)
+    slope = np.where((f & _CLAMP_PROGRESSIVE) != 0, clamped, slope)
+    flat = ((f & _CLAMP) != 0) & (np.minimum(np.abs(vp - v0), np.abs(vn - v0)) <= 0)
+    return np.nan_to_num(np.where(flat, 0.0, slope))
 
 
-def _tcb_slopes(times: np.ndarray, values: np.ndarray, data: np.ndarray):
-    """Kochanek-Bartels incoming and outgoing slopes [value/s] of each key from its tension,
-    continuity and bias (``data[:, :3]``); the end keys use their one neighbour."""
+def _tangents(times, values, flags, data):
+    """Per key: the right tangent's slope [value/s] and weight (a fraction of the segment
+    after it) and the left tangent's slope and weight (of the segment before it), by each
+    key's interpolation and tangent mode (see :func:`_evaluate`)."""
+    K = len(times)
     t = times / FBX_TICKS_PER_SECOND
-    prev_v = np.concatenate([values[:1], values[:-1]])
-    next_v = np.concatenate([values[1:], values[-1:]])
-    prev_t = np.concatenate([t[:1] - 1, t[:-1]])
-    next_t = np.concatenate([t[1:], t[-1:] + 1])
-    before = (values - prev_v) / np.maximum(t - prev_t, 1e-12)
-    after = (next_v - values) / np.maximum(next_t - t, 1e-12)
-    T, C, B = data[:, 0], data[:, 1], data[:, 2]
-    out = (1 - T) * (1 + B) * (1 - C) / 2 * before + (1 - T) * (1 - B) * (1 + C) / 2 * after
-    inc = (1 - T) * (1 + B) * (1 + C) / 2 * before + (1 - T) * (1 - B) * (1 - C) / 2 * after
-    return inc, out
+    v = values
+    packed = np.ascontiguousarray(data[:, 2], dtype=np.float32).view(np.uint32)
+    packed = packed.astype(np.int64)
+    weight_r = np.where(flags & _WEIGHTED_RIGHT, (packed & 0xFFFF) * 1e-4, 1 / 3)
+    weight_nl = np.where(flags & _WEIGHTED_NEXT_LEFT, (packed >> 16) * 1e-4, 1 / 3)
+    stored_r, stored_nl = data[:, 0].astype(float), data[:, 1].astype(float)
+    constant, cubic = (flags & _CONSTANT) != 0, (flags & _CUBIC) != 0
+    linear = ~constant & ~cubic
+    tcb, user = cubic & ((flags & _TANGENT_TCB) != 0), cubic & ((flags & _TANGENT_USER) != 0)
+    auto = cubic & ~tcb & ~user
+    with np.errstate(divide="ignore", invalid="ignore"):
+        secant = np.nan_to_num(np.diff(v) / np.diff(t))        # (K - 1,) after each key
+    after = np.append(secant, 0.0)
+    before = np.insert(secant, 0, 0.0)
+    slope_r = np.where(constant, 0.0, np.where(linear, after, stored_r))
+    weight_r = np.where(cubic, weight_r, 1 / 3)
+    next_left = np.where(cubic & ~tcb, stored_nl, np.where(linear, after, 0.0))
+    next_weight = np.where(cubic & ~tcb, weight_nl, 1 / 3)
+    slope_l = np.insert(next_left[:-1], 0, 0.0)                 # carried from the key before
+    weight_l = np.insert(next_weight[:-1], 0, 1 / 3)
+    if np.any(tcb):
+        edge = np.zeros(K, dtype=bool)
+        edge[[0, -1]] = True
+        factor = np.where(edge, 1.0, 0.5)
+        T, C, B = (data[:, i].astype(float) for i in range(3))
+        tl = factor * (1 - T) * (1 + B) * (1 - C) * before + factor * (1 - T) * (1 - B) * \
+            (1 + C) * after
+        tr = factor * (1 - T) * (1 + B) * (1 + C) * before + factor * (1 - T) * (1 - B) * \
+            (1 - C) * after
+        slope_l, slope_r = np.where(tcb, tl, slope_l), np.where(tcb, tr, slope_r)
+    if np.any(auto) and K > 2:
+        inner = auto[1:-1]
+        same = np.abs(slope_l[1:-1] + stored_r[1:-1]) <= 1e-4
+        weights = (weight_l[1:-1], weight_r[1:-1])
+        both = _auto_slopes(t, v, flags, stored_r[1:-1], *weights)
+        left = np.where(same, both, _auto_slopes(t, v, flags, -slope_l[1:-1], *weights))
+        slope_l[1:-1] = np.where(inner, left, slope_l[1:-1])
+        slope_r[1:-1] = np.where(inner, both, slope_r[1:-1])
+    if K > 1:
+        for k, one_sided in ((0, secant[0]), (K - 1, secant[-1])):
+            if auto[k]:
+                progressive = flags[k] & _CLAMP_PROGRESSIVE or \
+                    (flags[k] & _CLAMP and one_sided == 0)
+                slope_l[k] = slope_r[k] = 0.0 if progressive else one_sided
+    return slope_r, weight_r, slope_l, weight_l
 
 
 def _evaluate(curve, ticks: np.ndarray) -> np.ndarray:
-    """The curve's values at ``ticks`` ``(N,)``."""
+    """The curve's values at ``ticks`` ``(N,)``: each key holds its value at its time; between
+    keys the earlier key's interpolation rules (constant: its value, or the next key's with
+    "constant next"; linear; cubic: a Bezier segment whose tangents are the keys' slopes
+    times their weights of the segment's length); outside the keys the first and last
+    values hold."""
     times, values, flags, data = curve
     if len(times) == 0:
         return np.full(len(ticks), np.nan)
@@ -440,23 +508,18 @@ def _evaluate(curve, ticks: np.ndarray) -> np.ndarray:
     inside = ~(before | after)
     if not np.any(inside):
         return out
+    slope_r, weight_r, slope_l, weight_l = _tangents(times, values, flags, data)
     k = k[inside]
     t0, t1 = times[k], times[k + 1]
     v0, v1 = values[k], values[k + 1]
     u = (ticks[inside] - t0) / (t1 - t0)
     f = flags[k]
     dt = (t1 - t0) / FBX_TICKS_PER_SECOND
-    slope_r, slope_l = data[k, 0].astype(float), data[k, 1].astype(float)
-    tcb = (flags & _TANGENT_TCB) != 0
-    if np.any(tcb):
-        inc, outg = _tcb_slopes(times, values, data.astype(float))
-        slope_r = np.where(tcb[k], outg[k], slope_r)
-        slope_l = np.where(tcb[k + 1], inc[k + 1], slope_l)
-    w_r, w_l = _weights(data, flags)
-    w_r, w_l = w_r[k], w_l[k]
-    cubic = _bezier(u, v0, v0 + slope_r * dt * w_r, v1 - slope_l * dt * w_l, v1, w_r, 1 - w_l)
+    w_r, w_l = weight_r[k], weight_l[k + 1]
+    cubic = _bezier(u, v0, v0 + slope_r[k] * dt * w_r, v1 - slope_l[k + 1] * dt * w_l, v1,
+                    w_r, 1 - w_l)
     linear = v0 + (v1 - v0) * u
-    constant = np.where(f & _CONSTANT_NEXT, v1, v0)
+    constant = np.where(((f & _CONSTANT_NEXT) != 0) & (u > 0), v1, v0)
     out[inside] = np.where(f & _CONSTANT, constant, np.where(f & _CUBIC, cubic, linear))
     return out
 
@@ -624,12 +687,13 @@ def _not_a_character(doc: _Doc) -> str:
     kinds: Counter = Counter()
     for oid, node in doc.objects.items():
         if node.name in ("Model", "Geometry"):
-            sub = doc.kind(oid)[2] or node.name
-            kinds[f"{sub} {node.name.lower()}"] += 1
+            kinds[(doc.kind(oid)[2] + " " + node.name.lower()).strip()] += 1
         elif node.name in ("AnimationStack", "Material", "Texture", "Video", "Deformer",
-                           "NodeAttribute", "Pose", "Constraint", "CollectionExclusive"):
+                           "NodeAttribute", "Pose", "Constraint"):
             kinds[node.name] += 1
-    held = ", ".join(f"{n} x {k}" for k, n in kinds.most_common(6)) or "no objects"
+    held = ", ".join(f"{n} {k}" if n == 1 else f"{n} {k[:-8]}geometries" if
+                     k.endswith("geometry") else f"{n} {k}s"
+                     for k, n in kinds.most_common(6)) or "no objects"
     return (f"not a character: no skeleton (no LimbNode, Root or skinned models); the file "
             f"holds {held}")
 
