@@ -355,3 +355,39 @@ def test_the_fbx_characters_pose_follows_its_take():
     assert moved.max() > 0.5
     follows = np.linalg.norm(vertices[:, tip] - pos[:, top], axis=1)
     assert np.ptp(follows) < 0.2 * moved.max()
+
+
+def _with_settings(tree, **values):
+    """``tree`` with GlobalSettings properties set (``UpAxis=2``, ...)."""
+    settings = tree.find("GlobalSettings").find("Properties70")
+    for p in settings.find_all("P"):
+        if p.props[0] in values:
+            p.props[4] = type(p.props[4])(values[p.props[0]])
+    return tree
+
+
+@pytest.mark.parametrize("axes, to_engine", [
+    # Blender's and 3ds Max's Z up, front -Y: (x, y, z) -> (x, z, -y)
+    (dict(UpAxis=2, UpAxisSign=1, FrontAxis=1, FrontAxisSign=-1, CoordAxis=0,
+          CoordAxisSign=1), [[1, 0, 0], [0, 0, 1], [0, -1, 0]]),
+    # X up, front +Z, right -Y
+    (dict(UpAxis=0, UpAxisSign=1, FrontAxis=2, FrontAxisSign=1, CoordAxis=1,
+          CoordAxisSign=-1), [[0, -1, 0], [1, 0, 0], [0, 0, 1]])])
+def test_global_settings_axes_and_units_become_metres_y_up(tmp_path, axes, to_engine):
+    """The same scene declared in other axes and in centimetres reads as the original turned
+    by the axis change and scaled to metres."""
+    path = shared_path(SAUSAGE)
+    original = read_fbx(path)
+    tree = _with_settings(parse_binary(path.read_bytes()), UnitScaleFactor=1.0, **axes)
+    other = tmp_path / "other_axes.fbx"
+    other.write_bytes(ascii_fbx(tree))
+    turned = read_fbx(other)
+    R = np.array(to_engine, dtype=float)
+    np.testing.assert_allclose(turned.bind_positions, 0.01 * original.bind_positions @ R.T,
+                               atol=1e-12)
+    for a, b in zip(original.motions, turned.motions):
+        pa = forward_kinematics(a, end_sites=False).positions
+        pb = forward_kinematics(b, end_sites=False).positions
+        np.testing.assert_allclose(pb, 0.01 * pa @ R.T, atol=1e-9)
+    np.testing.assert_allclose(turned.meshes[0].positions,
+                               0.01 * original.meshes[0].positions @ R.T, atol=1e-12)

@@ -156,7 +156,12 @@ class _Parser:
     def value(self, path: str):
         kind, text, at = self.next()
         if kind == "number":
-            return int(text) if _INTEGER.match(text) else float(text)
+            if not _INTEGER.match(text):
+                return float(text)
+            number = int(text)
+            if not -2 ** 63 <= number < 2 ** 63:
+                self.fail(f"the integer {text[:40]} in {path} is beyond 64 bits", at)
+            return number
         if kind == "string":
             return text[1:-1].replace("&quot;", '"')
         if kind == "word":
@@ -189,7 +194,9 @@ class _Parser:
         integers = not re.search(r"[.eEnN]", body)
         try:
             return np.array(items, dtype=np.int64 if integers else np.float64)
-        except (ValueError, OverflowError):
+        except OverflowError:
+            self.fail(f"the array of {path} holds an integer beyond 64 bits", line)
+        except ValueError:
             bad = next((s for s in items if not _number(s)), items[0] if items else "")
             self.fail(f"the array of {path} holds {bad[:40]!r}, not a number", line)
 

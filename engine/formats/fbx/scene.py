@@ -87,6 +87,8 @@ _SCALE_TOL = 1e-3
 #: a joint gets position channels when its local translation strays this far (a fraction of
 #: the character's size) from its bind offset
 _MOVE_TOL = 1e-5
+#: [ticks] the largest key time taken (about a thousand years)
+_MAX_TICKS = 2 ** 60
 #: longest take sampled (about 5.5 hours at 30 fps)
 _MAX_FRAMES = 600_000
 
@@ -317,7 +319,6 @@ class _Model:
     post_inv: np.ndarray     # (3, 3) matrix
     order: str
     inherit: int
-    geometric: np.ndarray    # (4, 4) geometric transform (meshes)
 
     def local(self, T=None, R=None, S=None) -> np.ndarray:
         """``(N, 4, 4)`` local matrices for ``(N, 3)`` translations, rotations [deg] and
@@ -346,10 +347,6 @@ def _model(doc: _Doc, oid: int) -> _Model:
     pre = _euler(_vector(p, "PreRotation", (0, 0, 0))[None], "xyz")[0] if active else np.eye(3)
     post = _euler(_vector(p, "PostRotation", (0, 0, 0))[None], "xyz")[0] if active else \
         np.eye(3)
-    geo = np.eye(4)
-    geo[:3, :3] = _euler(_vector(p, "GeometricRotation", (0, 0, 0))[None], "xyz")[0] * \
-        _vector(p, "GeometricScaling", (1, 1, 1))
-    geo[:3, 3] = _vector(p, "GeometricTranslation", (0, 0, 0))
     return _Model(oid=oid, name=name, subtype=sub,
                   translation=_vector(p, "Lcl Translation", (0, 0, 0)),
                   rotation=_vector(p, "Lcl Rotation", (0, 0, 0)),
@@ -359,7 +356,7 @@ def _model(doc: _Doc, oid: int) -> _Model:
                   scaling_offset=_vector(p, "ScalingOffset", (0, 0, 0)),
                   scaling_pivot=_vector(p, "ScalingPivot", (0, 0, 0)),
                   pre=pre, post_inv=post.T, order=_EULER_ORDERS.get(order, "xyz"),
-                  inherit=int(_number(p, "InheritType", 1.0)), geometric=geo)
+                  inherit=int(_number(p, "InheritType", 1.0)))
 
 
 def _world(model: _Model, local: np.ndarray, parent_world: np.ndarray | None,
@@ -384,6 +381,8 @@ def _curve(doc: _Doc, node: Node):
     values = _array(doc, node, "KeyValueFloat")
     if len(times) != len(values):
         raise doc.error(f"{len(times)} key times but {len(values)} key values", node)
+    if np.any(np.abs(times) > _MAX_TICKS):
+        raise doc.error("key times beyond a thousand years", node)
     if np.any(np.diff(times) <= 0):
         raise doc.error("key times that do not increase", node)
     K = len(times)
@@ -398,6 +397,9 @@ def _curve(doc: _Doc, node: Node):
                 len(counts) != len(raw_flags) or np.any(counts < 0) or counts.sum() < K:
             raise doc.error("key attributes (KeyAttrFlags, KeyAttrDataFloat, "
                             "KeyAttrRefCount) that do not cover the keys", node)
+        if attr.dtype.kind not in "biuf" or (attr.dtype != np.float32 and not np.all(
+                np.abs(attr.astype(float)) <= np.finfo(np.float32).max)):
+            raise doc.error("KeyAttrDataFloat holds values that are not 32-bit floats", node)
         flags = np.repeat(raw_flags, counts)[:K] & 0xFFFFFFFF
         bits = np.asarray(attr, dtype=np.float32).reshape(-1, 4)
         data = np.repeat(bits, counts, axis=0)[:K]
@@ -587,7 +589,8 @@ def _takes(doc: _Doc, notes: list[str]) -> list[_Take]:
 
 
 def _tick(values) -> int | None:
-    if values and _is_id(values[0]):
+    """A ``KTime`` property's ticks (``None`` when absent, malformed or out of range)."""
+    if values and _is_id(values[0]) and abs(int(values[0])) <= _MAX_TICKS:
         return int(values[0])
     return None
 
@@ -694,6 +697,8 @@ def _not_a_character(doc: _Doc) -> str:
     held = ", ".join(f"{n} {k}" if n == 1 else f"{n} {k[:-8]}geometries" if
                      k.endswith("geometry") else f"{n} {k}s"
                      for k, n in kinds.most_common(6)) or "no objects"
+    if not any(node.name == "Model" for node in doc.objects.values()):
+        held += " and no models"
     return (f"not a character: no skeleton (no LimbNode, Root or skinned models); the file "
             f"holds {held}")
 
@@ -959,8 +964,13 @@ def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str]) -> list[Mesh]:
                         weights=_frozen(ww), skin=len(out), node=int(owner[0]) if owner
                         else int(geometry_id)))
     if unbound_total:
-        notes.append(f"{_plural(unbound_total, 'vertex')} no cluster weighs bound to their "
-                     "skin's first joint")
+        what = "1 vertex" if unbound_total == 1 else f"{unbound_total} vertices"
+        notes.append(f"{what} no cluster weighs bound to their skin's first joint")
+    skinned = {m.node for m in out}
+    loose = sum(1 for oid, node in doc.objects.items() if node.name == "Model" and
+                doc.kind(oid)[2] == "Mesh" and oid not in skinned)
+    if loose:
+        notes.append(f"{_plural(loose, 'mesh')} without a skin on the skeleton left out")
     return out
 
 
