@@ -75,6 +75,11 @@ _CUSTOM_MODE = 14
 #: scipy's extrinsic axis sequence of each ``RotationOrder`` (eEulerXYZ rotates about X first)
 _EULER_ORDERS = {0: "xyz", 1: "xzy", 2: "yzx", 3: "yxz", 4: "zxy", 5: "zyx", 6: "xyz"}
 _JOINT_TYPES = ("LimbNode", "Root", "Null")
+#: a model's transform properties and their defaults
+_TRANSFORM = {"Lcl Translation": (0, 0, 0), "Lcl Rotation": (0, 0, 0), "Lcl Scaling": (1, 1, 1),
+              "RotationOffset": (0, 0, 0), "RotationPivot": (0, 0, 0),
+              "ScalingOffset": (0, 0, 0), "ScalingPivot": (0, 0, 0), "PreRotation": (0, 0, 0),
+              "PostRotation": (0, 0, 0)}
 _ANIMATED = ("Lcl Translation", "Lcl Rotation", "Lcl Scaling")
 # AnimationCurve key flags (FbxAnimCurveDef)
 _CONSTANT, _LINEAR, _CUBIC = 0x2, 0x4, 0x8
@@ -135,7 +140,6 @@ class _Doc:
     def __init__(self, root: Node, path, ascii_form: bool):
         self.path = path
         self.ascii_form = ascii_form
-        self.version = int(root.props[0]) if root.props else 0
         self.objects: dict[int, Node] = {}
         objects = root.find("Objects")
         for node in objects.children if objects is not None else ():
@@ -160,7 +164,6 @@ class _Doc:
             if kind.props and template is not None:
                 self.templates[str(kind.props[0])] = _properties(template)
         self.settings = _properties(root.find("GlobalSettings"))
-        self.takes_node = root.find("Takes")
 
     def error(self, problem: str, node: Node | None = None) -> FBXError:
         where = None
@@ -194,22 +197,23 @@ def _is_id(value) -> bool:
 
 
 def _vector(values: dict[str, list], name: str, default) -> np.ndarray:
-    """A 3-vector property (the default when absent or malformed)."""
+    """A 3-vector property (the default when absent or not three numbers; it may be out of
+    range: see :func:`_model`)."""
     v = values.get(name)
     if v is None or len(v) < 3:
         return np.array(default, dtype=float)
     try:
-        out = np.array([float(x) for x in v[:3]])
-    except (TypeError, ValueError):
+        return np.array([float(x) for x in v[:3]])
+    except (TypeError, ValueError, OverflowError):
         return np.array(default, dtype=float)
-    return out if np.all(np.isfinite(out)) else np.array(default, dtype=float)
 
 
 def _number(values: dict[str, list], name: str, default: float) -> float:
+    """A number property (the default when absent, malformed or not finite)."""
     v = values.get(name)
     try:
         out = float(v[0])
-    except (TypeError, ValueError, IndexError):
+    except (TypeError, ValueError, IndexError, OverflowError):
         return default
     return out if np.isfinite(out) else default
 
@@ -227,8 +231,9 @@ def _array(doc: _Doc, node: Node, name: str, *, integer: bool = False,
         raise doc.error(f"{name} is not an array of numbers", child)
     if integer:
         if value.dtype.kind == "f":
-            if not np.all(np.isfinite(value)) or np.any(value != np.round(value)):
-                raise doc.error(f"{name} holds numbers that are not whole", child)
+            if not np.all(np.abs(value) <= 2.0 ** 62) or np.any(value != np.round(value)):
+                raise doc.error(f"{name} holds numbers that are not whole or are out of range",
+                                child)
         return value.astype(np.int64)
     out = value.astype(float)
     if not np.all(np.isfinite(out)) or np.any(np.abs(out) > limits.MAX_MAGNITUDE * 1e3):
@@ -344,23 +349,24 @@ def _model(doc: _Doc, oid: int) -> _Model:
     p = doc.props(node)
     active = bool(_number(p, "RotationActive", 0.0))
     order = int(_number(p, "RotationOrder", 0.0)) if active else 0
-    pre = _euler(_vector(p, "PreRotation", (0, 0, 0))[None], "xyz")[0] if active else np.eye(3)
-    post = _euler(_vector(p, "PostRotation", (0, 0, 0))[None], "xyz")[0] if active else \
-        np.eye(3)
+    vectors = {key: _vector(p, key, default) for key, default in _TRANSFORM.items()}
+    for key, v in vectors.items():
+        if not np.all(np.abs(v) <= limits.MAX_MAGNITUDE):
+            raise doc.error(f"the {key} of model {name!r} is {v.tolist()} (expected finite "
+                            f"numbers of magnitude at most {limits.MAX_MAGNITUDE:g})", node)
+    pre = _euler(vectors["PreRotation"][None], "xyz")[0] if active else np.eye(3)
+    post = _euler(vectors["PostRotation"][None], "xyz")[0] if active else np.eye(3)
     return _Model(oid=oid, name=name, subtype=sub,
-                  translation=_vector(p, "Lcl Translation", (0, 0, 0)),
-                  rotation=_vector(p, "Lcl Rotation", (0, 0, 0)),
-                  scaling=_vector(p, "Lcl Scaling", (1, 1, 1)),
-                  rotation_offset=_vector(p, "RotationOffset", (0, 0, 0)),
-                  rotation_pivot=_vector(p, "RotationPivot", (0, 0, 0)),
-                  scaling_offset=_vector(p, "ScalingOffset", (0, 0, 0)),
-                  scaling_pivot=_vector(p, "ScalingPivot", (0, 0, 0)),
+                  translation=vectors["Lcl Translation"], rotation=vectors["Lcl Rotation"],
+                  scaling=vectors["Lcl Scaling"], rotation_offset=vectors["RotationOffset"],
+                  rotation_pivot=vectors["RotationPivot"],
+                  scaling_offset=vectors["ScalingOffset"], scaling_pivot=vectors["ScalingPivot"],
                   pre=pre, post_inv=post.T, order=_EULER_ORDERS.get(order, "xyz"),
                   inherit=int(_number(p, "InheritType", 1.0)))
 
 
 def _world(model: _Model, local: np.ndarray, parent_world: np.ndarray | None,
-           parent: _Model | None, parent_scaling: np.ndarray | None) -> np.ndarray:
+           parent_scaling: np.ndarray | None) -> np.ndarray:
     """``(N, 4, 4)`` world matrices of ``model`` from its local matrices and its parent's world
     matrices (``None`` at the scene root); ``parent_scaling`` ``(N, 3)`` is the parent's own
     ``Lcl Scaling`` (left out of a child whose InheritType is 2, ``Rrs``)."""
@@ -368,9 +374,9 @@ def _world(model: _Model, local: np.ndarray, parent_world: np.ndarray | None,
         return local.copy()
     world = parent_world @ local
     if model.inherit == 2 and parent_scaling is not None:
-        unscale = np.zeros_like(parent_world)
-        unscale[..., :3, :3] = parent_world[..., :3, :3] / parent_scaling[:, None, :]
-        world[..., :3, :3] = unscale[..., :3, :3] @ local[..., :3, :3]
+        with np.errstate(divide="ignore", invalid="ignore"):    # a zero scale: not finite
+            unscaled = parent_world[..., :3, :3] / parent_scaling[:, None, :]
+        world[..., :3, :3] = unscaled @ local[..., :3, :3]
     return world
 
 
@@ -517,26 +523,34 @@ def _evaluate(curve, ticks: np.ndarray) -> np.ndarray:
     u = (ticks[inside] - t0) / (t1 - t0)
     f = flags[k]
     dt = (t1 - t0) / FBX_TICKS_PER_SECOND
-    w_r, w_l = weight_r[k], weight_l[k + 1]
-    cubic = _bezier(u, v0, v0 + slope_r[k] * dt * w_r, v1 - slope_l[k + 1] * dt * w_l, v1,
-                    w_r, 1 - w_l)
-    linear = v0 + (v1 - v0) * u
-    constant = np.where(((f & _CONSTANT_NEXT) != 0) & (u > 0), v1, v0)
-    out[inside] = np.where(f & _CONSTANT, constant, np.where(f & _CUBIC, cubic, linear))
+    value = v0 + (v1 - v0) * u                                     # linear
+    constant = (f & _CONSTANT) != 0
+    value[constant] = np.where(((f[constant] & _CONSTANT_NEXT) != 0) & (u[constant] > 0),
+                               v1[constant], v0[constant])
+    c = np.flatnonzero(~constant & ((f & _CUBIC) != 0))
+    if len(c):
+        w_r, w_l, d = weight_r[k[c]], weight_l[k[c] + 1], dt[c]
+        value[c] = _bezier(u[c], v0[c], v0[c] + slope_r[k[c]] * d * w_r,
+                           v1[c] - slope_l[k[c] + 1] * d * w_l, v1[c], w_r, 1 - w_l)
+    out[inside] = value
     return out
 
 
 def _bezier(u, p0, p1, p2, p3, x1, x2) -> np.ndarray:
     """A cubic Bezier's value where its time ``x(s)`` (control times 0, ``x1``, ``x2``, 1)
-    equals ``u``: ``s`` by bisection (``x`` increases for weights in (0, 1])."""
-    lo, hi = np.zeros_like(u), np.ones_like(u)
-    unweighted = np.isclose(x1, 1 / 3) & np.isclose(x2, 2 / 3)
-    for _ in range(50):
-        mid = (lo + hi) / 2
-        m = 1 - mid
-        x = 3 * m * m * mid * x1 + 3 * m * mid * mid * x2 + mid ** 3
-        lo, hi = np.where(x < u, mid, lo), np.where(x < u, hi, mid)
-    s = np.where(unweighted, u, (lo + hi) / 2)
+    equals ``u``: ``s = u`` for unweighted tangents (``x1 = 1/3``, ``x2 = 2/3``: ``x`` is
+    then linear), else by bisection (``x`` increases for weights in (0, 1])."""
+    s = np.array(u, dtype=float)
+    weighted = np.flatnonzero(~(np.isclose(x1, 1 / 3) & np.isclose(x2, 2 / 3)))
+    if len(weighted):
+        uw, a, b = u[weighted], x1[weighted], x2[weighted]
+        lo, hi = np.zeros_like(uw), np.ones_like(uw)
+        for _ in range(50):
+            mid = (lo + hi) / 2
+            m = 1 - mid
+            below = 3 * m * m * mid * a + 3 * m * mid * mid * b + mid ** 3 < uw
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        s[weighted] = (lo + hi) / 2
     m = 1 - s
     return m ** 3 * p0 + 3 * m * m * s * p1 + 3 * m * s * s * p2 + s ** 3 * p3
 
@@ -754,7 +768,7 @@ class _Evaluator:
             local = np.broadcast_to(model.local(*trs), (n, 4, 4))
             scaling[m] = np.broadcast_to(model.scaling if trs[2] is None else trs[2], (n, 3))
             p = _scene_parent(self.doc, m)
-            out[m] = _world(model, local, out.get(p), self.models.get(p), scaling.get(p))
+            out[m] = _world(model, local, out.get(p), scaling.get(p))
         return out
 
 
@@ -1012,6 +1026,8 @@ def _build(doc: _Doc, name: str, fps: float | None) -> Character:
     ev = _Evaluator(doc, joints)
     bind_file = _bind_matrices(doc, joints, ev, links, notes)
     bind = _to_engine(bind_file, A, s)
+    if not np.all(np.isfinite(bind)):
+        raise doc.error("the bind pose is not finite (a zero scale on a joint?)")
     rot, sig, det = _polar(bind[:, :3, :3])
     spread = sig.max(axis=-1) / np.maximum(sig.min(axis=-1), 1e-300) - 1.0
     if np.any(spread > _SCALE_TOL) or np.any(det <= 0):
