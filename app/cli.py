@@ -356,6 +356,10 @@ def cmd_retarget(args) -> int:
     output_format(args.output)
     performer_options = side_options(args, "performer")
     if args.take is not None:
+        from motion_composer.engine.formats import sniff
+        if sniff(args.performer).read_take is None:
+            raise MotionComposerError(f"{args.performer}: --take applies to FBX files (a "
+                                      f"{sniff(args.performer).name} file has no takes)")
         performer_options["take"] = args.take
     target_options = side_options(args, "target")
     performer = read_performer(args.performer, **performer_options)

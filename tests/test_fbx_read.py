@@ -19,7 +19,7 @@ import pytest
 from conftest import clip_path, shared_path
 from fbx_ascii import ascii_fbx
 from motion_composer.app.cli import main
-from motion_composer.engine.errors import FBXError, UnsupportedFormatError
+from motion_composer.engine.errors import FBXError
 from motion_composer.engine.formats import (FBX, read_character, read_motion, read_performer,
                                             sniff)
 from motion_composer.engine.formats.fbx import scene as fbx_scene
@@ -121,14 +121,17 @@ def test_takes_are_chosen_by_name_or_by_the_part_after_the_bar():
     assert read_motion(path).num_frames == 1                     # the target: its bind pose
 
 
-def test_a_character_without_takes_is_no_performer_and_bvh_has_no_takes():
+def test_a_character_without_takes_is_no_performer_and_bvh_has_no_takes(capsys, tmp_path):
     maya = shared_path("fbx/maya_character_7500_binary.fbx")
     with pytest.raises(FBXError) as info:
         read_performer(maya)
     one_line(info.value, "no take that moves a joint", "target")
-    with pytest.raises(UnsupportedFormatError) as info:
-        read_performer(WALK, take="Walk")
-    one_line(info.value, "BVH file has no takes")
+    # a project's take on a BVH source names nothing to choose; the command line refuses it
+    assert read_performer(WALK, take="Walk").num_frames == read_motion(WALK).num_frames
+    assert main(["retarget", str(WALK), "--take", "Walk", "--target", str(TPOSE),
+                 "-o", str(tmp_path / "o.bvh")]) == 2
+    assert "--take applies to FBX files (a BVH file has no takes)" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
 
 
 def test_takes_are_sampled_at_the_files_rate_or_the_one_asked():

@@ -234,11 +234,12 @@ def sniff(path: str | os.PathLike) -> Format:
     raise _unknown(head, path)
 
 
-def _no_takes(fmt: Format, path, options: dict) -> None:
-    if options.get("take") is not None and fmt.read_take is None:
-        raise UnsupportedFormatError(f"a {fmt.name} file has no takes; a take is chosen in "
-                                     "FBX files only", path)
+def _without_take(options: dict) -> dict:
+    """The reader options of a format without takes: a ``take`` names one of an FBX file's
+    takes, and a file with one motion (BVH, glTF) has nothing to choose (a project keeps
+    the name; the command line refuses ``--take`` for such a file)."""
     options.pop("take", None)
+    return options
 
 
 def read_motion(path: str | os.PathLike, **bvh_overrides) -> Motion:
@@ -251,7 +252,7 @@ def read_motion(path: str | os.PathLike, **bvh_overrides) -> Motion:
     """
     fmt = sniff(path)
     if fmt.read_take is None:
-        _no_takes(fmt, path, bvh_overrides)
+        _without_take(bvh_overrides)
     return fmt.read_motion(path, **bvh_overrides)
 
 
@@ -267,7 +268,7 @@ def read_performer(path: str | os.PathLike, **bvh_overrides) -> Motion:
     fmt = sniff(path)
     if fmt.read_take is not None:
         return fmt.read_take(path, **bvh_overrides)
-    _no_takes(fmt, path, bvh_overrides)
+    _without_take(bvh_overrides)
     if fmt.mesh:
         raise UnsupportedFormatError(f"a {fmt.name} file is a character; use it as the target "
                                      "(the performer is a BVH clip or an FBX take)", path)

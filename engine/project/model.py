@@ -123,7 +123,7 @@ class Source:
         units, scale, up_axis, position_mode: the reader overrides used (``None``: detected);
             see :func:`engine.formats.bvh.record_to_motion`.
         take: the take of an FBX file (``None``: its first take for a performer, its bind
-            pose for a target).
+            pose for a target); a file with one motion (BVH, glTF) has none to choose.
     """
 
     path: str | None = None
