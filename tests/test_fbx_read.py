@@ -318,6 +318,18 @@ def test_a_capture_onto_a_mixamo_fbx_character_written_as_glb(tmp_path, capsys):
     assert written.num_vertices == 24746 and written.motions[0].num_frames == 994
 
 
+def test_a_project_with_an_fbx_target_exports_onto_its_mesh(tmp_path, capsys):
+    project = tmp_path / "p.mcp"
+    mixamo = shared_path("fbx/mixamo.fbx")
+    assert main(["retarget", str(WALK), "--target", str(mixamo), "-o", str(tmp_path / "a.glb"),
+                 "--save-project", str(project)]) == 0
+    assert main(["export", str(project), "-o", str(tmp_path / "b.glb")]) == 0
+    a, b = read_character(tmp_path / "a.glb"), read_character(tmp_path / "b.glb")
+    assert b.num_vertices == 24746
+    np.testing.assert_allclose(a.motions[0].rotations, b.motions[0].rotations, atol=1e-6)
+    capsys.readouterr()
+
+
 def test_an_fbx_take_as_the_performer_through_a_project_and_batch(tmp_path, capsys):
     samba = tmp_path / "samba.fbx"
     shutil.copy(shared_path("fbx/Samba_Dancing.fbx"), samba)
