@@ -4,7 +4,8 @@
 FBX file with its own importer (``io_scene_fbx``, default settings: the file's axes and
 ``UnitScaleFactor`` to Blender's metres, +Z up). Per file it reports the world position of
 every bone's head in the bind pose (edit bones) and, per requested take, at the requested
-times; ``None`` as a take is the pose without an action (the models' own transforms).
+times (and, when asked, every mesh's skinned vertices, as Blender's armature modifier deforms
+them); ``None`` as a take is the pose without an action (the models' own transforms).
 
 Blender's quirks, handled here (see ``shared/data/fbx/README.md``): its importer sets
 ``use_connect`` on bones whose head meets their parent's tail, which drops their translation;
@@ -56,14 +57,21 @@ BLENDER_SCRIPT = textwrap.dedent(r'''
                                    a.name.startswith(wanted + "|")), None)
                     assert action is not None, (wanted, [a.name for a in bpy.data.actions])
                 arm.animation_data.action = action
-            samples = []
+            samples, meshes = [], []
             for t in times:
                 frame = t * fps + 1
                 whole = math.floor(frame + 1e-9)
                 scene.frame_set(whole, subframe=max(0.0, frame - whole))
                 samples.append({pb.name: list(arm.matrix_world @ pb.head) for arm in arms
                                 for pb in arm.pose.bones})
+                if item.get("meshes"):
+                    graph = bpy.context.evaluated_depsgraph_get()
+                    meshes.append({o.name: [list(o.matrix_world @ v.co) for v in
+                                            o.evaluated_get(graph).to_mesh().vertices]
+                                   for o in scene.objects if o.type == "MESH"})
             takes[str(take)] = samples
+            if meshes:
+                takes[str(take) + " meshes"] = meshes
         results[item["key"]] = {"fps": fps, "bind": bind, "takes": takes,
                                 "actions": [a.name for a in bpy.data.actions]}
     json.dump(results, open(job["out"], "w"))
@@ -80,13 +88,15 @@ def run_blender_fbx(files: list[dict], folder: Path, timeout: float = 900) -> di
     """Import FBX files in one headless Blender process.
 
     Args:
-        files: ``{"key": str, "path": str, "takes": [[take name or None, [t, ...]], ...]}``
-            per file (times in seconds).
+        files: ``{"key": str, "path": str, "takes": [[take name or None, [t, ...]], ...],
+            "meshes": bool}`` per file (times in seconds; ``meshes``: also the skinned
+            vertices of every mesh object at those times).
         folder: where the script, the job and the result are written.
 
     Returns:
         key -> ``{"fps": int, "bind": {bone: [x, y, z]}, "takes": {str(take): [{bone:
-        [x, y, z]} per time]}, "actions": [...]}`` in Blender's axes and metres.
+        [x, y, z]} per time], str(take) + " meshes": [{mesh object: [[x, y, z] per
+        vertex]} per time]}, "actions": [...]}`` in Blender's axes and metres.
     """
     blender = blender_or_skip()
     folder = Path(folder)
