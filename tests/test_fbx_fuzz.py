@@ -5,7 +5,7 @@ its :func:`cli_fuzz.judge`.
 
 The seeds are the binary characters of ../shared/data/fbx (Blender's sausage with its three
 takes, the Maya rigs with pivots and pre-rotations) and ASCII copies of two of them
-(tests/fbx_ascii.py), plus the ASCII NURBS scene. Binary mutations follow the record layout
+(tests/fbx_ascii.py), plus the ASCII NURBS scene and the FBX 6.1 ASCII Maya rig. Binary mutations follow the record layout
 (:mod:`engine.formats.fbx.binary`): a record's end offset, property count or length, a
 property's type code, a scalar's value (NaN, infinities, huge numbers, odd ids), an array's
 length, encoding or stored size; and bytes truncated or flipped anywhere. ASCII mutations are
@@ -188,6 +188,7 @@ def test_fuzzed_fbx_files_through_the_real_cli(tmp_path):
         copy.write_bytes(ascii_fbx(parse_binary((folder_in / name).read_bytes())))
         seeds.append((copy, ASCII_MUTATIONS))
     seeds.append((folder_in / "nurbs_ascii_7200.fbx", ASCII_MUTATIONS))
+    seeds.append((folder_in / "maya_character_6100_ascii.fbx", ASCII_MUTATIONS))
     cases_dir = tmp_path / "cases"
     cases_dir.mkdir()
     walk = REPO / "tests" / "data" / "walk_first_60.bvh"

@@ -42,8 +42,7 @@ EXPECTED = {
     SAUSAGE: (5, ["Skeleton|Base", "Skeleton|Spin", "Skeleton|Wiggle"], 1),
     "fbx/maya_kenney_character_7700_binary.fbx": (59, ["Take 001"], 1),
     "fbx/maya_character_7500_binary.fbx": (63, [], 0),
-    "fbx/maya_character_6100_ascii.fbx": "FBX 6 is not supported (FBX 7.x is read): re-export "
-                                         "as FBX 7",
+    "fbx/maya_character_6100_ascii.fbx": (63, [], 0),
     "fbx/max7_skin_5000_binary.fbx": "older than FBX 7.1",
     "fbx/motionbuilder_actor_7700_binary.fbx": "not a character: no skeleton",
     "fbx/nurbs_ascii_7200.fbx": "the file holds 5 NurbsCurve geometries",
@@ -181,6 +180,40 @@ def test_the_ascii_and_binary_forms_of_one_scene_read_the_same(name, tmp_path):
         np.testing.assert_array_equal(x.weights, y.weights)
 
 
+def test_the_fbx6_ascii_and_fbx7_binary_copies_of_one_rig_give_the_same_poses():
+    """``maya_character_6100_ascii.fbx`` and ``_7500_binary.fbx`` are one Maya rig (63 joints
+    with pre-rotations and InheritType 2, no mesh, no animation): its bind pose and its
+    models' own pose read the same from both."""
+    six = read_fbx(shared_path("fbx/maya_character_6100_ascii.fbx"))
+    seven = read_fbx(shared_path("fbx/maya_character_7500_binary.fbx"))
+    assert six.skeleton.names == seven.skeleton.names
+    np.testing.assert_array_equal(six.skeleton.parents, seven.skeleton.parents)
+    np.testing.assert_allclose(six.bind_positions, seven.bind_positions, atol=1e-12)
+    np.testing.assert_allclose(six.node_pose.rotations, seven.node_pose.rotations, atol=1e-12)
+    np.testing.assert_allclose(forward_kinematics(six.node_pose).positions,
+                               forward_kinematics(seven.node_pose).positions, atol=1e-12)
+
+
+def test_what_fbx6_keeps_elsewhere_is_noted():
+    text = (b"; FBX 6.1.0 project file\nFBXHeaderExtension:  {\n\tFBXVersion: 6100\n}\n"
+            b"Objects:  {\n\tModel: \"Model::Hips\", \"Limb\" {\n\t\tProperties60:  {\n"
+            b"\t\t\tProperty: \"Lcl Translation\", \"Lcl Translation\", \"A+\",0,90,0\n"
+            b"\t\t}\n\t}\n\tModel: \"Model::body\", \"Mesh\" {\n\t\tVertices: 0,0,0\n\t}\n"
+            b"\tDeformer: \"Deformer::Skin\", \"Skin\" {\n\t}\n}\n"
+            b"Connections:  {\n\tConnect: \"OO\", \"Model::Hips\", \"Model::Scene\"\n}\n"
+            b"Takes:  {\n\tTake: \"Walk\" {\n\t\tModel: \"Model::Hips\" {\n\t\t}\n\t}\n}\n")
+    from motion_composer.engine.formats.fbx.legacy import from_fbx6
+    tree, notes = from_fbx6(parse_ascii(text))
+    assert notes == ["FBX 6: the file's Deformer, Mesh objects are not read (re-export as FBX "
+                     "7 for meshes, skins and bind poses)",
+                     "FBX 6: the animation of 1 take(s) is not read (re-export as FBX 7 for it)"]
+    hips = tree.find("Objects").find("Model")
+    assert hips.props == [1, "Hips\x00\x01Model", "Limb"]
+    assert hips.find("Properties70").find("P").props == ["Lcl Translation", "Lcl Translation",
+                                                         "", "A+", 0, 90, 0]
+    assert tree.find("Connections").find("C").props == ["OO", 1, 0]
+
+
 def test_the_ascii_tree_has_the_binary_trees_types_and_names():
     root = parse_ascii(shared_path("fbx/nurbs_ascii_7200.fbx").read_bytes())
     assert root.name == "FBX" and root.props == [7200]
@@ -209,6 +242,8 @@ def test_the_ascii_tree_has_the_binary_trees_types_and_names():
      "unexpected character '@'"),
     (b"FBXHeaderExtension: {\n\tFBXVersion: 9000\n}\n", None, "newer than the FBX 7.7"),
     (b"FBXHeaderExtension: {\n}\n", 1, "no FBXHeaderExtension/FBXVersion"),
+    (b"; FBX 5.8.0 project file\nFBXHeaderExtension: {\n\tFBXVersion: 5800\n}\n", 3,
+     "FBX 5 and older are not read (FBX 6.x ASCII and 7.x are): re-export as FBX 7"),
 ])
 def test_malformed_ascii_names_the_line(text, line, problem):
     with pytest.raises(FBXError) as info:

@@ -1,4 +1,5 @@
-"""ASCII FBX 7.x: text to the document tree (:class:`~.nodes.Node`), the binary form's twin.
+"""ASCII FBX 7.x (and 6.x): text to the document tree (:class:`~.nodes.Node`), the binary
+form's twin.
 
 The syntax (as the FBX SDK writes it, e.g. ``nurbs_ascii_7200.fbx``): ``;`` starts a comment
 to the end of the line; a record is ``Name: value, value, ...`` ended by the line's end (a
@@ -19,7 +20,9 @@ Typed values, so that the scene reader sees one tree whichever form the file is 
 The root is a :class:`Node` named ``"FBX"`` whose one property is the file's version
 (``FBXHeaderExtension/FBXVersion``, ``numpy.int32``), as :func:`~.binary.parse_binary` gives.
 Every record's :attr:`Node.offset` is its line number. Malformed text raises
-:class:`~engine.errors.FBXError` naming the line; FBX 6 files are refused by name.
+:class:`~engine.errors.FBXError` naming the line. FBX 6 text has the same syntax (its lists
+of numbers are plain values, not ``*N`` arrays); :mod:`.legacy` rewrites its tree for the
+scene reader. FBX 5 and older are refused by name.
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ from .nodes import Node
 
 __all__ = ["is_ascii_fbx", "parse_ascii"]
 
-_OLDEST, _NEWEST = 7000, 7700
+_OLDEST, _NEWEST = 6000, 7700
 _MAX_DEPTH = 64
 _TOKEN = re.compile(r"""
     (?P<space>[ \t\r\f\v]+)
@@ -46,6 +49,7 @@ _TOKEN = re.compile(r"""
   | (?P<punct>[{},])
 """, re.VERBOSE)
 _INTEGER = re.compile(r"[-+]?[0-9]+\Z")
+_TOO_OLD = "FBX 5 and older are not read (FBX 6.x ASCII and 7.x are): re-export as FBX 7"
 _BOOLEANS = {"T": True, "Y": True, "F": False, "N": False}
 
 
@@ -219,17 +223,15 @@ def _version(nodes: list[Node], path) -> int:
 
 
 def parse_ascii(data: bytes, path=None) -> Node:
-    """The document tree of an ASCII FBX 7.x file's bytes (see the module notes).
+    """The document tree of an ASCII FBX 6.x or 7.x file's bytes (see the module notes).
 
     Raises:
         FBXError: text that is not UTF-8, malformed records (naming the line), no version,
-            FBX 6 and older ("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7")
-            or a version newer than 7.7.
+            FBX 5 and older or a version newer than 7.7.
     """
     major = re.search(rb"FBXVersion:\s*([0-9]+)", data[:4096])
     if major and int(major.group(1)) < _OLDEST:
-        raise FBXError("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7", path,
-                       line=data[:major.start()].count(b"\n") + 1)
+        raise FBXError(_TOO_OLD, path, line=data[:major.start()].count(b"\n") + 1)
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -242,7 +244,7 @@ def parse_ascii(data: bytes, path=None) -> Node:
     nodes = _Parser(text, path).records(0, "")
     version = _version(nodes, path)
     if version < _OLDEST:
-        raise FBXError("FBX 6 is not supported (FBX 7.x is read): re-export as FBX 7", path)
+        raise FBXError(_TOO_OLD, path)
     if version > _NEWEST:
         raise FBXError(f"ASCII FBX version {version} is newer than the FBX 7.7 this reader "
                        "knows", path)

@@ -1,4 +1,5 @@
-"""FBX scenes: the document tree (binary or ASCII FBX 7.x) read as a character and its takes.
+"""FBX scenes: the document tree (binary or ASCII FBX 7.x, ASCII FBX 6.x through
+:mod:`.legacy`) read as a character and its takes.
 
 :func:`read_fbx` returns the same :class:`~engine.formats.gltf.Character` the glTF reader does:
 the skeleton whose zero-rotation pose is the bind pose, the skinned meshes in that pose, and
@@ -11,10 +12,10 @@ How the tree is read (the FBX SDK's model, as Blender's and ufbx's readers imple
   ``Connections`` record ``C: "OO", child, parent`` links two objects and ``C: "OP", child,
   parent, "property"`` links an object to a parent's property. Properties (``Properties70``)
   fall back on the ``Definitions`` templates of their object type.
-* **Joints.** Models of type ``LimbNode`` and ``Root``, the models skin clusters bind to, and
-  their ``Null`` (or ``LimbNode``) ancestors below the scene root are the skeleton's joints
-  (a Blender armature is such a ``Null``). Several top joints get a common new ``root`` joint at
-  the origin.
+* **Joints.** Models of type ``LimbNode``, ``Root`` (and FBX 6's ``Limb``), the models skin
+  clusters bind to, and their ``Null`` (or ``LimbNode``) ancestors below the scene root are
+  the skeleton's joints (a Blender armature is such a ``Null``). Several top joints get a
+  common new ``root`` joint at the origin.
 * **Transforms.** A model's local matrix is ``T * Roff * Rp * Rpre * R * Rpost^-1 * Rp^-1 *
   Soff * Sp * S * Sp^-1`` (``Lcl Translation``, ``RotationOffset``, ``RotationPivot``,
   ``PreRotation``, ``Lcl Rotation`` in its ``RotationOrder``, ``PostRotation``,
@@ -61,6 +62,7 @@ from ..gltf import (POSITION_LAYOUT, ROTATION_LAYOUT, Character, Mesh, _frozen, 
                     _matrix_to_quat, _plural, _polar, _pose_from_world, _pose_motion)
 from .ascii import is_ascii_fbx, parse_ascii
 from .binary import is_binary_fbx, parse_binary
+from .legacy import from_fbx6
 from .nodes import FBX_TICKS_PER_SECOND, Node
 
 __all__ = ["read_fbx", "parse_fbx", "take_motion", "DEFAULT_FPS"]
@@ -74,7 +76,9 @@ _TIME_MODES = {1: 120.0, 2: 100.0, 3: 60.0, 4: 50.0, 5: 48.0, 6: 30.0, 7: 30.0,
 _CUSTOM_MODE = 14
 #: scipy's extrinsic axis sequence of each ``RotationOrder`` (eEulerXYZ rotates about X first)
 _EULER_ORDERS = {0: "xyz", 1: "xzy", 2: "yzx", 3: "yxz", 4: "zxy", 5: "zyx", 6: "xyz"}
-_JOINT_TYPES = ("LimbNode", "Root", "Null")
+_JOINT_TYPES = ("LimbNode", "Limb", "Root", "Null")
+#: the model types that are joints by themselves (``Limb``: FBX 6's)
+_SKELETON_TYPES = ("LimbNode", "Limb", "Root")
 #: a model's transform properties and their defaults
 _TRANSFORM = {"Lcl Translation": (0, 0, 0), "Lcl Rotation": (0, 0, 0), "Lcl Scaling": (1, 1, 1),
               "RotationOffset": (0, 0, 0), "RotationPivot": (0, 0, 0),
@@ -640,7 +644,7 @@ def _scene_parent(doc: _Doc, oid: int) -> int | None:
 
 def _joint_tree(doc: _Doc, cluster_models: set[int], notes: list[str]) -> _Joints:
     models = {oid for oid, n in doc.objects.items() if n.name == "Model"}
-    core = {m for m in models if doc.kind(m)[2] in ("LimbNode", "Root")} | \
+    core = {m for m in models if doc.kind(m)[2] in _SKELETON_TYPES} | \
         (cluster_models & models)
     if not core:
         raise doc.error(_not_a_character(doc))
@@ -1011,8 +1015,7 @@ def _channels(parents: np.ndarray, offsets: np.ndarray, size: float, poses) -> t
     return tuple(POSITION_LAYOUT + ROTATION_LAYOUT if m else ROTATION_LAYOUT for m in moving)
 
 
-def _build(doc: _Doc, name: str, fps: float | None) -> Character:
-    notes: list[str] = []
+def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Character:
     A, s, reason = _axis_frame(doc)
     fps = _frame_rate(doc) if fps is None else fps
     skins = _clusters(doc)
@@ -1093,13 +1096,15 @@ def _build(doc: _Doc, name: str, fps: float | None) -> Character:
 
 
 def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
-    """Read an FBX 7.x character (binary or ASCII) with every take (see the module notes).
+    """Read an FBX 7.x character (binary or ASCII) with every take, or the skeleton of an
+    ASCII FBX 6.x file (see the module notes and :mod:`.legacy`).
 
     Args:
         fps: the rate takes are sampled at; by default the file's own (``TimeMode``).
 
     Raises:
-        FBXError: for a malformed file, FBX 6 and older, or a file that holds no skeleton
+        FBXError: for a malformed file, binary FBX 6 and FBX 5 and older, or a file that
+            holds no skeleton
             (saying what it holds).
     """
     path = os.fspath(path)
@@ -1112,8 +1117,11 @@ def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
     except OSError as exc:
         raise FBXError(f"cannot be read: {exc.strerror or exc}", path) from None
     root = parse_fbx(data, path)
+    notes: list[str] = []
+    if int(root.props[0]) < 7000:
+        root, notes = from_fbx6(root)
     doc = _Doc(root, path, ascii_form=not is_binary_fbx(data[:32]))
-    return _build(doc, Path(path).stem, fps)
+    return _build(doc, Path(path).stem, fps, notes)
 
 
 def take_motion(character: Character, take: str | None = None) -> Motion:
