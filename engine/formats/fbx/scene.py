@@ -810,6 +810,17 @@ def _clusters(doc: _Doc):
     return skins
 
 
+def _inverse(doc: _Doc, m: np.ndarray, what: str) -> np.ndarray:
+    """The inverse of a 4x4 transform of ``what`` (a joint or a mesh), refusing one that
+    has none (a zero scale) or is not finite."""
+    linear = m[:3, :3]
+    if not np.all(np.isfinite(m)) or not abs(np.linalg.det(linear)) > 1e-12 * max(
+            1.0, float(np.abs(linear).max()) ** 3):
+        raise doc.error(f"the transform of {what} has a zero scale or is not finite, so it "
+                        "cannot be inverted")
+    return np.linalg.inv(m)
+
+
 def _bind_pose_matrices(doc: _Doc) -> dict[int, np.ndarray]:
     """World matrices of the ``Pose``/``BindPose`` objects (file space)."""
     out: dict[int, np.ndarray] = {}
@@ -843,7 +854,7 @@ def _bind_matrices(doc: _Doc, joints: _Joints, ev: _Evaluator, links: dict[int, 
             p = joints.parents[j]
             if p >= 0 and joints.models[p] >= 0:
                 pm = joints.models[p]
-                bind[j] = bind[p] @ np.linalg.inv(rest[pm][0]) @ rest[m][0]
+                bind[j] = bind[p] @ _inverse(doc, rest[pm][0], joints.names[p]) @ rest[m][0]
             else:
                 bind[j] = rest[m][0]
             from_rest += 1
@@ -969,7 +980,7 @@ def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str]) -> list[Mesh]:
         positions = positions @ lin.T + frame[:3, 3]
         normals = _normals(doc, geometry, index, len(vertices))
         if normals is not None:
-            normals = (A @ normals.T).T @ np.linalg.inv(lin)
+            normals = (A @ normals.T).T @ _inverse(doc, frame, f"the mesh {doc.kind(geometry_id)[1]!r}")[:3, :3]
             length = np.linalg.norm(normals, axis=1, keepdims=True)
             normals = normals / np.where(length > 1e-12, length, 1.0)
         jj, ww, unbound = _influences(doc, clusters, index_of, len(vertices))
@@ -1072,9 +1083,9 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Charact
     for j, m in enumerate(joints.models):
         if m >= 0:
             model = ev.models[m]
-            local = model.local()[0, :3, :3]
+            turn, _, _ = _polar(model.local()[:, :3, :3])
             node_t[j] = model.translation
-            node_q[j] = _matrix_to_quat(local / np.linalg.norm(local, axis=0))
+            node_q[j] = _matrix_to_quat(turn)[0]
             node_s[j] = model.scaling
     skin_maps = []
     skin_names = []
