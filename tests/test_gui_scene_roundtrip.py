@@ -60,7 +60,8 @@ def every_kind() -> tuple:
 def full_project() -> Project:
     """Every field of a project away from its default."""
     return Project(
-        performer=Source(str(WALK), units="cmu", up_axis="+Y", position_mode="absolute"),
+        performer=Source(str(WALK), units="cmu", up_axis="+Y", position_mode="absolute",
+                         take="Take 001"),
         target=Source(str(TPOSE), scale=0.0254 / 0.45, up_axis="+Y",
                       position_mode={"Hips": "absolute"}),
         correspondence=Correspondence(MAX_TO_HOLDEN, {"Hips": "by hand", "Head": BY_HAND,

@@ -93,6 +93,7 @@ def read_sources(project: Project, *, path=None) -> tuple[Motion, Motion]:
 def _read_source(source: Source, role: str, path) -> Motion:
     options = source.reader_options()
     if source.embedded is not None:
+        options.pop("take", None)                  # an embedded clip is BVH text
         try:
             return parse_bvh(source.embedded, None, name=source.name(role), **options)
         except BVHError as exc:
@@ -109,20 +110,28 @@ def _read_source(source: Source, role: str, path) -> Motion:
         present = False
     if not present:
         raise MissingSourceError(role, os.path.abspath(source.path), path)
-    # the file's content says which reader (a glTF character's bind pose is the target)
-    from ..errors import FileFormatError, GLTFError
-    from ..formats import read_motion
+    # the file's content says which reader (a glTF or FBX character's bind pose is the
+    # target; an FBX performer is one of its takes)
+    from ..errors import FBXError, FileFormatError, GLTFError
+    from ..formats import read_motion, read_performer
     try:
-        return read_motion(source.path, **options)
+        return (read_performer if role == "performer" and _has_takes(source.path) else
+                read_motion)(source.path, **options)
     except BVHError as exc:
         if _about_position_mode(exc):
             raise ProjectError(exc.problem, path, f"{role}.position_mode") from None
         raise ProjectError(f"the {role} clip cannot be read: {exc}", path,
                            f"{role}.path") from None
     except FileFormatError as exc:
-        what = "character" if isinstance(exc, GLTFError) else "clip"
+        what = "character" if isinstance(exc, (GLTFError, FBXError)) else "clip"
         raise ProjectError(f"the {role} {what} cannot be read: {exc}", path,
                            f"{role}.path") from None
+
+
+def _has_takes(path) -> bool:
+    """Whether the file is in a format whose performer is a take (FBX)."""
+    from ..formats import sniff
+    return sniff(path).read_take is not None
 
 
 def _about_position_mode(exc: BVHError) -> bool:

@@ -127,10 +127,13 @@ def _source_dict(source: Source, folder, role: str) -> dict:
         except ValueError:                    # another drive (Windows): keep it absolute
             path = absolute
     mode = source.position_mode
-    return {"path": path, "units": source.units,
-            "scale": float(source.scale) if source.scale is not None else None,
-            "up_axis": source.up_axis,
-            "position_mode": dict(mode) if isinstance(mode, dict) else mode}
+    out = {"path": path, "units": source.units,
+           "scale": float(source.scale) if source.scale is not None else None,
+           "up_axis": source.up_axis,
+           "position_mode": dict(mode) if isinstance(mode, dict) else mode}
+    if source.take is not None:                  # optional: absent in files without one
+        out["take"] = source.take
+    return out
 
 
 _LINE = 100
@@ -307,7 +310,8 @@ def _build(data: dict, folder) -> Project:
 
 
 def _source(data, where: str, folder, embedded) -> Source:
-    d = _obj(data, where, optional=("path", "units", "scale", "up_axis", "position_mode"))
+    d = _obj(data, where, optional=("path", "units", "scale", "up_axis", "position_mode",
+                                    "take"))
     path = _optional(_str, d.get("path"), f"{where}.path")
     if path is not None:
         if not path or "\x00" in path:
@@ -325,10 +329,11 @@ def _source(data, where: str, folder, embedded) -> Source:
                 for k, v in mode.items()}
     elif mode is not None:
         mode = _choice(mode, f"{where}.position_mode", ("absolute", "relative"))
+    take = _optional(_str, d.get("take"), f"{where}.take")
     if path is None and embedded is None:
         raise _Invalid(where, "needs the clip's path or the clip embedded in the project")
     return Source(path=path, embedded=embedded, units=units, scale=scale, up_axis=up_axis,
-                  position_mode=mode)
+                  position_mode=mode, take=take)
 
 
 def _correspondence(data) -> Correspondence:

@@ -124,6 +124,8 @@ class Source:
             ``path``).
         units, scale, up_axis, position_mode: the reader overrides used (``None``: detected);
             see :func:`engine.formats.bvh.record_to_motion`.
+        take: the take of an FBX file (``None``: its first take for a performer, its bind
+            pose for a target); a file with one motion (BVH, glTF) has none to choose.
     """
 
     path: str | None = None
@@ -132,6 +134,7 @@ class Source:
     scale: float | None = None
     up_axis: str | None = None
     position_mode: str | dict | None = None
+    take: str | None = None
 
     def __post_init__(self):
         if self.path is not None:
@@ -140,9 +143,10 @@ class Source:
             object.__setattr__(self, "position_mode", dict(self.position_mode))
 
     def reader_options(self) -> dict:
-        """The keyword arguments for :func:`engine.formats.bvh.read_bvh`."""
+        """The keyword arguments for :func:`engine.formats.read_motion` (the BVH reader's
+        overrides, and an FBX file's take)."""
         options = {"units": self.units, "scale": self.scale, "up_axis": self.up_axis,
-                   "position_mode": self.position_mode}
+                   "position_mode": self.position_mode, "take": self.take}
         return {k: v for k, v in options.items() if v is not None}
 
     def name(self, role: str) -> str:
