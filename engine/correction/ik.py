@@ -319,13 +319,21 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
     ``sticky``: ``(B, T)`` one-sided tasks already activated in this solve stay active (held
     on the plane) so that the attraction cannot pull them back through it on every other
-    iteration; the array is updated in place.
+    iteration, except where a position task holds the same joint (which may hold it clear
+    of the plane); the array is updated in place.
     """
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure.fk_joints, rot, tra, slot)
     err = np.zeros((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
     parent_m = {}
+    # frames where a joint's position is pinned by a task: a one-sided task on that joint does
+    # not stick there (the pin decides, and it may hold the joint clear of the plane)
+    pinned: dict[int, np.ndarray] = {}
+    for task in structure.tasks:
+        if task.kind.fixed_point:
+            weight = task.weight if select is None else task.weight[select]
+            pinned[task.joint] = pinned.get(task.joint, np.zeros(B, dtype=bool)) | (weight > 0)
     for ti, (task, chain, r0) in enumerate(zip(structure.tasks, structure.chains,
                                                structure.row0)):
         e = task.joint
@@ -345,7 +353,7 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
         on = task.weight > 0
         active = on & task.kind.active(task.goal, state)
         if sticky is not None:
-            active |= on & sticky[:, ti]
+            active |= on & sticky[:, ti] & ~pinned.get(e, np.zeros(B, dtype=bool))
             sticky[:, ti] |= active
         rows = slice(r0, r0 + task.rows)
         err[:, rows] = np.where(active[:, None], task.kind.error(task.goal, state), 0.0)
