@@ -309,7 +309,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                      for c in used}, key=lambda f: f[0])
     if ground is None:
         ground = converted_ground(composed, feet_t, floor=floor)
-    runs = []          # (target joint, kind, start, end, smooth_in, part, contact, goal)
+    runs = []          # (target joint, what, start, end, smooth_in, part, contact, goal)
     for c in used:
         ankle = by_performer[c.joint]
         toe = by_performer.get(c.toe) if c.toe else None
@@ -320,8 +320,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             goal = np.median(t_pos.positions[frames, a], axis=0)
             goal[1] = ground.floor + ground.heights[ankle]
             turn = t_pos.rotations[(c.start + c.end) // 2, a]
-            runs += [(ankle, "position", c.start, c.end, None, "heel", c, goal),
-                     (ankle, "orientation", c.start, c.end, None, None, c, turn)]
+            runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal),
+                     (ankle, "turn", c.start, c.end, None, None, c, turn)]
             continue
         t = sk.index[toe]
         rest_turn, rest_toe = ground.flat[ankle]
@@ -341,22 +341,22 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             toe_at = np.median(t_pos.positions[frames, t], axis=0)
             toe_at[1] = ground.floor + ground.heights[toe]
         for s, e in c.heel:
-            runs.append((ankle, "position", s, e, None, "heel", c, ankle_at))
+            runs.append((ankle, "pin", s, e, None, "heel", c, ankle_at))
         for s, e in c.ball:
             flats = [(max(s, hs), min(e, he)) for hs, he in c.heel if hs <= e and s <= he]
             for fs, fe in flats:
-                runs.append((ankle, "orientation", fs, fe, None, None, c, turn))
+                runs.append((ankle, "turn", fs, fe, None, None, c, turn))
             # from the flat foot on, the toe is where the flat foot puts it: held from there,
             # it needs no ramp in (a ramp in would pull it against the flat foot's)
             first = flats[0][0] if flats else None
-            runs.append((toe, "position", s if first is None else first, e, first, "toe", c,
+            runs.append((toe, "pin", s if first is None else first, e, first, "toe", c,
                          toe_at))
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
     out = []
-    for (joint, kind, s, e, first, part, c, goal), (lo, hi) in zip(runs, spans):
+    for (joint, _, s, e, first, part, c, goal), (lo, hi) in zip(runs, spans):
         lo = lo if first is None else first
         performer_joint = c.toe if part == "toe" else c.joint
-        if kind == "position":
+        if part is not None:
             out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
                                   priority=priority, name=f"contact {joint} {s}-{e}", auto=True,
@@ -380,7 +380,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                               priority=priority, name=f"floor {joint}", auto=True,
                               meta={"source": "contact", "floor": True,
                                     "performer_joint": pairs[joint]}))
-    out.sort(key=lambda k: (k.kind == "plane", k.start, k.kind, k.joint))
+    out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
 
 

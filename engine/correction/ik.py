@@ -267,12 +267,12 @@ def _checked_limits(limits) -> tuple:
 class _Structure:
     """What a task set needs from the skeleton: the unknown joints and each task's chain."""
 
-    def __init__(self, skeleton: Skeleton, tasks: list[Task]):
+    def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset()):
         self.tasks = tasks
         moving: set[int] = set()
         chains = []
         for t in tasks:
-            chain = t.kind.chain(skeleton, t.joint)
+            chain = [j for j in t.kind.chain(skeleton, t.joint) if j not in locked]
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
@@ -393,7 +393,8 @@ class _Rows:
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
                  attraction_rot: np.ndarray, attraction_root: np.ndarray,
-                 options: IKOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 options: IKOptions, locked=frozenset()
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of frames that share ``tasks``.
 
     Each iteration: the tasks' errors at the current posture; a step that restores the
@@ -409,6 +410,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             the root's is an unknown).
         attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
         options: the settings; ``options.scale`` must be set.
+        locked: joints whose rotation is no unknown (they stay at their attraction posture).
 
     Returns:
         ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
@@ -419,7 +421,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     rot = np.array(rot, dtype=float)
     tra = np.array(tra, dtype=float)
     B = rot.shape[0]
-    structure = _Structure(skeleton, tasks)
+    structure = _Structure(skeleton, tasks, locked)
     rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints
