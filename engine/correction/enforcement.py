@@ -60,6 +60,10 @@ __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FR
 #: same as the whole batch's: every frame is solved on its own).
 CHUNK_FRAMES = 2048
 
+#: a joint whose rotation (quaternion components) never moves further than this from its
+#: first frame's is held still by the conversion (rounding aside)
+STILL = 1e-12
+
 
 @dataclass(frozen=True, eq=False)
 class Correction:
@@ -199,7 +203,7 @@ def _still_joints(composed: Motion) -> frozenset:
     rot = composed.rotations
     if len(rot) < 2:
         return frozenset()
-    still = np.all(rot == rot[:1], axis=(0, 2))
+    still = np.all(np.abs(rot - rot[:1]) <= STILL, axis=(0, 2))
     return frozenset() if still.all() else frozenset(np.flatnonzero(still).tolist())
 
 
