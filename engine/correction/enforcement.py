@@ -136,6 +136,11 @@ def _check(constraints, composed: Motion) -> list:
         if c.smooth_out > F - 1:
             raise ConstraintError(f"constraint {c.name or c.joint!r}: smooth_out {c.smooth_out} "
                                   f"is past the last frame ({F - 1})")
+        if c.smooth_in == c.start == c.end == c.smooth_out and 0 < c.start < F - 1:
+            raise ConstraintError(
+                f"constraint {c.name or c.joint!r}: the range {list(c.range)} holds the joint on "
+                "one frame with no ramps, so it would jump there and back; give it ramps "
+                "(smooth_in < start or end < smooth_out) or a longer range", "range")
         out.append(c)
     return out
 
