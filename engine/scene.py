@@ -40,7 +40,7 @@ from .conversion.converter import convert
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
-                                  horizontal_drift)
+                                  horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction import preview as _preview
 from .correction.quality import quality
@@ -344,22 +344,38 @@ class Scene:
     def automatic_constraints(self) -> list[Constraint]:
         """The constraints the project's settings generate: foot contacts found in the
         performer (``auto_contacts``, with ``contact_options``) and keep-above-floor planes on
-        the target's feet (``floor``). Empty without a direct conversion."""
+        the target's feet (``floor``), each foot joint at or above its planted height over the
+        floor (:meth:`ground`). Empty without a direct conversion."""
         composed = self.composed
         if composed is None:
             return []
         p = self.project
         out: list[Constraint] = []
+        ground = self.ground()
         if p.auto_contacts:
             out += contact_constraints(self.contacts(), self.performer, composed,
                                        p.correspondence.pairs, p.contact_options,
-                                       floor=p.floor)
+                                       ground=ground)
         if p.floor is not None:
             for ankle, toe in find_feet(self.target.skeleton):
                 for joint in (ankle, toe):
                     if joint:
-                        out.append(floor_constraint(joint, composed.num_frames, p.floor))
+                        out.append(floor_constraint(joint, composed.num_frames,
+                                                    p.floor + ground.heights[joint]))
         return out
+
+    def ground(self):
+        """Where the target's feet stand (:class:`~engine.correction.contacts.Ground`): the
+        target's feet in its reference pose on the floor under them (the lowest mesh vertex
+        of the feet where the character has a mesh), moved to ``floor`` where it is set."""
+        by_performer = {p: t for t, p in self.correspondence.pairs.items()}
+        mapped = [(by_performer[a], by_performer.get(t)) for a, t in
+                  find_feet(self.performer.skeleton) if a in by_performer]
+        feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
+        reference = self.project.bind_options.target_reference
+        sole = _sole(self.character, self.target, feet, reference)
+        return target_ground(self.target, feet, reference=reference, floor=self.project.floor,
+                             sole=sole)
 
     def contact_warnings(self) -> list[str]:
         """Why automatic contacts (``auto_contacts``) cannot pin some or all feet, one line
@@ -534,6 +550,30 @@ def _apply_layers(layers, motion: Motion) -> Motion:
     return motion
 
 
+def _sole(character, target: Motion, feet, reference) -> float | None:
+    """[m] The lowest vertex of ``character``'s feet (vertices bound mostly to a foot joint or
+    a joint below it) in ``target``'s reference pose, or None (no mesh, or none on the
+    feet)."""
+    if character is None or not character.meshes or not feet or \
+            character.skeleton.names != target.skeleton.names:
+        return None
+    from .conversion.binding import reference_pose
+    from .skinning import skin_character
+    sk = target.skeleton
+    joints = {sk.index[n] for foot in feet for n in foot if n}
+    foot = np.array([bool(set(sk.ancestors(j)) & joints) or j in joints
+                     for j in range(sk.num_joints)])
+    rot, tra, _ = reference_pose(target, reference)
+    pose = Motion._trusted(sk, rot[None], tra[None], target.frame_time, target.name)
+    lowest = []
+    for mesh, vertices in zip(character.meshes, skin_character(character, pose)):
+        main = mesh.joints[np.arange(len(mesh.joints)), np.argmax(mesh.weights, axis=1)]
+        on_feet = foot[main]
+        if on_feet.any():
+            lowest.append(float(vertices[0, on_feet, 1].min()))
+    return min(lowest) if lowest else None
+
+
 def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:
     report = {
         "frames": composed.num_frames,
@@ -544,12 +584,13 @@ def _report(composed: Motion, correction, constraints: list, mapped: int, timing
         "timings": timings,
     }
     motion = correction.motion if correction is not None else composed
-    pins = [c for c in constraints if c.auto and c.meta.get("source") == "contact"
-            and c.kind_object.fixed_point]
+    # the foot parts' pins, the longest first
+    pins = sorted((c for c in constraints if c.auto and c.meta.get("source") == "contact"
+                   and "part" in c.meta), key=lambda c: (c.start - c.end, c.start))
     if pins:
         for c in pins:
             report["contacts"].append({
-                "joint": c.joint, "start": c.start, "end": c.end,
+                "joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
                 "drift_direct_m": horizontal_drift(composed, c.joint, c.start, c.end),
                 "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, c.end)})
         drift_d = [x["drift_direct_m"] for x in report["contacts"]]

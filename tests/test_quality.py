@@ -117,3 +117,22 @@ def test_retarget_report_writes_the_quality_figures(tmp_path, capsys):
     data = json.loads(report.read_text())
     _check_schema(data["quality"], data["frames"])
     assert data["quality"]["contacts"]
+
+
+def test_contradicting_goals_at_one_priority_give_a_continuous_compromise(walk_solution):
+    """Two goals 80 cm apart for one hand at one priority: neither is met, and the hand
+    settles between them without a flip (no joint turns faster than the no-pop limit)."""
+    from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.kinematics import fk_arrays
+    performer = read_motion(WALK)
+    composed = walk_solution.scene.composed
+    sk = composed.skeleton
+    here = fk_arrays(sk, composed.rotations, composed.translations,
+                     end_sites=False).positions[400, sk.index["LeftHand"]]
+    there = [Constraint("LeftHand", "position", {"point": here + offset}, 300, 320, 480, 500,
+                        name=name)
+             for name, offset in (("up", [0.4, 0.3, 0.0]), ("down", [-0.4, -0.2, 0.3]))]
+    result = enforce(composed, there)
+    q = quality(performer, composed, result.motion, there, result.residual)
+    assert all(c["max_residual"] > 0.1 for c in q["constraints"])       # a compromise
+    assert max(p["ratio"] for p in q["pops"]) <= 1.0
