@@ -56,13 +56,12 @@ class MainWindow(QtWidgets.QMainWindow):
     def _build_docks(self) -> None:
         from motion_composer.app.gui.binding_panel import BindingPanel
         from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
-        from motion_composer.app.gui.curve_editor import CurveEditor
         from motion_composer.app.gui.playback import PlaybackBar
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
         self.binding_panel = BindingPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
-        self.curve_editor = CurveEditor(self.doc)
+        self._curve_editor = None                   # built when first shown (or asked for)
         from motion_composer.app.gui.ik_panel import IKPanel
         self.ik_panel = IKPanel(self.doc)
         ik_page = QtWidgets.QWidget()
@@ -75,7 +74,7 @@ class MainWindow(QtWidgets.QMainWindow):
             ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
             ("IK", ik_page, QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "ik"),
-            ("Curves", self.curve_editor, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
+            ("Curves", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
@@ -99,6 +98,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if getattr(self, "timeline_dock", None) is not None:
             self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
             self.timeline_dock.raise_()
+        self.curves_dock.visibilityChanged.connect(self._curves_shown)
         # the bottom docks' titles and tabs run down their left side: their height goes to
         # the viewport
         self.setTabPosition(QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
@@ -128,6 +128,20 @@ class MainWindow(QtWidgets.QMainWindow):
                          QtCore.Qt.Orientation.Horizontal)
         self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
+
+    @property
+    def curve_editor(self):
+        """The curve editor, built the first time its dock shows or it is asked for: the
+        window's first frame does not wait for curves it does not show."""
+        if self._curve_editor is None:
+            from motion_composer.app.gui.curve_editor import CurveEditor
+            self._curve_editor = CurveEditor(self.doc)
+            self.curves_dock.setWidget(self._curve_editor)
+        return self._curve_editor
+
+    def _curves_shown(self, shown: bool) -> None:
+        if shown:
+            self.curve_editor                     # noqa: B018 - builds it
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
         action = QtGui.QAction(text, self)

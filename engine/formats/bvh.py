@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ._numparse import parse_number_rows
 from ..errors import BVHError, ExportError
@@ -792,6 +791,7 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                         source=source)
     translations = translations * scale
     if up_axis != "+Y":
+        from scipy.spatial.transform import Rotation
         translations[:, 0] = translations[:, 0] @ C.T
         rotations[:, 0] = (Rotation.from_matrix(C) * Rotation.from_quat(rotations[:, 0])).as_quat()
     return Motion(skeleton=skeleton, rotations=rotations, translations=translations,
@@ -894,6 +894,7 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     rotations = motion.rotations
     translations = motion.translations / s
     if src.up_axis != "+Y":
+        from scipy.spatial.transform import Rotation
         translations = translations.copy()
         translations[:, 0] = translations[:, 0] @ C
         rotations = rotations.copy()
