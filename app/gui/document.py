@@ -292,6 +292,15 @@ class Document(QtCore.QObject):
             self._scene = _with_viewer(self._scene, viewer)
             self.viewerChanged.emit()
 
+    def set_viewer_options(self, **options) -> None:
+        """Change display settings kept in the viewer's ``options`` (not undoable), e.g.
+        ``follow_root=True``; the others stay as they are."""
+        viewer = dataclasses.replace(self._scene.viewer,
+                                     options={**self._scene.viewer.options, **options})
+        if viewer != self._scene.viewer:
+            self._scene = _with_viewer(self._scene, viewer)
+            self.viewerChanged.emit()
+
     def select(self, side: str, joint: str) -> None:
         if (side, joint) != self.selection:
             self.selection = (side, joint)

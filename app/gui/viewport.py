@@ -372,9 +372,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
 
     def set_option(self, name: str, on: bool) -> None:
         """Turn a display toggle (:meth:`option`) on or off and redraw."""
-        options = dict(self.doc.scene.viewer.options)
-        options[name] = bool(on)
-        self.doc.set_viewer(options=options)
+        self.doc.set_viewer_options(**{name: bool(on)})
         self.refresh()
 
     def set_ghost_offsets(self, offsets) -> None:
