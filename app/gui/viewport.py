@@ -206,6 +206,7 @@ class _Figure:
                                    color=QtGui.QColor.fromRgbF(*[min(1.0, c * 1.15 + 0.1)
                                                                  for c in color[:3]]))
         self.label.setData(alignment=QtCore.Qt.AlignmentFlag.AlignHCenter)
+        self.label.setDepthValue(100)                 # drawn last: over a skinned mesh
         view.addItem(self.mesh)
         view.addItem(self.joints)
         view.addItem(self.label)
@@ -234,7 +235,7 @@ class _Figure:
         self.joints.setData(pos=pts, color=colors, size=sizes)
         top = pts[np.argmax(pts[:, 2])]
         self.label.setData(pos=(float(pts[0, 0]), float(pts[0, 1]),
-                                float(top[2] + 2.5 * joint_size)), text=label)
+                                float(top[2] + 6 * joint_size)), text=label)
         self.points = pts
 
     def remove(self, view) -> None:
@@ -416,14 +417,18 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                 "target": lambda: self.doc.pose("target") or self.doc.pose("character")
                 }[which]()
 
-    def _size(self) -> float:
+    def _size(self, motion=None) -> float:
+        """[m] the stature of ``motion`` (by default the target, or else the performer),
+        computed once per motion: joints, bones and goals are drawn in proportion to it."""
         from motion_composer.engine.describe import stature
-        m = self.doc.scene.target if self.doc.scene.target is not None else self.doc.scene.performer
+        m = motion or (self.doc.scene.target if self.doc.scene.target is not None
+                       else self.doc.scene.performer)
         if m is None:
             return 1.7
-        if not hasattr(self, "_size_cache") or self._size_cache[0] is not m:
-            self._size_cache = (m, max(stature(m), 0.2))
-        return self._size_cache[1]
+        cache = self.__dict__.setdefault("_statures", {})
+        if cache.get(id(m), (None,))[0] is not m:
+            cache[id(m)] = (m, max(stature(m), 0.2))
+        return cache[id(m)][1]
 
     def _frame_of(self, which: str, pose) -> int:
         """The frame of ``pose`` shown for ``which`` (a target without motion: its rest)."""
@@ -452,10 +457,10 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     def refresh(self) -> None:
         doc = self.doc
         layout = self._layout()
-        size = self._size()
-        width, joint_size = 0.03 * size, 0.022 * size
         side, joint = doc.selection
         for which in ("performer", "intermediate", "target"):
+            size = self._size(doc.scene.performer if which == "performer" else None)
+            width, joint_size = 0.03 * size, 0.022 * size
             data = self.skeleton_points(which) if which in layout else None
             if data is None:
                 if which in self.figures:
@@ -474,7 +479,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._refresh_skin(layout)
         self._refresh_virtual(layout)
         self._refresh_goals(layout)
-        self._refresh_ghosts(layout, width)
+        self._refresh_ghosts(layout)
         self._refresh_trails(layout)
         if self.option("follow_root"):
             self._follow(layout)
@@ -504,16 +509,17 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             self.skin.setMeshData(meshdata=meshdata, color=SKIN, shader=TWO_SIDED, smooth=True)
         self.skin.setVisible(True)
 
-    def _refresh_ghosts(self, layout, width: float) -> None:
-        """Onion skin: the target's bones at :attr:`ghost_offsets` frames from the current
-        one (past blue, future red, fainter further away), while ``onion_skin`` is on."""
+    def _refresh_ghosts(self, layout) -> None:
+        """Onion skin: the target's skeleton as lines at :attr:`ghost_offsets` frames from the
+        current one (past blue, future red, fainter further away), while ``onion_skin`` is
+        on. Lines, not shaded bones: light to draw, and legible beside a skinned mesh."""
         pose = self._pose("target") if "target" in layout and self.doc.motion is not None \
             else None
         on = self.option("onion_skin") and pose is not None
         offsets = self.ghost_offsets if on else ()
         while len(self.ghosts) < len(offsets):
-            ghost = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
-                                  shader="shaded", smooth=False, glOptions="translucent")
+            ghost = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=2, mode="lines",
+                                      antialias=True, glOptions="translucent")
             self.ghosts.append(ghost)
             self.addItem(ghost)
         for ghost in self.ghosts[len(offsets):]:
@@ -531,16 +537,19 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                 ghost.setVisible(False)
                 continue
             pts = to_view(pose.positions[g]) + layout["target"]
-            verts, faces = bone_mesh(pts[parents[child]], pts[child], width)
+            segments = np.stack([pts[parents[child]], pts[child]], axis=1).reshape(-1, 3)
             rgb = GHOST_PAST if offset < 0 else GHOST_FUTURE
-            alpha = 0.55 - 0.3 * abs(offset) / reach
-            ghost.setMeshData(vertexes=verts, faces=faces, color=(*rgb, alpha),
-                              shader="shaded", smooth=False)
+            ghost.setData(pos=segments, color=(*rgb, 0.9 - 0.5 * abs(offset) / reach))
             ghost.setVisible(True)
 
     def foot_trails(self) -> FootTrails | None:
         """The target's foot trails over the play range (computed once per motion and range),
-        or None where the target has no motion or no feet that can be found."""
+        or None where the target has no motion or no legs that can be found.
+
+        The feet are the ankle and toe joints :func:`~engine.correction.contacts.find_feet`
+        names; a leg that ends without a foot joint (a game rig whose feet are IK controls
+        beside the legs, as the robot's) is followed at its shin's End Site, the ankle, with
+        the planted frames the engine's contact detection finds for the shin."""
         motion = self.doc.motion
         if motion is None or self.doc.scene.target is None:
             return None
@@ -551,24 +560,50 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         from motion_composer.engine.correction.contacts import (detect_contacts,
                                                                 estimate_floor, find_feet)
         sk = motion.skeleton
+        pose = self.doc.pose("target")
         feet = [(a, t) for a, t in find_feet(sk) if a in sk.index]
-        if not feet:
+        if feet:
+            joints = [name for pair in feet for name in pair if name is not None]
+            tracks = pose.positions[:, [sk.index[name] for name in joints]]
+            detects = joints
+        else:
+            feet, joints, columns = self._shin_ends(sk)
+            tracks = pose.end_positions[:, columns]
+            detects = [a for a, _t in feet]
+        if not joints:
             self._trails = None
             return None
-        joints = [name for pair in feet for name in pair if name is not None]
-        index = [sk.index[name] for name in joints]
-        pose = self.doc.pose("target")
-        paths = pose.positions[lo:hi + 1, index].transpose(1, 0, 2)
+        paths = tracks[lo:hi + 1].transpose(1, 0, 2)
         planted = np.zeros(paths.shape[:2], dtype=bool)
         for c in detect_contacts(motion, feet):
             for name in (c.joint, c.toe):
-                if name in joints:
-                    a, b = max(c.start, lo), min(c.end, hi)
-                    if a <= b:
-                        planted[joints.index(name), a - lo:b - lo + 1] = True
-        floor = estimate_floor(pose.positions[:, index, 1])
+                a, b = max(c.start, lo), min(c.end, hi)
+                if name in detects and a <= b:
+                    planted[detects.index(name), a - lo:b - lo + 1] = True
+        floor = estimate_floor(tracks[..., 1])
         self._trails = FootTrails(motion, (lo, hi), joints, paths, planted, floor)
         return self._trails
+
+    @staticmethod
+    def _shin_ends(sk):
+        """For a skeleton whose legs end without feet: ``(feet, names, columns)``, the shins
+        as ``(ankle, None)`` pairs for contact detection, and their End Sites' names and
+        columns in the pose's ``end_positions``."""
+        from motion_composer.engine.conversion.automap import identify
+        from motion_composer.engine.errors import MappingError
+        try:
+            roles = identify(sk)
+        except MappingError:
+            return [], [], []
+        feet, names, columns = [], [], []
+        for side in ("l", "r"):
+            shin = roles.get(f"shin_{side}")
+            ends = [k for k, e in enumerate(sk.end_sites) if shin and e.parent == sk.index[shin]]
+            if ends:
+                feet.append((shin, None))
+                names.append(sk.end_sites[ends[0]].name)
+                columns.append(ends[0])
+        return feet, names, columns
 
     def _play_range(self) -> tuple[int, int]:
         last = max(self.doc.scene.num_frames - 1, 0)
