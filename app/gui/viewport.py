@@ -42,7 +42,7 @@ VIRTUAL = (0.2, 1.0, 0.5, 1.0)
 SKIN = (0.80, 0.79, 0.76, 1.0)
 #: onion skin: frames before and after the current one, and their colours (past blue, future
 #: red, fainter further away)
-GHOST_OFFSETS = (-10, -5, 5, 10)
+GHOST_OFFSETS = (-20, -10, 10, 20)
 GHOST_PAST, GHOST_FUTURE = (0.45, 0.7, 1.0), (1.0, 0.55, 0.45)
 #: foot trails: the path, planted frames on it, and contacts active now on the floor
 TRAIL = (0.95, 0.85, 0.35, 0.9)
@@ -477,6 +477,10 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                        self._label(which))
             fig.offset = layout[which]
         self._refresh_skin(layout)
+        if self.skin is not None and self.skin.visible():       # the label over the mesh
+            label = self.figures["target"].label
+            top = float(self.skin.opts["meshdata"].vertexes()[:, 2].max())
+            label.setData(pos=(*label.pos[:2], top + 0.06 * self._size()))
         self._refresh_virtual(layout)
         self._refresh_goals(layout)
         self._refresh_ghosts(layout)
