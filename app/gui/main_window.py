@@ -10,6 +10,10 @@ from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
 
+#: panels whose docks start behind another tab -> their dock's name (see MainWindow._panel)
+_LAZY_PANELS = {"curve_editor": "curves", "binding_panel": "binding", "ik_panel": "ik",
+                "inspector": "inspector"}
+
 MAX_RECENT = 8
 #: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
 #: a crash loses at most this much work
@@ -54,41 +58,31 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ building
     def _build_docks(self) -> None:
-        from motion_composer.app.gui.binding_panel import BindingPanel
         from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
         from motion_composer.app.gui.playback import PlaybackBar
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
-        self.binding_panel = BindingPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
-        self._curve_editor = None                   # built when first shown (or asked for)
-        from motion_composer.app.gui.ik_panel import IKPanel
-        self.ik_panel = IKPanel(self.doc)
-        ik_page = QtWidgets.QWidget()
-        ik_box = QtWidgets.QVBoxLayout(ik_page)
-        ik_box.addWidget(self.ik_panel)
-        ik_box.addStretch(1)
+        self._panels: dict = {}                     # the panels built so far (see _panel)
         docks = [
             ("Correspondence", self.correspondence_panel,
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
-            ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
+            ("Binding", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
-            ("IK", ik_page, QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "ik"),
+            ("IK", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "ik"),
             ("Curves", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
-            from motion_composer.app.gui.inspector import ConstraintInspector
             from motion_composer.app.gui.timeline import ConstraintTimeline
             self.timeline = ConstraintTimeline(self.doc)
-            self.inspector = ConstraintInspector(self.doc, self.timeline)
             self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
             docks += [("Constraints", self.timeline,
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
-                      ("Constraint", self.inspector,
+                      ("Constraint", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "inspector")]
         except ImportError:
-            self.timeline = self.inspector = None
+            self.timeline = None
         for title, widget, area, name in docks:
             dock = QtWidgets.QDockWidget(title, self)
             dock.setObjectName(name)
@@ -98,7 +92,10 @@ class MainWindow(QtWidgets.QMainWindow):
         if getattr(self, "timeline_dock", None) is not None:
             self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
             self.timeline_dock.raise_()
-        self.curves_dock.visibilityChanged.connect(self._curves_shown)
+        for name, dock in _LAZY_PANELS.items():
+            if getattr(self, f"{dock}_dock", None) is not None:
+                getattr(self, f"{dock}_dock").visibilityChanged.connect(
+                    lambda shown, name=name: shown and self._panel(name))
         # the bottom docks' titles and tabs run down their left side: their height goes to
         # the viewport
         self.setTabPosition(QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
@@ -129,19 +126,52 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
 
-    @property
-    def curve_editor(self):
-        """The curve editor, built the first time its dock shows or it is asked for: the
-        window's first frame does not wait for curves it does not show."""
-        if self._curve_editor is None:
-            from motion_composer.app.gui.curve_editor import CurveEditor
-            self._curve_editor = CurveEditor(self.doc)
-            self.curves_dock.setWidget(self._curve_editor)
-        return self._curve_editor
+    # ------------------------------------------------------------------ panels built when shown
+    def _panel(self, name: str):
+        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time its dock shows or
+        it is asked for (its attribute): they all start behind another tab, and the window's
+        first frame waits for none of them. None without the constraint timeline."""
+        if name not in self._panels:
+            dock = getattr(self, f"{_LAZY_PANELS[name]}_dock", None)
+            if dock is None:
+                return None
+            panel, page = self._make_panel(name)
+            self._panels[name] = panel
+            old = dock.widget()
+            dock.setWidget(page)
+            if old is not None:
+                old.deleteLater()
+        return self._panels[name]
 
-    def _curves_shown(self, shown: bool) -> None:
-        if shown:
-            self.curve_editor                     # noqa: B018 - builds it
+    def _make_panel(self, name: str):
+        """A new panel and the page its dock holds."""
+        if name == "curve_editor":
+            from motion_composer.app.gui.curve_editor import CurveEditor
+            panel = CurveEditor(self.doc)
+        elif name == "binding_panel":
+            from motion_composer.app.gui.binding_panel import BindingPanel
+            panel = BindingPanel(self.doc)
+        elif name == "inspector":
+            from motion_composer.app.gui.inspector import ConstraintInspector
+            panel = ConstraintInspector(self.doc, self.timeline)
+        else:
+            from motion_composer.app.gui.ik_panel import IKPanel
+            panel = IKPanel(self.doc)
+            page = QtWidgets.QWidget()
+            box = QtWidgets.QVBoxLayout(page)
+            box.addWidget(panel)
+            box.addStretch(1)
+            return panel, page
+        return panel, panel
+
+    curve_editor = property(lambda self: self._panel("curve_editor"),
+                            doc="The curve editor (built when first shown or asked for).")
+    binding_panel = property(lambda self: self._panel("binding_panel"),
+                             doc="The binding panel (built when first shown or asked for).")
+    ik_panel = property(lambda self: self._panel("ik_panel"),
+                        doc="The IK panel (built when first shown or asked for).")
+    inspector = property(lambda self: self._panel("inspector"),
+                         doc="The constraint inspector (built when first shown or asked for).")
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
         action = QtGui.QAction(text, self)
