@@ -91,24 +91,6 @@ def _without_dialogs(window) -> None:
     window.ask_unsaved = lambda: "discard"
 
 
-#: modules a project's first frame usually needs but the window does not: SciPy's rotations
-#: (a BVH file that is not +Y up, a displacement map), about a third of the start-up
-PRELOADED = ("scipy.spatial.transform",)
-
-
-def _preload_in_background() -> None:
-    """Import :data:`PRELOADED` in a daemon thread while Qt starts and the window is built
-    (numpy is already loaded, so the two import different modules); whoever needs them
-    first waits for the import in progress instead of starting its own."""
-    import importlib
-    import threading
-
-    def load():
-        for name in PRELOADED:
-            importlib.import_module(name)
-    threading.Thread(target=load, name="preload", daemon=True).start()
-
-
 def run(project: str | None = None, *, demo: bool = False, screenshot: str | None = None,
         frame: int | None = None, quit_after_ms: int | None = None,
         self_test: bool = False) -> int:
@@ -124,7 +106,6 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
             (drawn on Qt's offscreen platform then), before Qt is started.
     """
     _check_display(headless=self_test or screenshot is not None)
-    _preload_in_background()
     from motion_composer.app.gui.qt import QtCore, application
     from motion_composer.app.runtime import tune_allocator
 
