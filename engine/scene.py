@@ -41,6 +41,7 @@ from .correction.contacts import (contact_constraints, detect_contacts, find_fee
                                   horizontal_drift)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction import preview as _preview
+from .correction.quality import quality
 from .errors import MotionComposerError
 from .motion import Motion
 from .project import (Project, Source, check_project, correction_keys, open_project,
@@ -400,6 +401,10 @@ class Scene:
                             for k, v in correction.seconds.items()})
         scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
+        corrected = correction.motion if correction is not None else composed
+        report["quality"] = quality(self.performer, composed, corrected, chosen,
+                                    correction.residual if correction is not None else None,
+                                    self.binding)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 

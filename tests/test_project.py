@@ -345,13 +345,24 @@ def saved(tmp_path):
     return path
 
 
-def test_a_truncated_file(saved):
+@pytest.mark.parametrize("share", [0.5, 0.33, 0.9])
+def test_a_truncated_file(saved, share):
     text = saved.read_text()
-    saved.write_text(text[:len(text) // 2])
+    saved.write_text(text[:int(len(text) * share)])
     with pytest.raises(ProjectError) as exc:
         load_project(saved)
     assert exc.value.path == str(saved) and "truncated" in str(exc.value)
     assert "line" in str(exc.value)
+
+
+def test_a_file_cut_anywhere_says_truncated(saved):
+    """Cut inside a number, a key, a string or between values: always named truncated."""
+    text = saved.read_text()
+    rng = random.Random(7)
+    for cut in sorted(rng.sample(range(1, len(text) - 2), 60)):
+        saved.write_text(text[:cut])
+        with pytest.raises(ProjectError, match="truncated"):
+            load_project(saved)
 
 
 def test_broken_json(saved):

@@ -193,7 +193,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         out.append(Constraint(joint=target, kind="position", goal={"point": goal},
                               smooth_in=smooth_in, start=c.start, end=c.end,
                               smooth_out=smooth_out, priority=priority, name=name, auto=True,
-                              meta={"source": "contact", "performer_joint": c.joint}))
+                              meta={"source": "contact", "part": "heel",
+                                    "performer_joint": c.joint}))
         toe = by_performer.get(c.toe) if c.toe else None
         if toe is not None:
             out.append(Constraint(joint=toe, kind="plane",

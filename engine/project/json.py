@@ -128,6 +128,8 @@ def _source_dict(source: Source, folder, role: str) -> dict:
 
 
 _LINE = 100
+#: what a file cut inside a value ends with: part of a number, a word or a string
+_PARTIAL_TOKEN = re.compile(r"[\w.+\-\"]*")
 
 
 def _encode(value, depth: int, where: str, lead: int = 0) -> str:
@@ -236,7 +238,7 @@ def _parse(text: str):
         return data
     except json.JSONDecodeError as exc:
         tail = (" (the file ends there: it looks truncated)"
-                if exc.pos >= len(text.rstrip()) else "")
+                if _ends_the_text(text, exc.pos) else "")
         raise _Invalid("", f"not valid JSON at line {exc.lineno}, column {exc.colno}: "
                            f"{exc.msg}{tail}") from None
     except RecursionError:
@@ -250,6 +252,13 @@ class _NotANumber:
 
     def __init__(self, problem: str):
         self.problem = problem
+
+
+def _ends_the_text(text: str, pos: int) -> bool:
+    """Whether a JSON error at ``pos`` is the end of ``text``, or inside a number, word or
+    string cut off there (``1.`` or ``"na`` at the end): the file was truncated."""
+    rest = text[pos:].rstrip()
+    return not rest or (len(rest) < 64 and _PARTIAL_TOKEN.fullmatch(rest) is not None)
 
 
 def _reject_not_a_number(value, where: str) -> None:
