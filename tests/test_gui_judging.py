@@ -333,3 +333,69 @@ def test_a_dropped_character_is_the_target_and_a_bad_file_says_why(qtbot, tmp_pa
     _drop(qtbot, w, junk)
     assert w.errors and "notes.txt" in w.errors[-1]
     w.doc.undo_stack.setClean()
+
+
+def _same_figures(a, b) -> None:
+    """Two quality reports hold the same figures (floats to rounding)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b)
+        for k in a:
+            _same_figures(a[k], b[k])
+    elif isinstance(a, list):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            _same_figures(x, y)
+    elif isinstance(a, float):
+        assert a == pytest.approx(b, rel=1e-6, abs=1e-9)
+    else:
+        assert a == b
+
+
+def test_the_quality_panel_shows_the_reports_figures_and_its_rows_go_to_their_frame(
+        qtbot, tmp_path, monkeypatch):
+    import json
+    from conftest import clip_path
+    from motion_composer.app.cli import main
+    from motion_composer.app.gui.qt import QtCore
+    from motion_composer.app.gui.quality_panel import GROUPS, quality_rows
+    require_gl()
+    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
+    report = tmp_path / "report.json"
+    assert main(["retarget", str(walk), "--target", str(tpose), "-o", str(tmp_path / "o.bvh"),
+                 "--auto-contacts", "--report", str(report)]) == 0
+    expected = json.loads(report.read_text())["quality"]
+
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
+    w.show()
+    qtbot.waitExposed(w, timeout=WAIT_MS)
+    assert w.import_file("performer", walk) and w.import_file("target", tpose)
+    panel, doc = w.quality_panel, w.doc
+    assert panel.quality is None and not w.quality_strip.isVisible()
+    w.solve_contacts()                                   # Tools > Add Foot Contacts and Solve
+    qtbot.waitUntil(lambda: panel.quality is not None, timeout=WAIT_MS * 4)
+    _same_figures(json.loads(json.dumps(panel.quality)), expected)
+    # the rows are the report's, as the panel words them
+    rows = quality_rows(expected)
+    for key, _title in GROUPS:
+        shown = [(i.text(0), i.text(1), i.text(2)) for i in panel.rows(key)]
+        assert shown == [(a, b, "" if f is None else str(f)) for a, b, f, _j in rows[key]]
+    assert rows["contacts"] and rows["pops"] and rows["bone_directions"]
+    # the strip under the timeline: foot slide and largest residual per frame, in cm
+    assert w.quality_strip.isVisible()
+    np.testing.assert_allclose(w.quality_strip.slide.yData,
+                               np.asarray(expected["per_frame"]["foot_slide_m"]) * 100)
+    # a click on a row goes to its frame and selects its joint
+    w.quality_dock.raise_()
+    item = panel.rows("pops")[0]
+    panel.tree.scrollToItem(item)
+    rect = panel.tree.visualItemRect(item)
+    qtbot.mouseClick(panel.tree.viewport(), QtCore.Qt.MouseButton.LeftButton,
+                     pos=rect.center())
+    frame, joint = expected["pops"][0]["frame"], expected["pops"][0]["joint"]
+    assert doc.scene.viewer.current_frame == frame and doc.selection == ("target", joint)
+    # Measure solves as retarget does: the same figures again
+    panel.show_quality(None)
+    qtbot.mouseClick(panel.measure_button, QtCore.Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: panel.quality is not None, timeout=WAIT_MS * 4)
+    _same_figures(json.loads(json.dumps(panel.quality)), expected)
+    doc.undo_stack.setClean()

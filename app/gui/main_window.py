@@ -60,8 +60,10 @@ class MainWindow(QtWidgets.QMainWindow):
     def _build_docks(self) -> None:
         from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
         from motion_composer.app.gui.playback import PlaybackBar
+        from motion_composer.app.gui.quality_panel import QualityPanel
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
+        self.quality_panel = QualityPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self._panels: dict = {}                     # the panels built so far (see _panel)
         docks = [
@@ -70,6 +72,8 @@ class MainWindow(QtWidgets.QMainWindow):
             ("Binding", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
             ("IK", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "ik"),
+            ("Quality", self.quality_panel, QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
+             "quality"),
             ("Curves", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
              "curves"),
         ]
@@ -77,7 +81,7 @@ class MainWindow(QtWidgets.QMainWindow):
             from motion_composer.app.gui.timeline import ConstraintTimeline
             self.timeline = ConstraintTimeline(self.doc)
             self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
-            docks += [("Constraints", self.timeline,
+            docks += [("Constraints", self._timeline_page(),
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
                       ("Constraint", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "inspector")]
@@ -115,6 +119,7 @@ class MainWindow(QtWidgets.QMainWindow):
         # the side panels share one column of tabs, so the viewport keeps most of the width
         self.tabifyDockWidget(self.correspondence_dock, self.binding_dock)
         self.tabifyDockWidget(self.binding_dock, self.ik_dock)
+        self.tabifyDockWidget(self.ik_dock, self.quality_dock)
         if getattr(self, "inspector_dock", None) is not None:
             self.tabifyDockWidget(self.binding_dock, self.inspector_dock)
         self.correspondence_dock.raise_()
@@ -125,6 +130,22 @@ class MainWindow(QtWidgets.QMainWindow):
                          QtCore.Qt.Orientation.Horizontal)
         self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
+
+    def _timeline_page(self) -> QtWidgets.QWidget:
+        """The constraint timeline with the quality strip under it, on the same frames (the
+        strip shows while there are quality figures)."""
+        from motion_composer.app.gui.quality_panel import QualityStrip
+        self.quality_strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+        page = QtWidgets.QWidget()
+        box = QtWidgets.QVBoxLayout(page)
+        box.setContentsMargins(0, 0, 0, 0)
+        box.setSpacing(0)
+        box.addWidget(self.timeline, 1)
+        box.addWidget(self.quality_strip)
+        left = self.quality_strip.getAxis("left")
+        self.timeline.view.sigResized.connect(
+            lambda *_: left.setWidth(self.timeline.row_axis.width()))
+        return page
 
     # ------------------------------------------------------------------ panels built when shown
     def _panel(self, name: str):
