@@ -35,7 +35,10 @@ CM = 100.0
 
 
 def _length(value) -> str:
-    return "-" if value is None else f"{value * CM:.2f} cm"
+    """[m] in centimetres, or in millimetres below one centimetre."""
+    if value is None:
+        return "-"
+    return f"{value * CM:.2f} cm" if abs(value) >= 0.01 else f"{value * 1000:.2f} mm"
 
 
 def _residual(c: dict) -> str:
@@ -44,7 +47,7 @@ def _residual(c: dict) -> str:
     if c.get("residual_unit") == "rad":
         return (f"{np.degrees(c['max_residual']):.2f} / "
                 f"{np.degrees(c['mean_residual']):.2f} deg")
-    return f"{c['max_residual'] * CM:.2f} / {c['mean_residual'] * CM:.2f} cm"
+    return f"{_length(c['max_residual'])} / {_length(c['mean_residual'])}"
 
 
 def quality_rows(quality: dict) -> dict[str, list[tuple[str, str, int | None, str]]]:
@@ -144,9 +147,10 @@ class QualityPanel(QtWidgets.QWidget):
                     item.setData(0, QtCore.Qt.ItemDataRole.UserRole, (frame, joint))
                     group.addChild(item)
                 group.setExpanded(True)
-            self.tree.resizeColumnToContents(0)
+            for column in range(3):
+                self.tree.resizeColumnToContents(column)
             slide = max(quality["per_frame"]["foot_slide_m"], default=0.0)
-            self.status.setText(f"Largest foot slide {slide * CM:.2f} cm; "
+            self.status.setText(f"Largest foot slide {_length(slide)}; "
                                 f"{sum(p['ratio'] > 1 for p in quality['pops'])} joints pop.")
         self.qualityChanged.emit(quality)
 
@@ -188,6 +192,7 @@ class QualityStrip(pg.PlotWidget):
         item.setMouseEnabled(x=False, y=False)
         item.getAxis("bottom").setStyle(showValues=False)
         item.setLabel("left", "cm")
+        item.getAxis("left").enableAutoSIPrefix(False)
         self.slide = self.plot(pen=pg.mkPen(*self.SLIDE, width=1.5), name="foot slide")
         self.residual = self.plot(pen=pg.mkPen(*self.RESIDUAL, width=1.5),
                                   name="largest residual")

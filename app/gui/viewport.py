@@ -336,6 +336,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                                        mode="lines", antialias=True)
         self.planted = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), color=PLANTED, size=6,
                                             pxMode=True)
+        self.planted.setGLOptions("translucent")       # not added to the trail under it
         self.contacts = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
                                       color=CONTACT_FLOOR, glOptions="translucent",
                                       smooth=False)
