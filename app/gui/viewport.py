@@ -17,6 +17,8 @@ all (from a sensible height), 1 / 3 / 7 front, side and top views.
 """
 from __future__ import annotations
 
+import atexit
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,6 +91,21 @@ TWO_SIDED = shaders.ShaderProgram("two_sided", [
             gl_FragColor = vec4(min(rgb, vec3(1.0)), v_color.a);
         }
     """)])
+
+
+#: the views alive, deleted at exit while Qt still runs (see _delete_live_views)
+_LIVE: "weakref.WeakSet[Viewport]" = weakref.WeakSet()
+
+
+@atexit.register
+def _delete_live_views() -> None:
+    """Delete the GL windows still alive at exit, while the application and their OpenGL
+    contexts exist: left to Python's teardown, a GL window goes after the application and the
+    process dies in a segmentation fault on its way out."""
+    import shiboken6
+    for view in list(_LIVE):
+        if shiboken6.isValid(view) and shiboken6.isValid(view.widget):
+            shiboken6.delete(view.widget)
 
 
 def gl_possible() -> bool:
@@ -304,6 +321,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                                            parent)
             self.widget.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
         self.widget.setMinimumSize(320, 240)
+        _LIVE.add(self)
         self.setBackgroundColor((38, 40, 44))
         self.grid = gl.GLGridItem()
         self.grid.setSpacing(0.5, 0.5)
@@ -478,7 +496,10 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                        self._label(which))
             fig.offset = layout[which]
         self._refresh_skin(layout)
-        if self.skin is not None and self.skin.visible():       # the label over the mesh
+        if self.skin is not None and self.skin.visible():
+            # the mesh stands for the target's bones (its joints stay, to pick); the label
+            # goes over the mesh
+            self.figures["target"].mesh.setVisible(False)
             label = self.figures["target"].label
             top = float(self.skin.opts["meshdata"].vertexes()[:, 2].max())
             label.setData(pos=(*label.pos[:2], top + 0.06 * self._size()))
