@@ -99,13 +99,16 @@ _LIVE: "weakref.WeakSet[Viewport]" = weakref.WeakSet()
 
 @atexit.register
 def _delete_live_views() -> None:
-    """Delete the GL windows still alive at exit, while the application and their OpenGL
-    contexts exist: left to Python's teardown, a GL window goes after the application and the
-    process dies in a segmentation fault on its way out."""
+    """Delete the GL windows still alive at exit while the application and their OpenGL
+    contexts exist (a test session's application lives to the end): left to Python's
+    teardown, a GL window goes after the application and the process dies in a segmentation
+    fault on its way out."""
     import shiboken6
+    if QtCore.QCoreApplication.instance() is None:       # gone first: nothing may be deleted
+        return
     for view in list(_LIVE):
         if shiboken6.isValid(view) and shiboken6.isValid(view.widget):
-            shiboken6.delete(view.widget)
+            shiboken6.delete(view.widget.window())       # the window it is in, whole
 
 
 def gl_possible() -> bool:
