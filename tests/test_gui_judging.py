@@ -286,7 +286,7 @@ def _drop(qtbot, w, *paths):
     from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
     mime = QtCore.QMimeData()
     mime.setUrls([QtCore.QUrl.fromLocalFile(str(p)) for p in paths])
-    at = QtCore.QPointF(w.width() / 2, w.height() / 2)
+    at = QtCore.QPointF(w.width() / 2, w.height() / 2)        # a window or the 3D view
     enter = QtGui.QDragEnterEvent(at.toPoint(), QtCore.Qt.DropAction.CopyAction, mime,
                                   QtCore.Qt.MouseButton.LeftButton,
                                   QtCore.Qt.KeyboardModifier.NoModifier)
@@ -328,6 +328,10 @@ def test_a_dropped_character_is_the_target_and_a_bad_file_says_why(qtbot, tmp_pa
     from motion_composer.app.gui.main import SKINNED_CHARACTER
     _drop(qtbot, w, clip_path("cmu_131_01_walk.bvh"), SKINNED_CHARACTER)
     assert w.doc.scene.character is not None and w.doc.scene.ready, w.errors
+    # dropped on the 3D view itself (a native window: its own drag events), the same
+    w.ask_role = lambda name: "performer"
+    _drop(qtbot, w.viewport, clip_path("fair1_child8_jumping.bvh"))
+    assert w.doc.scene.performer.name == "fair1_child8_jumping"
     junk = tmp_path / "notes.txt"
     junk.write_text("not a motion\n")
     _drop(qtbot, w, junk)
