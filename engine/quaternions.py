@@ -22,7 +22,8 @@ import numpy as np
 
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
            "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix",
-           "components", "interleaved", "cmul", "cconj", "crot", "cquat_between", "ctwist_about"]
+           "from_matrix", "from_rotvec", "components", "interleaved", "cmul", "cconj", "crot",
+           "cquat_between", "ctwist_about"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -250,6 +251,47 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
     out[..., 2, 0] = 2 * (x * z - y * w)
     out[..., 2, 1] = 2 * (y * z + x * w)
     out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
+
+
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(..., 4)`` of rotation matrices ``(..., 3, 3)`` (Shepperd's method:
+    the decomposition led by the largest of the trace and the diagonal, as scipy's
+    ``Rotation.from_matrix`` does for orthonormal matrices, without importing scipy)."""
+    m = np.asarray(m, dtype=float)
+    lead = np.concatenate([np.diagonal(m, axis1=-2, axis2=-1),
+                           np.trace(m, axis1=-2, axis2=-1)[..., None]], axis=-1)
+    choice = np.argmax(lead, axis=-1)
+    trace = lead[..., 3]
+    q = np.empty(m.shape[:-2] + (4,))
+    on_trace = choice == 3
+    q[..., 0] = np.where(on_trace, m[..., 2, 1] - m[..., 1, 2], 0.0)
+    q[..., 1] = np.where(on_trace, m[..., 0, 2] - m[..., 2, 0], 0.0)
+    q[..., 2] = np.where(on_trace, m[..., 1, 0] - m[..., 0, 1], 0.0)
+    q[..., 3] = np.where(on_trace, 1.0 + trace, 0.0)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        here = choice == i
+        if not np.any(here):
+            continue
+        q[here, i] = 1.0 - trace[here] + 2.0 * m[here, i, i]
+        q[here, j] = m[here, j, i] + m[here, i, j]
+        q[here, k] = m[here, k, i] + m[here, i, k]
+        q[here, 3] = m[here, k, j] - m[here, j, k]
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def from_rotvec(v: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(..., 4)`` of rotation vectors ``(..., 3)`` [rad] (the exponential
+    map; a series near zero, as scipy's ``Rotation.from_rotvec``)."""
+    v = np.asarray(v, dtype=float)
+    angle = np.linalg.norm(v, axis=-1)
+    small = angle <= 1e-3
+    safe = np.where(small, 1.0, angle)
+    scale = np.where(small, 0.5 - angle ** 2 / 48 + angle ** 4 / 3840, np.sin(angle / 2) / safe)
+    out = np.empty(v.shape[:-1] + (4,))
+    out[..., :3] = v * scale[..., None]
+    out[..., 3] = np.cos(angle / 2)
     return out
 
 

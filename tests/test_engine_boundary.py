@@ -378,3 +378,24 @@ def test_the_stage_check_follows_app_reexports_and_relative_imports():
 ])
 def test_the_stage_check_leaves_other_calls(source):
     assert stage_calls({"motion_composer.app.gui.planted": source}) == [], source
+
+
+_DEMO_CHILD = textwrap.dedent("""
+    import sys
+    from motion_composer.engine.scene import Scene
+    scene = Scene.open(sys.argv[1])
+    scene.motion, scene.binding
+    print(sorted({m.split(".")[0] for m in sys.modules if m.split(".")[0] == "scipy"}))
+""")
+
+
+def test_opening_the_demo_needs_no_scipy():
+    """Start-up: reading the bundled demo (Z-up BVH target included) and evaluating its
+    motion stays off scipy, which costs about half a second to import."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    proc = subprocess.run([sys.executable, "-c", _DEMO_CHILD,
+                           str(REPO / "resources" / "demo" / "demo.mcp")],
+                          capture_output=True, text=True, cwd=REPO, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"

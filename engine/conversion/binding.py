@@ -31,7 +31,7 @@ from .correspondence import Correspondence
 from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_arrays
 from ..motion import Motion
-from ..quaternions import about_axis, qconj, qmul, qrot, quat_between
+from ..quaternions import about_axis, from_matrix, qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["BindOptions", "Binding", "bind", "reference_pose", "is_upright"]
@@ -112,8 +112,7 @@ def reference_pose(motion: Motion, choice: str | int) -> tuple[np.ndarray, np.nd
     rest_rot = np.zeros((sk.num_joints, 4))
     rest_rot[:, 3] = 1.0
     # zero channel values: the root keeps the turn from the file's up axis to +Y
-    from scipy.spatial.transform import Rotation
-    rest_rot[0] = Rotation.from_matrix(sk.source.rotation).as_quat()
+    rest_rot[0] = from_matrix(sk.source.rotation)
     rest_tra = sk.offsets[sk.translated].copy()
     rest_tra[0] = motion.translations[0, 0]
     if choice == "auto":

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import MotionComposerError
 from ..motion import Motion
-from ..quaternions import qmul
+from ..quaternions import from_rotvec, qmul
 
 __all__ = ["Curve", "DisplacementMap", "Layer", "reduce_keys", "fit_keys", "INTERPOLATIONS",
            "TANGENTS", "ROOT"]
@@ -292,10 +292,7 @@ class DisplacementMap:
         moved = np.flatnonzero(np.any(rot != 0, axis=(0, 2)))
         rotations = motion.rotations.copy()
         if len(moved):
-            from scipy.spatial.transform import Rotation
-            exp = Rotation.from_rotvec(rot[:, moved].reshape(-1, 3)).as_quat()
-            rotations[:, moved] = qmul(exp.reshape(len(rot), len(moved), 4),
-                                       rotations[:, moved])
+            rotations[:, moved] = qmul(from_rotvec(rot[:, moved]), rotations[:, moved])
         translations = motion.translations.copy()
         translations[:, 0] += tra
         return motion.replace(rotations=rotations, translations=translations)

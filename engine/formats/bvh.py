@@ -28,6 +28,7 @@ from .. import limits
 from ..fileio import atomic_write
 from ..kinematics import fk_arrays
 from ..motion import Motion
+from ..quaternions import from_matrix, qmul
 from ..rotations import euler_to_quat, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
@@ -857,9 +858,8 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                         source=source)
     translations = translations * scale
     if up_axis != "+Y":
-        from scipy.spatial.transform import Rotation
         translations[:, 0] = translations[:, 0] @ C.T
-        rotations[:, 0] = (Rotation.from_matrix(C) * Rotation.from_quat(rotations[:, 0])).as_quat()
+        rotations[:, 0] = qmul(from_matrix(C), rotations[:, 0])
     # computed here, unit quaternions (Euler angles or scipy's output) and finite numbers:
     # the checks and copies of Motion() would only double a large clip's peak memory
     return Motion._trusted(skeleton, rotations, translations, record.frame_time, name)
@@ -968,12 +968,10 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     rotations = motion.rotations
     translations = motion.translations / s
     if src.up_axis != "+Y":
-        from scipy.spatial.transform import Rotation
         translations = translations.copy()
         translations[:, 0] = translations[:, 0] @ C
         rotations = rotations.copy()
-        rotations[:, 0] = (Rotation.from_matrix(C.T) *
-                           Rotation.from_quat(rotations[:, 0])).as_quat()
+        rotations[:, 0] = qmul(from_matrix(C.T), rotations[:, 0])
 
     # channel values
     rot_cols, pos_cols = _column_layout(written)

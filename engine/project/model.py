@@ -200,7 +200,7 @@ class ViewerState:
         """A copy with fields changed; ``show_performer``, ``show_intermediate``,
         ``show_target`` (bool) and ``side_by_side`` are accepted too."""
         shown = set(self.shown)
-        options = dict(self.options)
+        options = dict(changes.pop("options", self.options))
         for name in SKELETONS:
             on = changes.pop(f"show_{name}", None)
             if on is not None:

@@ -51,7 +51,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ... import limits
 from ...errors import FBXError
@@ -306,6 +305,7 @@ def _to_engine(m: np.ndarray, A: np.ndarray, s: float) -> np.ndarray:
 # =========================================================================== transforms
 def _euler(angles: np.ndarray, order: str) -> np.ndarray:
     """``(N, 3)`` X, Y, Z angles [deg] -> ``(N, 3, 3)`` rotation matrices in ``order``."""
+    from scipy.spatial.transform import Rotation     # imported when an FBX file is read
     idx = ["xyz".index(a) for a in order]
     return Rotation.from_euler(order, angles[:, idx], degrees=True).as_matrix()
 
