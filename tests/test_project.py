@@ -773,3 +773,13 @@ def test_round_trip_on_shared_clips(tmp_path):
         assert path.read_bytes() == first
         assert same_motion(evaluate_project(loaded, performer, target).motion,
                            evaluate_project(project).motion)
+
+
+def test_viewer_state_with_options_and_shown_figures():
+    viewer = ViewerState(current_frame=3, options={"side_by_side": True, "ghosts": False})
+    changed = viewer.with_(options={"follow_root": True}, show_performer=False,
+                           current_frame=9)
+    assert changed.options == {"follow_root": True}
+    assert "performer" not in changed.shown and changed.current_frame == 9
+    assert viewer.with_(side_by_side=False).options == {"side_by_side": False, "ghosts": False}
+    assert viewer.options == {"side_by_side": True, "ghosts": False}      # unchanged
