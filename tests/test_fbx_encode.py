@@ -91,6 +91,16 @@ def test_layout_is_the_sdks():
     assert data[at + 16:at + 20 + padding] == bytes(4 + padding)
 
 
+def test_childless_animation_layer_is_closed_as_the_sdk_closes_it(real_tree):
+    data = encode_binary(real_tree, 7400)
+    layers = [n for n in parse_binary(data).walk() if n.name == "AnimationLayer"]
+    for layer in layers:
+        end, count, size = struct.unpack_from("<III", data, layer.offset)
+        closed_at = layer.offset + 13 + len("AnimationLayer") + size
+        assert not layer.children and end == closed_at + 13
+        assert data[closed_at:end] == bytes(13)
+
+
 def test_small_arrays_raw_large_ones_deflated():
     data = encode_binary(_tree())
     small = np.arange(4, dtype=np.float64).tobytes()

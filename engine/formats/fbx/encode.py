@@ -9,7 +9,9 @@ files in ``shared/data/fbx``):
   ``uint64`` from 7.5), the name's length byte and name, the properties, then the children
   closed by an empty record (13 zero bytes in 7.4, 25 from 7.5). A record gets that closing
   record when it has children *or no properties*; a record with properties and no children
-  ends right after them. The top-level list is closed by an empty record too;
+  ends right after them, except ``AnimationLayer`` and ``AnimationStack`` (:data:`ALWAYS_CLOSED`:
+  every real file here closes its childless ``AnimationLayer``, and Blender's exporter does the
+  same for both). The top-level list is closed by an empty record too;
 * arrays longer than :data:`DEFLATE_ABOVE` bytes zlib-deflated (encoding 1), shorter ones raw;
 * the footer: a 16-byte footer code, 4 zero bytes, zero padding to the next multiple of 16
   (a full 16 when already aligned), the version again, 120 zero bytes and a fixed 16-byte
@@ -30,10 +32,12 @@ import numpy as np
 from .binary import MAGIC
 from .nodes import Node, type_code
 
-__all__ = ["encode_binary", "DEFLATE_ABOVE", "CREATION_TIME", "FILE_ID", "FOOTER_ID"]
+__all__ = ["encode_binary", "DEFLATE_ABOVE", "ALWAYS_CLOSED", "CREATION_TIME", "FILE_ID", "FOOTER_ID"]
 
 #: arrays of more bytes than this are deflated (the size FBX converters use)
 DEFLATE_ABOVE = 128
+#: records closed by an empty record even with properties and no children
+ALWAYS_CLOSED = frozenset({"AnimationLayer", "AnimationStack"})
 #: the ``CreationTime`` string that :data:`FILE_ID` and :data:`FOOTER_ID` belong to
 CREATION_TIME = "1970-01-01 10:00:00:000"
 #: the ``FileId`` (raw bytes) matching :data:`CREATION_TIME`
@@ -66,7 +70,7 @@ class _Writer:
         for value in node.props:
             self.prop(value)
         props_bytes = len(self.out) - props_at
-        if node.children or not node.props:
+        if node.children or not node.props or node.name in ALWAYS_CLOSED:
             for child in node.children:
                 self.record(child)
             self.out += self.empty
