@@ -405,3 +405,51 @@ def test_structure_is_blenders_exporters(key, blender):
         allowed = BLENDER_ONLY_PROPS | (BLENDER_ONLY_MESH_PROPS if kind == ("Model", "Mesh")
                                         else set())
         assert ref_ps - allowed <= ours_ps, kind
+
+
+# --------------------------------------------------------------------------- the commands
+def cli(capsys, *argv):
+    from motion_composer.app.cli import main
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def skinned_fbx_summary(path) -> dict:
+    tree = parse_binary(path.read_bytes())
+    objects = tree.find("Objects").children
+    return {"joints": sorted(name_of(o) for o in objects
+                             if o.name == "Model" and class_of(o) == "LimbNode"),
+            "meshes": sum(1 for o in objects if o.name == "Geometry"),
+            "clusters": sum(1 for o in objects if o.name == "Deformer" and
+                            class_of(o) == "Cluster"),
+            "keys": len(key_times(tree))}
+
+
+def test_retarget_and_export_write_fbx_with_the_characters_mesh(capsys, tmp_path,
+                                                                test_character):
+    out, project = tmp_path / "onto.fbx", tmp_path / "onto.mcp"
+    code, stdout, err = cli(capsys, "retarget", clip_path("cmu_131_01_walk.bvh"), "--target",
+                            TEST_CHARACTER, "--frames", "0:119", "-o", out,
+                            "--save-project", project)
+    assert code == 0, err
+    assert f"wrote {out}" in stdout
+    summary = skinned_fbx_summary(out)
+    assert summary == {"joints": sorted(test_character.skeleton.names), "meshes": 1,
+                       "clusters": summary["clusters"], "keys": 120}
+    weighted = {j for m in test_character.meshes for j in np.unique(m.joints[m.weights > 0])}
+    assert summary["clusters"] == len(weighted)
+    again = tmp_path / "again.fbx"
+    code, stdout, err = cli(capsys, "export", project, "-o", again, "--frames", "0:59")
+    assert code == 0, err
+    assert skinned_fbx_summary(again) == dict(summary, keys=60)
+
+
+def test_rotation_only_is_refused_for_fbx(capsys, tmp_path):
+    out = tmp_path / "walk.fbx"
+    code, stdout, err = cli(capsys, "retarget", clip_path("cmu_131_01_walk.bvh"), "--target",
+                            clip_path("cmu_rest_tpose.bvh"), "--frames", "0:9",
+                            "--rotation-only", "-o", out)
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert "rotation-only channels are a BVH option" in err and "walk.fbx" in err
+    assert not out.exists()

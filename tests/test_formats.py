@@ -289,7 +289,7 @@ def test_a_gltf_output_carries_the_character(tmp_path):
     assert read_motion(bvh).skeleton.names == robot.skeleton.names
 
 
-@pytest.mark.parametrize("name", ["out.txt", "out", "out.fbx", "out.vrm", "out.bvh.tmp"])
+@pytest.mark.parametrize("name", ["out.txt", "out", "out.vrm", "out.bvh.tmp"])
 def test_an_unknown_output_suffix_is_refused_and_nothing_written(tmp_path, name):
     path = tmp_path / name
     for call in (lambda: output_format(path), lambda: write_motion(read_bvh(TPOSE), path)):
@@ -300,7 +300,7 @@ def test_an_unknown_output_suffix_is_refused_and_nothing_written(tmp_path, name)
 
 
 def test_output_suffixes_and_a_default_suffix():
-    assert output_suffixes() == (".bvh", ".glb", ".gltf")
+    assert output_suffixes() == (".bvh", ".glb", ".gltf", ".fbx")
     assert with_output_suffix("take") == "take.bvh"
     assert with_output_suffix("take.txt") == "take.txt.bvh"
     assert with_output_suffix(Path("a/take.GLB")) == os.path.join("a", "take.GLB")
@@ -327,7 +327,7 @@ def test_the_open_filters_list_every_readable_format():
     for fmt, patterns in zip(FORMATS, each):
         wanted = [f"*{s}" for s in fmt.suffixes + fmt.other_suffixes]
         assert patterns == wanted and set(wanted) <= set(together)
-    assert {"*.bvh", "*.glb", "*.gltf", "*.vrm"} == set(together)
+    assert {"*.bvh", "*.glb", "*.gltf", "*.vrm", "*.fbx"} == set(together)
 
 
 def test_the_save_filters_list_every_written_format_bvh_first():

@@ -1,5 +1,6 @@
-"""File formats: BVH (:mod:`.bvh`) and glTF 2.0 / GLB characters (:mod:`.gltf`), and the one
-place that decides which of them a file is.
+"""File formats: BVH (:mod:`.bvh`), glTF 2.0 / GLB characters (:mod:`.gltf`) and FBX
+(:mod:`.fbx`, written as binary FBX 7.4), and the one place that decides which of them a file
+is.
 
 :data:`FORMATS` is the registry: per format its name, the suffixes it writes, a sniffer of a
 file's first bytes, its reader and writer, and what it can hold. Everything outside this
@@ -9,9 +10,10 @@ package reads and writes through the functions here and never looks at a suffix 
   ``HIERARCHY`` (after an optional UTF-8 byte-order mark and blank space), glTF JSON is a JSON
   object with an ``"asset"`` member, GLB starts with the magic ``b"glTF"``. So a ``.vrm``
   avatar (a GLB) reads as glTF and a BVH saved as ``.txt`` reads as BVH. Only the first
-  :data:`HEAD_BYTES` bytes are looked at. FBX is recognised and refused (not supported yet);
-  anything else raises :class:`~engine.errors.UnknownFormatError` naming the formats known.
-* writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``); any other suffix
+  :data:`HEAD_BYTES` bytes are looked at. FBX is recognised and refused for reading (not
+  supported yet); anything else raises :class:`~engine.errors.UnknownFormatError` naming the formats known.
+* writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``); any other
+  suffix
   raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format` raises
   before any work is done.
 """
@@ -28,9 +30,10 @@ from ..errors import (ExportError, FileFormatError, GLTFError, UnknownFormatErro
                       UnsupportedFormatError)
 from ..motion import Motion
 from .bvh import read_bvh, write_bvh
+from .fbx.write import write_fbx
 from .gltf import Character, read_gltf, write_gltf
 
-__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "HEAD_BYTES", "sniff", "read_motion",
+__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff", "read_motion",
            "read_performer", "read_character", "output_format", "write_motion",
            "output_suffixes", "with_output_suffix", "open_filters", "save_filters"]
 
@@ -130,6 +133,24 @@ def _write_gltf(motion: Motion, path, character: Character | None, channels: str
     write_gltf(motion, character, path)
 
 
+def _write_fbx(motion: Motion, path, character: Character | None, channels: str) -> None:
+    if channels != "all":
+        raise ExportError(f"rotation-only channels are a BVH option; an FBX file "
+                          f"({Path(path).name}) animates every joint's translation and rotation")
+    write_fbx(motion, path, character=character)
+
+
+def _fbx_not_read(head: bytes) -> bool:
+    """FBX is written, not read yet: its entry claims no file, so :func:`sniff` refuses FBX
+    content by name (:func:`_is_fbx`)."""
+    return False
+
+
+def _read_fbx(path, **bvh_overrides) -> Motion:
+    raise UnsupportedFormatError("FBX is not supported yet; export it from your 3D tool as "
+                                 "BVH (a motion) or glTF/GLB (a character)", path)
+
+
 BVH = Format("BVH", "BVH motion", (".bvh",), (), _is_bvh, read_bvh, None, _write_bvh,
              motion=True, mesh=False)
 GLTF = Format("glTF", "glTF JSON", (".gltf",), (), _is_gltf_json, _gltf_rest_motion,
@@ -137,8 +158,11 @@ GLTF = Format("glTF", "glTF JSON", (".gltf",), (), _is_gltf_json, _gltf_rest_mot
 GLB = Format("GLB", "GLB, binary glTF", (".glb",), (".vrm",), _is_glb, _gltf_rest_motion,
              read_gltf, _write_gltf, motion=True, mesh=True)
 
+FBX = Format("FBX", "FBX binary 7.4", (".fbx",), (), _fbx_not_read, _read_fbx, None,
+             _write_fbx, motion=True, mesh=True)
+
 #: every format read and written, in the order dialogs list them
-FORMATS: tuple[Format, ...] = (BVH, GLB, GLTF)
+FORMATS: tuple[Format, ...] = (BVH, GLB, GLTF, FBX)
 
 
 def _known() -> str:
@@ -241,7 +265,7 @@ def read_character(path: str | os.PathLike) -> Character | None:
 
 # --------------------------------------------------------------------------- writing
 def output_suffixes() -> tuple[str, ...]:
-    """Every suffix a writer writes (``.bvh``, ``.glb``, ``.gltf``)."""
+    """Every suffix a writer writes (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``)."""
     return tuple(s for fmt in FORMATS for s in fmt.suffixes)
 
 
@@ -265,10 +289,10 @@ def write_motion(motion: Motion, path: str | os.PathLike,
                  character: Character | None = None, *, channels: str = "all") -> None:
     """Write ``motion`` to ``path`` in the format its suffix names, atomically.
 
-    ``character`` gives a glTF output the character's meshes and skin (``None``: a
+    ``character`` gives a glTF or FBX output the character's meshes and skin (``None``: a
     skeleton-only file); BVH ignores it. ``channels="rotation"`` writes a BVH file with
     rotation channels only on every joint but the root (see
-    :func:`~engine.formats.bvh.format_bvh`); glTF refuses it.
+    :func:`~engine.formats.bvh.format_bvh`); glTF and FBX refuse it.
 
     Raises:
         UnsupportedFormatError: for a suffix no format writes (nothing is written).

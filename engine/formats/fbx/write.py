@@ -50,7 +50,6 @@ import os
 
 import numpy as np
 
-from ... import __version__
 from ...errors import ExportError
 from ...fileio import atomic_write
 from ...motion import Motion
@@ -63,7 +62,8 @@ from .nodes import FBX_TICKS_PER_SECOND, Node
 __all__ = ["write_fbx", "format_fbx", "fbx_document", "CENTIMETRES_PER_METRE", "FBX_VERSION",
            "TIME_MODES", "TIME_MODE_CUSTOM", "rotation_order", "frame_rate"]
 
-#: the binary version written (FBX 7.4, read by every FBX SDK since 2014)
+#: the binary version written (FBX 7.4, the format of the 2014-2015 SDKs, which every later
+#: SDK and the tools built on them read)
 FBX_VERSION = 7400
 #: lengths are written in centimetres (``UnitScaleFactor`` 1)
 CENTIMETRES_PER_METRE = 100.0
@@ -82,7 +82,7 @@ _DEFAULT_ORDER = "ZYX"
 _KEY_FLAGS = 0x4 | 0x100 | 0x2000 | 0x4000
 #: right and next-left slopes 0, both tangent weights 1/3 (0x0D05 twice), velocities 0
 _KEY_DATA = np.array([0, 0, 0x0D050D05, 0], dtype=np.int32).view(np.float32)
-_CREATOR = f"Motion Composer {__version__}"
+_CREATOR = "Motion Composer"
 
 
 # --------------------------------------------------------------------------- small builders
@@ -192,8 +192,7 @@ def _header() -> list[Node]:
     for when in ("Original", "LastSaved"):
         app += [_p(when, "Compound", "", ""),
                 _string(f"{when}|ApplicationVendor", "Motion Composer"),
-                _string(f"{when}|ApplicationName", "Motion Composer"),
-                _string(f"{when}|ApplicationVersion", __version__)]
+                _string(f"{when}|ApplicationName", "Motion Composer")]
     info = Node("SceneInfo", [_name("GlobalInfo", "SceneInfo"), "UserData"], [
         Node("Type", ["UserData"]), Node("Version", [np.int32(100)]), meta, _props(*app)])
     extension = Node("FBXHeaderExtension", [], [
