@@ -102,7 +102,7 @@ def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) ->
 
 # ------------------------------------------------------------------------------------- FBX
 FBX_SCRIPT = textwrap.dedent(r'''
-    import json, sys
+    import json, math, sys
     import numpy
     import bpy
 
@@ -136,7 +136,7 @@ FBX_SCRIPT = textwrap.dedent(r'''
         bpy.ops.object.mode_set(mode="OBJECT")
         meshes = [o for o in scene.objects if o.type == "MESH"]
         out = {"armatures": len(armatures), "fps": scene.render.fps / scene.render.fps_base,
-               "positions": {}, "meshes": {}}
+               "scene_fps": scene.render.fps, "positions": [], "meshes": {}}
         for o in meshes:
             out["meshes"][o.name] = {"groups": sorted(g.name for g in o.vertex_groups),
                                      "vertices": len(o.data.vertices), "skinned": {},
@@ -144,16 +144,16 @@ FBX_SCRIPT = textwrap.dedent(r'''
             for g in o.vertex_groups:
                 out["meshes"][o.name]["group_sizes"][g.name] = sum(
                     1 for v in o.data.vertices for e in v.groups if e.group == g.index)
-        for f in item["frames"]:
-            scene.frame_set(f)
-            out["positions"][f] = {pb.name: list(arm.matrix_world @ pb.head)
-                                   for pb in arm.pose.bones}
-            if f in item.get("skin_frames", []):
+        for k, f in enumerate(item["frames"]):
+            scene.frame_set(math.floor(f), subframe=f - math.floor(f))
+            out["positions"].append({pb.name: list(arm.matrix_world @ pb.head)
+                                     for pb in arm.pose.bones})
+            if k in item.get("skin_at", []):
                 depsgraph = bpy.context.evaluated_depsgraph_get()
                 for o in meshes:
                     evaluated = o.evaluated_get(depsgraph)
                     mesh = evaluated.to_mesh()
-                    out["meshes"][o.name]["skinned"][f] = [list(o.matrix_world @ v.co)
+                    out["meshes"][o.name]["skinned"][k] = [list(o.matrix_world @ v.co)
                                                            for v in mesh.vertices]
                     evaluated.to_mesh_clear()
         results["imports"][item["key"]] = out
@@ -167,16 +167,17 @@ def run_blender_fbx(job: dict, folder: Path, timeout: float = 300) -> dict:
 
     Args:
         job: ``{"exports": [{"key", "source": a .bvh or .glb, "out": an .fbx path}],
-            "imports": [{"key", "path": an .fbx, "frames": [scene frame, ...],
-            "skin_frames": [scene frames whose skinned vertices are reported]}]}``.
+            "imports": [{"key", "path": an .fbx, "frames": [scene frame (may be fractional),
+            ...], "skin_at": [indices into frames where the skinned vertices are reported]}]}``.
         folder: where the script, the job and the result are written.
 
     Returns:
-        ``{"exports": {key: path}, "imports": {key: {"armatures": count, "fps": scene rate,
-        "positions": {str(frame): {bone: [x, y, z]}}, "meshes": {name: {"groups": [vertex
-        group names], "group_sizes": {group: vertex count}, "vertices": count, "skinned":
-        {str(frame): [[x, y, z], ...]}}}}}}``, positions in Blender's world (metres, +Z up)
-        with the bones' ``use_connect`` switched off after import.
+        ``{"exports": {key: path}, "imports": {key: {"armatures": count, "fps": the file's
+        rate, "scene_fps": the scene's (whole) rate, "positions": [{bone: [x, y, z]} per
+        frame], "meshes": {name: {"groups": [vertex group names], "group_sizes": {group:
+        vertex count}, "vertices": count, "skinned": {str(index): [[x, y, z], ...]}}}}}}``,
+        positions in Blender's world (metres, +Z up) with the bones' ``use_connect`` switched
+        off after import. Blender puts FBX time ``t`` at scene frame ``t * scene_fps + 1``.
     """
     blender = blender_or_skip()
     folder = Path(folder)

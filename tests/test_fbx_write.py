@@ -27,6 +27,8 @@ from motion_composer.engine.skinning import skin_character
 SECTIONS = ["FBXHeaderExtension", "FileId", "CreationTime", "Creator", "GlobalSettings",
             "Documents", "References", "Definitions", "Objects", "Connections", "Takes"]
 TEST_CHARACTER = REPO / "resources" / "characters" / "test_character.glb"
+#: a rate FBX does not name (written as CustomFrameRate)
+CUSTOM_FPS = 37.5
 #: frames of the bundled walk written (2 s at 120 fps; Blender checks every one)
 WALK_FRAMES = 240
 
@@ -87,6 +89,13 @@ def fbx_rotation(euler_xyz: np.ndarray, order: int) -> Rotation:
 @pytest.fixture(scope="module")
 def walk():
     return read_motion(clip_path("cmu_131_01_walk.bvh")).frames(slice(0, WALK_FRAMES))
+
+
+@pytest.fixture(scope="module")
+def jump():
+    """The rotation orders YXZ and XYZ, at 119.875 fps: NTSC 119.88 fps written (within 1e-4),
+    which Blender puts between its whole frames."""
+    return read_motion(clip_path("fair1_child8_jumping.bvh")).frames(slice(0, WALK_FRAMES))
 
 
 @pytest.fixture(scope="module")
@@ -247,7 +256,7 @@ def test_rates_fbx_names_and_custom_ones():
 
 
 def test_custom_rate_is_written(walk):
-    motion = walk.resampled(37.5)
+    motion = walk.resampled(CUSTOM_FPS)
     tree = parse_binary(format_fbx(motion))
     settings = props70(tree.find("GlobalSettings"))
     assert int(settings["TimeMode"][0]) == TIME_MODE_CUSTOM
@@ -279,14 +288,17 @@ def test_write_is_atomic_and_reads_back(walk, tmp_path):
 
 # --------------------------------------------------------------------------- Blender
 @pytest.fixture(scope="module")
-def blender(walk, fox, test_character, tmp_path_factory):
-    """One Blender run: our walk (skeleton only) and our fox (skinned, its own joint axes)
-    imported on every frame; Blender's exporter writing the same walk and test character."""
+def blender(walk, jump, fox, test_character, tmp_path_factory):
+    """One Blender run: our walk and jump (skeletons only) and our fox (skinned, its own joint
+    axes) imported and read on every frame; Blender's exporter writing the same walk and test
+    character."""
     folder = tmp_path_factory.mktemp("fbx_blender")
     fox_motion = fox.motions[0]
-    ours = {"walk": folder / "walk.fbx", "fox": folder / "fox.fbx",
-            "character": folder / "character.fbx"}
+    ours = {"walk": folder / "walk.fbx", "jump": folder / "jump.fbx", "fox": folder / "fox.fbx",
+            "character": folder / "character.fbx", "custom": folder / "custom.fbx"}
     write_fbx(walk, ours["walk"])
+    write_fbx(walk.resampled(CUSTOM_FPS), ours["custom"])
+    write_fbx(jump, ours["jump"])
     write_fbx(fox_motion, ours["fox"], character=fox)
     write_fbx(test_character.motions[0], ours["character"], character=test_character)
     job = {"exports": [{"key": "walk", "source": str(clip_path("cmu_131_01_walk.bvh")),
@@ -294,14 +306,21 @@ def blender(walk, fox, test_character, tmp_path_factory):
                        {"key": "character",
                         "source": str(TEST_CHARACTER),
                         "out": str(folder / "character_blender.fbx")}],
-           "imports": [{"key": "walk", "path": str(ours["walk"]),
-                        "frames": list(range(1, walk.num_frames + 1))},
+           "imports": [{"key": "walk", "path": str(ours["walk"]), "frames": scene_frames(walk)},
+                       {"key": "jump", "path": str(ours["jump"]), "frames": scene_frames(jump)},
+                       {"key": "custom", "path": str(ours["custom"]),
+                        "frames": scene_frames(walk.resampled(CUSTOM_FPS))},
                        {"key": "fox", "path": str(ours["fox"]),
-                        "frames": list(range(1, fox_motion.num_frames + 1)),
-                        "skin_frames": [1, 40]}]}
+                        "frames": scene_frames(fox_motion), "skin_at": [0, 39]}]}
     result = run_blender_fbx(job, folder)
     result["ours"] = ours
     return result
+
+
+def scene_frames(motion) -> list[float]:
+    """Where Blender puts each key: frame = t * round(fps) + 1 (fractional at 119.875 fps)."""
+    rate, _ = frame_rate(motion.fps)
+    return list(np.arange(motion.num_frames) / rate * round(rate) + 1.0)
 
 
 def blender_to_engine(p) -> np.ndarray:
@@ -316,15 +335,17 @@ def stature(motion) -> float:
 
 
 @pytest.mark.blender
-@pytest.mark.parametrize("key", ["walk", "fox"])
-def test_blender_gets_the_joint_positions_on_every_frame(key, blender, walk, fox):
-    motion = walk if key == "walk" else fox.motions[0]
+@pytest.mark.parametrize("key", ["walk", "jump", "custom", "fox"])
+def test_blender_gets_the_joint_positions_on_every_frame(key, blender, walk, jump, fox):
+    motion = {"walk": walk, "jump": jump, "custom": walk.resampled(CUSTOM_FPS),
+              "fox": fox.motions[0]}[key]
     result = blender["imports"][key]
-    assert result["armatures"] == 1 and result["fps"] == round(motion.fps)
+    assert result["armatures"] == 1
+    # Blender keeps the rate as a whole number and a float32 divisor
+    assert result["fps"] == pytest.approx(frame_rate(motion.fps)[0], rel=1e-6)
     ours = forward_kinematics(motion, end_sites=False).positions
     names = motion.skeleton.names
-    theirs = np.array([[result["positions"][str(f + 1)][n] for n in names]
-                       for f in range(motion.num_frames)])    # frame = t * round(fps) + 1
+    theirs = np.array([[frame[n] for n in names] for frame in result["positions"]])
     err = np.linalg.norm(blender_to_engine(theirs) - ours, axis=-1)
     assert err.max() <= 1e-4 * stature(motion), f"{key}: {err.max():.3g} m"
 
@@ -338,7 +359,7 @@ def test_blender_skins_the_mesh_as_we_do(blender, fox):
     assert set(mesh["groups"]) == weighted
     assert mesh["vertices"] == fox.meshes[0].num_vertices
     ours = skin_character(fox, motion, frames=[0, 39])[0]
-    for k, frame in enumerate((1, 40)):
+    for k, frame in enumerate((0, 39)):
         theirs = blender_to_engine(mesh["skinned"][str(frame)])
         err = np.linalg.norm(theirs - ours[k], axis=-1).max()
         assert err <= 1e-4 * stature(motion), f"frame {frame}: {err:.3g}"
