@@ -1,6 +1,5 @@
 """File formats: BVH (:mod:`.bvh`), glTF 2.0 / GLB characters (:mod:`.gltf`) and FBX
-(:mod:`.fbx`, written as binary FBX 7.4), and the one place that decides which of them a file
-is.
+(:mod:`.fbx`), and the one place that decides which of them a file is.
 
 :data:`FORMATS` is the registry: per format its name, the suffixes it writes, a sniffer of a
 file's first bytes, its reader and writer, and what it can hold. Everything outside this
@@ -10,12 +9,11 @@ package reads and writes through the functions here and never looks at a suffix 
   ``HIERARCHY`` (after an optional UTF-8 byte-order mark and blank space), glTF JSON is a JSON
   object with an ``"asset"`` member, GLB starts with the magic ``b"glTF"``. So a ``.vrm``
   avatar (a GLB) reads as glTF and a BVH saved as ``.txt`` reads as BVH. Only the first
-  :data:`HEAD_BYTES` bytes are looked at. FBX is recognised and refused for reading (not
-  supported yet); anything else raises :class:`~engine.errors.UnknownFormatError` naming the formats known.
+  :data:`HEAD_BYTES` bytes are looked at. FBX is recognised and refused (not supported yet);
+  anything else raises :class:`~engine.errors.UnknownFormatError` naming the formats known.
 * writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``); any other
-  suffix
-  raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format` raises
-  before any work is done.
+  suffix raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format`
+  raises before any work is done.
 """
 from __future__ import annotations
 
@@ -33,8 +31,8 @@ from .bvh import read_bvh, write_bvh
 from .fbx.write import write_fbx
 from .gltf import Character, read_gltf, write_gltf
 
-__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff", "read_motion",
-           "read_performer", "read_character", "output_format", "write_motion",
+__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff",
+           "read_motion", "read_performer", "read_character", "output_format", "write_motion",
            "output_suffixes", "with_output_suffix", "open_filters", "save_filters"]
 
 #: how many bytes of a file sniffing reads (a glTF JSON's ``"asset"`` member is looked for

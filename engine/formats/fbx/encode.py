@@ -32,7 +32,8 @@ import numpy as np
 from .binary import MAGIC
 from .nodes import Node, type_code
 
-__all__ = ["encode_binary", "DEFLATE_ABOVE", "ALWAYS_CLOSED", "CREATION_TIME", "FILE_ID", "FOOTER_ID"]
+__all__ = ["encode_binary", "DEFLATE_ABOVE", "ALWAYS_CLOSED", "CREATION_TIME", "FILE_ID",
+           "FOOTER_ID"]
 
 #: arrays of more bytes than this are deflated (the size FBX converters use)
 DEFLATE_ABOVE = 128
