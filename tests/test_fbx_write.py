@@ -357,6 +357,10 @@ def test_blender_skins_the_mesh_as_we_do(blender, fox):
     weighted = {fox.skeleton.names[j] for m in fox.meshes
                 for j in np.unique(m.joints[m.weights > 0])}
     assert set(mesh["groups"]) == weighted
+    m = fox.meshes[0]
+    for name, size in mesh["group_sizes"].items():
+        j = fox.skeleton.index[name]
+        assert size == int(np.any((m.joints == j) & (m.weights > 0), axis=1).sum()), name
     assert mesh["vertices"] == fox.meshes[0].num_vertices
     ours = skin_character(fox, motion, frames=[0, 39])[0]
     for k, frame in enumerate((0, 39)):
