@@ -138,12 +138,14 @@ FBX_SCRIPT = textwrap.dedent(r'''
         out = {"armatures": len(armatures), "fps": scene.render.fps / scene.render.fps_base,
                "scene_fps": scene.render.fps, "positions": [], "meshes": {}}
         for o in meshes:
+            sizes = [0] * len(o.vertex_groups)
+            for v in o.data.vertices:
+                for e in v.groups:
+                    sizes[e.group] += e.weight > 0
             out["meshes"][o.name] = {"groups": sorted(g.name for g in o.vertex_groups),
-                                     "vertices": len(o.data.vertices), "skinned": {},
-                                     "group_sizes": {}}
-            for g in o.vertex_groups:
-                out["meshes"][o.name]["group_sizes"][g.name] = sum(
-                    1 for v in o.data.vertices for e in v.groups if e.group == g.index)
+                                     "group_sizes": {g.name: sizes[g.index]
+                                                     for g in o.vertex_groups},
+                                     "vertices": len(o.data.vertices), "skinned": {}}
         for k, f in enumerate(item["frames"]):
             scene.frame_set(math.floor(f), subframe=f - math.floor(f))
             out["positions"].append({pb.name: list(arm.matrix_world @ pb.head)

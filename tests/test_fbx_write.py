@@ -29,6 +29,8 @@ SECTIONS = ["FBXHeaderExtension", "FileId", "CreationTime", "Creator", "GlobalSe
 TEST_CHARACTER = REPO / "resources" / "characters" / "test_character.glb"
 #: a rate FBX does not name (written as CustomFrameRate)
 CUSTOM_FPS = 37.5
+#: frames whose skinned vertices are compared with Blender's
+SKIN_AT = [0, 20]
 #: frames of the bundled walk written (2 s at 120 fps; Blender checks every one)
 WALK_FRAMES = 240
 
@@ -101,6 +103,13 @@ def jump():
 @pytest.fixture(scope="module")
 def fox():
     return read_character(shared_path("target_fox.glb"))
+
+
+@pytest.fixture(scope="module")
+def robot():
+    """19 meshes, 15 of them rigid parts bound to one joint; a bind pose folded from a 100x
+    scaled node (see engine.formats.gltf)."""
+    return read_character(shared_path("target_robot_expressive.glb"))
 
 
 @pytest.fixture(scope="module")
@@ -288,14 +297,16 @@ def test_write_is_atomic_and_reads_back(walk, tmp_path):
 
 # --------------------------------------------------------------------------- Blender
 @pytest.fixture(scope="module")
-def blender(walk, jump, fox, test_character, tmp_path_factory):
+def blender(walk, jump, fox, robot, test_character, tmp_path_factory):
     """One Blender run: our walk and jump (skeletons only) and our fox (skinned, its own joint
     axes) imported and read on every frame; Blender's exporter writing the same walk and test
     character."""
     folder = tmp_path_factory.mktemp("fbx_blender")
     fox_motion = fox.motions[0]
     ours = {"walk": folder / "walk.fbx", "jump": folder / "jump.fbx", "fox": folder / "fox.fbx",
-            "character": folder / "character.fbx", "custom": folder / "custom.fbx"}
+            "character": folder / "character.fbx", "custom": folder / "custom.fbx",
+            "robot": folder / "robot.fbx"}
+    write_fbx(robot.motions[0], ours["robot"], character=robot)
     write_fbx(walk, ours["walk"])
     write_fbx(walk.resampled(CUSTOM_FPS), ours["custom"])
     write_fbx(jump, ours["jump"])
@@ -311,7 +322,9 @@ def blender(walk, jump, fox, test_character, tmp_path_factory):
                        {"key": "custom", "path": str(ours["custom"]),
                         "frames": scene_frames(walk.resampled(CUSTOM_FPS))},
                        {"key": "fox", "path": str(ours["fox"]),
-                        "frames": scene_frames(fox_motion), "skin_at": [0, 39]}]}
+                        "frames": scene_frames(fox_motion), "skin_at": SKIN_AT},
+                       {"key": "robot", "path": str(ours["robot"]),
+                        "frames": scene_frames(robot.motions[0]), "skin_at": SKIN_AT}]}
     result = run_blender_fbx(job, folder)
     result["ours"] = ours
     return result
@@ -335,10 +348,10 @@ def stature(motion) -> float:
 
 
 @pytest.mark.blender
-@pytest.mark.parametrize("key", ["walk", "jump", "custom", "fox"])
-def test_blender_gets_the_joint_positions_on_every_frame(key, blender, walk, jump, fox):
+@pytest.mark.parametrize("key", ["walk", "jump", "custom", "fox", "robot"])
+def test_blender_gets_the_joint_positions_on_every_frame(key, blender, walk, jump, fox, robot):
     motion = {"walk": walk, "jump": jump, "custom": walk.resampled(CUSTOM_FPS),
-              "fox": fox.motions[0]}[key]
+              "fox": fox.motions[0], "robot": robot.motions[0]}[key]
     result = blender["imports"][key]
     assert result["armatures"] == 1
     # Blender keeps the rate as a whole number and a float32 divisor
@@ -351,22 +364,28 @@ def test_blender_gets_the_joint_positions_on_every_frame(key, blender, walk, jum
 
 
 @pytest.mark.blender
-def test_blender_skins_the_mesh_as_we_do(blender, fox):
-    motion = fox.motions[0]
-    (mesh,) = blender["imports"]["fox"]["meshes"].values()
-    weighted = {fox.skeleton.names[j] for m in fox.meshes
-                for j in np.unique(m.joints[m.weights > 0])}
-    assert set(mesh["groups"]) == weighted
-    m = fox.meshes[0]
-    for name, size in mesh["group_sizes"].items():
-        j = fox.skeleton.index[name]
-        assert size == int(np.any((m.joints == j) & (m.weights > 0), axis=1).sum()), name
-    assert mesh["vertices"] == fox.meshes[0].num_vertices
-    ours = skin_character(fox, motion, frames=[0, 39])[0]
-    for k, frame in enumerate((0, 39)):
-        theirs = blender_to_engine(mesh["skinned"][str(frame)])
-        err = np.linalg.norm(theirs - ours[k], axis=-1).max()
-        assert err <= 1e-4 * stature(motion), f"frame {frame}: {err:.3g}"
+@pytest.mark.parametrize("key", ["fox", "robot"])
+def test_blender_skins_the_meshes_as_we_do(key, blender, fox, robot):
+    """Every mesh: one vertex group per joint that weighs on it, holding the vertices it
+    weighs, and Blender's skinned vertices ours at two frames (the robot's 19 meshes are
+    mostly rigid parts bound to one joint)."""
+    character = fox if key == "fox" else robot
+    motion = character.motions[0]
+    meshes = blender["imports"][key]["meshes"]
+    assert sorted(meshes) == sorted(m.name for m in character.meshes)
+    ours = skin_character(character, motion, frames=SKIN_AT)
+    for m, skinned in zip(character.meshes, ours):
+        mesh = meshes[m.name]
+        assert mesh["vertices"] == m.num_vertices
+        weighed = (m.weights > 0)
+        groups = {character.skeleton.names[j]: int(np.any((m.joints == j) & weighed,
+                                                          axis=1).sum())
+                  for j in np.unique(m.joints[weighed])}
+        assert mesh["group_sizes"] == groups, m.name
+        for k, frame in enumerate(SKIN_AT):
+            theirs = blender_to_engine(mesh["skinned"][str(frame)])
+            err = np.linalg.norm(theirs - skinned[k], axis=-1).max()
+            assert err <= 1e-4 * stature(motion), f"{m.name} frame {frame}: {err:.3g}"
 
 
 def structure(path):
