@@ -24,7 +24,7 @@ def window(qtbot, tmp_path, monkeypatch):
 
 
 def test_export_dialog_writes_fbx_with_the_characters_mesh(window, tmp_path):
-    assert "FBX binary 7.4 (*.fbx)" in save_filters().split(";;")
+    assert any(entry.endswith(" (*.fbx)") for entry in save_filters().split(";;"))
     assert window.import_file("performer", WALK), window.errors
     assert window.import_file("target", CHARACTER), window.errors
     out = tmp_path / "onto.fbx"
