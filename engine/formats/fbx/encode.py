@@ -29,6 +29,7 @@ import zlib
 
 import numpy as np
 
+from ...errors import ExportError
 from .binary import MAGIC
 from .nodes import Node, type_code
 
@@ -77,8 +78,9 @@ class _Writer:
             self.out += self.empty
         end = len(self.out)
         if end >= self.limit:
-            raise ValueError("the FBX document is too large for 32-bit record offsets; "
-                             "write FBX 7.5 or later")
+            raise ExportError(f"the FBX document passes {self.limit // 2 ** 30} GiB, the most "
+                              "FBX 7.4's 32-bit record offsets reach: write fewer frames "
+                              "(--frames, --fps)")
         self.header.pack_into(self.out, start, end, len(node.props), props_bytes)
 
     def prop(self, value) -> None:
@@ -106,9 +108,9 @@ def encode_binary(root: Node, version: int = 7400) -> bytes:
     Property values must carry their FBX type (see :mod:`.nodes`).
 
     Raises:
-        ValueError: for a version outside 7.1-7.7, a record name that is not ASCII or longer
-            than 255 bytes, or a 7.1-7.4 document over 4 GiB (programming errors: the tree is
-            built by the writer).
+        ExportError: for a 7.1-7.4 document over 4 GiB (a motion too long for FBX 7.4).
+        ValueError: for a version outside 7.1-7.7 or a record name that is not ASCII or longer
+            than 255 bytes (programming errors: the tree is built by the writer).
         TypeError: for a property value with no FBX type.
     """
     if not _OLDEST <= version <= _NEWEST:
