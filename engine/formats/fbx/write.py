@@ -55,7 +55,7 @@ from ...fileio import atomic_write
 from ...motion import Motion
 from ...quaternions import qconj, qmul, qrot, to_matrix
 from ...rotations import quat_to_euler
-from ..gltf import Character
+from ..gltf import Character, _rest_positions
 from .encode import CREATION_TIME, FILE_ID, encode_binary
 from .nodes import FBX_TICKS_PER_SECOND, Node
 
@@ -446,15 +446,6 @@ def fbx_document(motion: Motion, character: Character | None = None, *,
     root.children += [_definitions(scene.objects), Node("Objects", [], scene.objects),
                       Node("Connections", [], scene.connections), _takes(take, stop)]
     return root
-
-
-def _rest_positions(sk) -> np.ndarray:
-    """``(J, 3)`` [m] joints' world positions at rest."""
-    pos = np.empty((sk.num_joints, 3))
-    pos[0] = sk.offsets[0]
-    for j in range(1, sk.num_joints):
-        pos[j] = pos[sk.parents[j]] + sk.offsets[j]
-    return pos
 
 
 def _meshes(scene: _Scene, character: Character | None, models: list[int],
