@@ -177,18 +177,29 @@ def ik_options_from_args(args, base):
         raise MotionComposerError(f"{flags[exc.field]}: {exc.problem}") from None
 
 
-def _gltf_info(args, character):
-    """The motion ``info`` shows of a glTF ``character`` and the extra figures."""
+def _gltf_info(args, character, fmt):
+    """The motion ``info`` shows of a glTF or FBX ``character`` (``fmt`` its format) and the
+    extra figures."""
     given = [flag for flag, value in (("--units", args.units), ("--scale", args.scale),
                                       ("--up-axis", args.up_axis),
                                       ("--position-mode", args.position_mode))
              if value is not None]
     if given:
+        convention = ("glTF is metres and +Y up by definition" if fmt.read_take is None else
+                      f"an {fmt.name} file states its units and axes")
         raise MotionComposerError(f"{args.file}: {', '.join(given)} apply to BVH files only; "
-                                  "glTF is metres and +Y up by definition")
-    motion = character.motions[0] if character.motions else character.rest_motion()
+                                  f"{convention}")
+    if args.take is not None and fmt.read_take is not None:
+        from motion_composer.engine.formats.fbx.scene import take_motion
+        motion = take_motion(character, args.take)
+    elif args.take is not None:
+        raise MotionComposerError(f"{args.file}: --take applies to FBX files (a {fmt.name} "
+                                  "file has no takes)")
+    else:
+        motion = character.motions[0] if character.motions else character.rest_motion()
     extra = {
         "character": character.name,
+        "format": fmt.name,
         "motion_shown": motion.name if character.motions else "bind pose (no animation)",
         "skins": list(character.skin_names),
         "meshes": [{"name": m.name, "vertices": m.num_vertices, "triangles": m.num_triangles,
@@ -202,11 +213,14 @@ def _gltf_info(args, character):
 
 
 def cmd_info(args) -> int:
-    from motion_composer.engine.formats import read_character, read_motion
+    from motion_composer.engine.formats import read_character, read_motion, sniff
     character = read_character(args.file)
     if character is not None:
-        motion, extra = _gltf_info(args, character)
+        motion, extra = _gltf_info(args, character, sniff(args.file))
     else:
+        if args.take is not None:
+            raise MotionComposerError(f"{args.file}: --take applies to FBX files (a BVH file "
+                                      "has no takes)")
         motion, extra = read_motion(args.file, **_reader_options(args)), None
         _warn(motion, args.file, "--")
     info = describe_motion(motion)
@@ -221,7 +235,8 @@ def cmd_info(args) -> int:
     unit_note = "given" if args.units or args.scale is not None else "detected"
     up_note = "given" if args.up_axis else "detected"
     if extra is not None:
-        unit_note = up_note = "the glTF convention"
+        unit_note = up_note = ("the glTF convention" if extra["format"] in ("glTF", "GLB") else
+                               "converted from the file's GlobalSettings")
     lines = [
         f"file:        {args.file}",
         f"frames:      {info['frames']}",
@@ -240,7 +255,7 @@ def cmd_info(args) -> int:
         "joint tree:",
     ]
     if extra is not None:
-        lines[1:1] = [f"character:   {extra['character']} (glTF), motion shown: "
+        lines[1:1] = [f"character:   {extra['character']} ({extra['format']}), motion shown: "
                       f"{extra['motion_shown']}"]
         meshes = extra["meshes"]
         rigid = sum(1 for m in meshes if m["skin"] is None)
@@ -249,7 +264,8 @@ def cmd_info(args) -> int:
                          f"{sum(m['vertices'] for m in meshes)} vertices, "
                          f"{sum(m['triangles'] for m in meshes)} triangles")
         anims = extra["animations"]
-        lines.insert(-2, f"animations:  {len(anims)}" + (": " + ", ".join(
+        label = "takes:      " if extra["format"] == "FBX" else "animations: "
+        lines.insert(-2, f"{label} {len(anims)}" + (": " + ", ".join(
             f"{a['name']} ({a['frames']} frames, {a['duration']:.2f} s)" for a in anims)
             if anims else ""))
         for note in extra["notes"]:
@@ -339,16 +355,22 @@ def cmd_retarget(args) -> int:
                    ("the --map file", args.map), ("the --constraints file", args.constraints)))
     output_format(args.output)
     performer_options = side_options(args, "performer")
+    if args.take is not None:
+        from motion_composer.engine.formats import sniff
+        if sniff(args.performer).read_take is None:
+            raise MotionComposerError(f"{args.performer}: --take applies to FBX files (a "
+                                      f"{sniff(args.performer).name} file has no takes)")
+        performer_options["take"] = args.take
     target_options = side_options(args, "target")
     performer = read_performer(args.performer, **performer_options)
     _warn(performer, args.performer, "--performer-")
     if args.frames:
         performer.excerpt(*args.frames)              # a range outside the clip fails first
-    character = read_character(args.target)          # a glTF's bind pose is the target
+    character = read_character(args.target)     # a glTF's or FBX's bind pose is the target
     if character is not None and target_options:
         raise MotionComposerError(f"{args.target}: {_side_flags(target_options, 'target')} "
                                   "apply to BVH files only; glTF is metres and +Y up by "
-                                  "definition")
+                                  "definition, FBX states its units and axes")
     target = (character.rest_motion() if character is not None else
               read_motion(args.target, **target_options))
     _warn(target, args.target, "--target-")
@@ -474,7 +496,10 @@ def cmd_batch(args) -> int:
     started = time.perf_counter()
     project = load_project(args.project, check_sources=False)
     recipe = recipe_from_project(project, suffix=args.suffix)
-    recipe = dataclasses.replace(recipe, performer_reader=side_options(args, "performer"),
+    performer_reader = side_options(args, "performer")
+    if args.take is not None:
+        performer_reader["take"] = args.take
+    recipe = dataclasses.replace(recipe, performer_reader=performer_reader,
                                  target_reader={**recipe.target_reader,
                                                 **side_options(args, "target")})
     if args.any_skeleton:
@@ -549,14 +574,16 @@ def build_parser() -> ArgumentParser:
     _add_window_options(parser.add_argument_group("the window (without a COMMAND)"))
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", prog="motion-composer")
     info = sub.add_parser("info", help="describe a motion file",
-                          description="Describe a BVH file or a glTF character (.glb, "
-                                      ".gltf): joint tree, frames, frame rate, duration, "
-                                      "units, up axis, stature, channel layout; for glTF also "
-                                      "skins, meshes and animations (the first animation is "
-                                      "the motion shown, or the bind pose when there is none).")
-    info.add_argument("file", help="a BVH file or a glTF character (.glb, .gltf, .vrm); the "
-                                   "content says which, not the name")
+                          description="Describe a BVH file, a glTF character (.glb, .gltf) or "
+                                      "an FBX file: joint tree, frames, frame rate, duration, "
+                                      "units, up axis, stature, channel layout; for glTF and "
+                                      "FBX also skins, meshes and animations or takes (the "
+                                      "first animation is the motion shown, or the bind pose "
+                                      "when there is none).")
+    info.add_argument("file", help="a BVH file, a glTF character (.glb, .gltf, .vrm) or an FBX "
+                                   "file (.fbx); the content says which, not the name")
     info.add_argument("--json", action="store_true", help="print JSON for machines")
+    info.add_argument("--take", metavar="NAME", help="FBX: the take shown (default: the first)")
     _add_reader_options(info)
     info.set_defaults(func=cmd_info)
 
@@ -565,10 +592,13 @@ def build_parser() -> ArgumentParser:
                                     "through an intermediate skeleton; with the correction "
                                     "options (constraints, automatic contacts, floor) then "
                                     "correct it with whole-body inverse kinematics.")
-    rt.add_argument("performer", help="the capture (.bvh)")
+    rt.add_argument("performer", help="the capture (.bvh, or an FBX file's take)")
+    rt.add_argument("--take", metavar="NAME",
+                    help="the performer's take when it is an FBX file (default: the first "
+                         "that moves a joint; info lists them)")
     rt.add_argument("--target", required=True,
                     help="the character: a .bvh whose rest pose or first frame gives it, or a "
-                         "glTF character (.glb/.gltf, its bind pose)")
+                         "glTF or FBX character (.glb/.gltf/.fbx, its bind pose)")
     rt.add_argument("-o", "--output", required=True,
                     help="the file to write: .bvh, or .glb/.gltf (with the character's mesh "
                          "and skin when the target is glTF)")
@@ -619,7 +649,9 @@ def build_parser() -> ArgumentParser:
                                     "stops the rest; the exit code is 1 if any failed (3 if one "
                                     "failed by a bug, with its traceback).")
     bt.add_argument("project", help="a .mcp project whose rules to apply")
-    bt.add_argument("clips", nargs="+", help="the clips (.bvh)")
+    bt.add_argument("clips", nargs="+", help="the clips (.bvh, or FBX files' takes)")
+    bt.add_argument("--take", metavar="NAME",
+                    help="the take of every FBX clip (default: each file's first)")
     bt.add_argument("-o", "--output", required=True,
                     help="folder for the results, created if missing; a run locks it until it "
                          "ends, so a second run into the same folder is refused at once "

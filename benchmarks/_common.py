@@ -87,6 +87,7 @@ def time_runs(fn: Callable[[], object], repeat: int, *, warmup: int = 1,
     The garbage collector runs before each call (not inside the timed part), so that one call's
     garbage is not collected on the next call's time.
     """
+    sample_load()
     for _ in range(warmup):
         fn()
     timing = Timing(label)
@@ -95,6 +96,7 @@ def time_runs(fn: Callable[[], object], repeat: int, *, warmup: int = 1,
         start = time.perf_counter()
         fn()
         timing.seconds.append(time.perf_counter() - start)
+    sample_load()
     return timing
 
 
@@ -180,9 +182,50 @@ class Row:
     note: str = ""
 
 
-def print_table(title: str, rows: list[Row], *, loaded: bool = False) -> None:
-    """Print ``rows`` as an aligned plain-text table with PASS/MISS per target (LOADED
-    instead where ``loaded``: the machine was too busy for the figure to be judged)."""
+#: a 1-minute load average above this means other work shares the CPUs: figures are printed
+#: but not judged (LOADED instead of PASS or MISS)
+LOAD_LIMIT = 1.0
+_highest_load = 0.0
+
+
+def sample_load() -> float:
+    """The 1-minute load average now; the highest one sampled is kept for :func:`print_table`
+    (:func:`time_runs` samples before and after its runs, so a script need not)."""
+    global _highest_load
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
+    _highest_load = max(_highest_load, load)
+    return load
+
+
+def highest_load() -> float:
+    """The highest 1-minute load average sampled so far in this process (sampling once more)."""
+    sample_load()
+    return _highest_load
+
+
+def ratio_row(what: str, ours: Timing, reference: Timing, limit: float, *,
+              at_most: bool = True, note: str = "") -> Row:
+    """A row judging ``ours.median / reference.median`` against ``limit`` (at most it, or at
+    least it with ``at_most=False``), the medians and spreads of both in its note."""
+    ratio = ours.median / reference.median
+    ok = ratio <= limit if at_most else ratio >= limit
+    detail = (f"{fmt_seconds(ours.median)} / {fmt_seconds(reference.median)} "
+              f"({ours.spread()} / {reference.spread()})")
+    return Row(what, f"{ratio:.2f}x", f"{'<=' if at_most else '>='} {limit:g}x", ok,
+               "; ".join(filter(None, [detail, note])))
+
+
+def print_table(title: str, rows: list[Row], *, loaded: bool | None = None) -> None:
+    """Print ``rows`` as an aligned plain-text table with PASS/MISS per target, then the load
+    and the line ``targets: P PASS, M MISS, L LOADED of T`` (a script prints one table, so this
+    line ends its output).
+
+    ``loaded``: the machine was too busy for the figures to be judged, so every target reads
+    LOADED; by default, whether the highest load average sampled (:func:`sample_load`, now
+    included) is over :data:`LOAD_LIMIT`."""
+    load = highest_load()
+    if loaded is None:
+        loaded = load > LOAD_LIMIT
     header = ("measure", "figure", "target", "result", "")
     cells = [(r.what, r.value, r.target,
               "" if r.ok is None else ("LOADED" if loaded else "PASS" if r.ok else "MISS"),
@@ -197,10 +240,11 @@ def print_table(title: str, rows: list[Row], *, loaded: bool = False) -> None:
         text = "  ".join(str(x).ljust(w) for x, w in zip(c, widths))
         print((text + ("  " + c[4] if c[4] else "")).rstrip())
     print(line)
-    targets = [r for r in rows if r.ok is not None]
-    met = sum(1 for r in targets if r.ok)
-    print(f"{met} of {len(targets)} targets met" + (" (machine loaded: not judged)"
-                                                     if loaded else ""))
+    results = [c[3] for c in cells if c[3]]
+    print(f"load average (1 min, highest seen): {load:.2f}"
+          + (f" - over {LOAD_LIMIT:g}: targets read LOADED, not judged" if loaded else ""))
+    print(f"targets: {results.count('PASS')} PASS, {results.count('MISS')} MISS, "
+          f"{results.count('LOADED')} LOADED of {len(results)}")
 
 
 def environment() -> str:

@@ -1,22 +1,28 @@
-"""BVH reading, forward kinematics and writing: speed against bvhio, and peak memory.
+"""BVH reading, forward kinematics and writing, as ratios to numpy.loadtxt of the same MOTION
+block, and peak memory.
 
-    python benchmarks/bench_bvh.py [--repeat N] [--ref-repeat N] [--file PATH] [--no-reference]
+    python benchmarks/bench_bvh.py [--repeat N] [--file PATH] [--big-mb N] [--bvhio]
 
 Measures on ``cc3_cmu_02_06_pickup.bvh`` from the shared data (1118 frames, 100 joints, 3.3 MB),
-or the file given with ``--file``:
+or the file given with ``--file``, taking turns in this process with the reference,
+``numpy.loadtxt`` of the file's MOTION rows (the C parser's floor for the same numbers):
 
-* reference: ``bvhio.readAsHierarchy(path)``, median of ``--ref-repeat`` runs (3; ~3 s each);
 * ours: ``engine.read_bvh(path)`` then ``engine.forward_kinematics(motion)`` (world rotations
-  and positions of every joint and End Site, every frame), median of ``--repeat`` runs (9);
-* the ratio of the two medians (target >= 30x);
-* ``engine.formats.bvh.write_bvh`` of the motion to a temporary folder, median (target < 0.2 s);
-* peak memory of one read plus FK in a fresh interpreter (target < 200 MB): the peak RSS minus
-  the RSS after imports, and tracemalloc's peak (numpy reports its array buffers to tracemalloc,
-  so this counts numpy data and Python objects, not the interpreter or the libraries).
+  and positions of every joint and End Site, every frame): the ratio to the reference (target
+  <= 2x);
+* ``engine.formats.bvh.write_bvh`` of the motion to a temporary folder (formatting plus the
+  atomic, fsynced write): the ratio to the reference (target <= 1.5x) and the time (target
+  < 0.2 s); ``format_bvh`` alone for information;
+* peak memory in fresh interpreters, ``ru_maxrss`` above the baseline after the imports: one
+  read plus FK of the file (target < 200 MB), tracemalloc's peak of the same (numpy reports its
+  array buffers to tracemalloc), and one read of the file's rows tiled to ``--big-mb`` MB (72)
+  in a temporary folder (target: at most 3x the file's size);
+* with ``--bvhio``, ``bvhio.readAsHierarchy(path)`` as a second reference (~3 s a run; it
+  builds bvhio's joint tree with local keyframes but computes no world positions; target:
+  ours >= 30x faster).
 
-The reference does less than ours: it builds bvhio's joint tree with local keyframes but
-computes no world positions. This is a report, not a test: it exits 0 whether or not the
-targets are met.
+Medians of ``--repeat`` runs (9). With a load average over 1 the targets read LOADED. This is a
+report, not a test: it exits 0 whether or not the targets are met.
 """
 from __future__ import annotations
 
@@ -33,13 +39,16 @@ import json  # noqa: E402
 import tempfile  # noqa: E402
 
 from _common import (Row, data_file, environment, fmt_seconds, max_rss_mib,  # noqa: E402
-                     print_table, proc_status_mib, run_child, time_interleaved, time_runs)
+                     print_table, proc_status_mib, ratio_row, run_child, time_interleaved)
 
 FILE = "cc3_cmu_02_06_pickup.bvh"
 FALLBACK = "cmu_131_01_walk.bvh"
-RATIO_TARGET = 30.0
+READ_TARGET = 2.0           # read + FK / loadtxt
+WRITE_RATIO_TARGET = 1.5    # write / loadtxt
 WRITE_TARGET = 0.2          # [s]
 MEMORY_TARGET = 200.0       # [MB], taken as MiB: the stricter reading
+BIG_TARGET = 3.0            # peak memory of a read / file size
+BVHIO_TARGET = 30.0
 
 
 def read_and_fk(path):
@@ -48,24 +57,49 @@ def read_and_fk(path):
     return motion, engine.forward_kinematics(motion)
 
 
+def motion_rows(path: Path) -> tuple[str, list[str]]:
+    """The file's text before its MOTION rows, and the rows (the lines after Frame Time:)."""
+    lines = path.read_text(encoding="utf-8-sig").replace("\r\n", "\n").split("\n")
+    at = next(k for k, line in enumerate(lines) if line.strip().lower().startswith("frame time"))
+    return "\n".join(lines[:at - 1]), lines[at + 1:]
+
+
+def tiled_file(path: Path, megabytes: float, folder: str) -> Path:
+    """``path`` with its rows repeated to about ``megabytes`` MB, written into ``folder``."""
+    head, rows = motion_rows(path)
+    rows = [r for r in rows if r.strip()]
+    size = sum(len(r) + 1 for r in rows)
+    copies = max(1, round(megabytes * 1e6 / size))
+    frame_time = next(line for line in path.read_text(encoding="utf-8-sig").splitlines()
+                      if line.strip().lower().startswith("frame time"))
+    out = Path(folder) / f"tiled_{path.stem}.bvh"
+    with open(out, "w") as handle:
+        handle.write(f"{head}\nFrames: {copies * len(rows)}\n{frame_time.strip()}\n")
+        for _ in range(copies):
+            handle.write("\n".join(rows) + "\n")
+    return out
+
+
 # --------------------------------------------------------------------------- memory children
 def child_memory(path: str, mode: str) -> dict:
-    """Run in a fresh interpreter: memory of one read plus FK, measured one way."""
+    """Run in a fresh interpreter: memory of one read (plus FK, but for ``big``)."""
     import gc
 
     import numpy as np
 
     # imports count towards the baseline, not the figure
-    from motion_composer import engine  # noqa: F401
+    from motion_composer import engine
     gc.collect()
-    if mode == "rss":
+    if mode in ("rss", "big"):
         base_peak, base_hwm = max_rss_mib(), proc_status_mib("VmHWM")
-        base_now = proc_status_mib("VmRSS")
-        motion, pose = read_and_fk(path)
+        if mode == "big":
+            motion = engine.read_bvh(path)
+        else:
+            motion, pose = read_and_fk(path)
         peak, hwm = max_rss_mib(), proc_status_mib("VmHWM")
-        return {"baseline_peak_mib": base_peak, "baseline_rss_mib": base_now, "peak_mib": peak,
-                "delta_mib": peak - base_peak,
-                "hwm_delta_mib": None if hwm is None else hwm - base_hwm}
+        return {"baseline_peak_mib": base_peak, "peak_mib": peak, "delta_mib": peak - base_peak,
+                "hwm_delta_mib": None if hwm is None else hwm - base_hwm,
+                "frames": motion.num_frames}
     import tracemalloc
     tracemalloc.start()
     motion, pose = read_and_fk(path)
@@ -84,14 +118,15 @@ def child_memory(path: str, mode: str) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=9,
-                        help="timed runs of our reader and writer (default 9; use >= 7)")
-    parser.add_argument("--ref-repeat", type=int, default=3,
-                        help="timed runs of bvhio, ~3 s each (default 3)")
+                        help="timed runs of each call (default 9; use >= 7)")
     parser.add_argument("--file", help=f"BVH file to measure (default: {FILE} from the shared "
                                        "data)")
-    parser.add_argument("--no-reference", action="store_true",
-                        help="skip bvhio (quick runs: no ratio)")
-    parser.add_argument("--child-memory", choices=["rss", "tracemalloc"], help=argparse.SUPPRESS)
+    parser.add_argument("--big-mb", type=float, default=72.0,
+                        help="size of the tiled file for the memory of a large read (MB)")
+    parser.add_argument("--bvhio", action="store_true",
+                        help="also time bvhio.readAsHierarchy (~3 s a run)")
+    parser.add_argument("--child-memory", choices=["rss", "tracemalloc", "big"],
+                        help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
     if args.child_memory:
@@ -100,79 +135,79 @@ def main(argv=None) -> int:
 
     path = data_file(FILE, FALLBACK, args.file)
     repeat = max(1, args.repeat)
-    ref_repeat = max(1, args.ref_repeat)
-    if repeat < 7 or ref_repeat < 3:
-        print("note: fewer runs than the standard 7 (ours) and 3 (bvhio); medians are rougher\n")
+    if repeat < 7:
+        print("note: fewer runs than the standard 7; medians are rougher\n")
 
-    # (e) memory first, each way in its own fresh interpreter, while this process is still small:
+    # memory first, each way in its own fresh interpreter, while this process is still small:
     # on Linux a child inherits its parent's ru_maxrss (see _common.max_rss_mib)
     script = Path(__file__).resolve()
     parent_peak = max_rss_mib()
     rss = run_child(script, ["--file", str(path), "--child-memory", "rss"])
     traced = run_child(script, ["--file", str(path), "--child-memory", "tracemalloc"])
+    with tempfile.TemporaryDirectory(prefix="mc_bench_") as folder:
+        big_path = tiled_file(path, args.big_mb, folder)
+        big_size = big_path.stat().st_size / 2**20
+        big = run_child(script, ["--file", str(big_path), "--child-memory", "big"])
 
-    from motion_composer.engine.formats.bvh import write_bvh
+    import numpy as np
 
-    motion, pose = read_and_fk(path)                 # also the warm-up run
+    from motion_composer.engine.formats.bvh import format_bvh, write_bvh
+
+    motion, pose = read_and_fk(path)
     sk = motion.skeleton
+    _, rows = motion_rows(path)
     print(f"file: {path} ({path.stat().st_size / 1e6:.1f} MB): {motion.num_frames} frames, "
           f"{sk.num_joints} joints, {sk.num_channels} channels, {len(sk.end_sites)} End Sites")
-    print(f"      {environment()}; allocator tuned as the application does: {ALLOCATOR}\n")
+    print(f"      {environment()}; allocator tuned as the application does: {ALLOCATOR}")
+    print(f"      medians of {repeat} runs, taking turns with the reference\n")
 
-    rows: list[Row] = []
-
-    # (a) reference, (b) ours and (c) their ratio; the two take turns, so that a change in the
-    # machine's load while the benchmark runs affects both alike
-    ours_fn = lambda: read_and_fk(path)                               # noqa: E731
-    bvhio = None
-    if args.no_reference:
-        ref_note = "skipped (--no-reference)"
-    else:
-        try:
-            import bvhio
-        except ImportError:
-            ref_note = "n/a: bvhio is not installed (pip install bvhio)"
-    if bvhio is None:
-        ours = time_runs(ours_fn, repeat, warmup=0)
-        rows.append(Row("reference: bvhio.readAsHierarchy", "-", note=ref_note))
-        rows.append(Row("ours: read_bvh + forward_kinematics", fmt_seconds(ours.median),
-                        note=f"median; {ours.spread()}"))
-    else:
-        timed = time_interleaved({"ref": (lambda: bvhio.readAsHierarchy(str(path)), ref_repeat),
-                                  "ours": (ours_fn, repeat)}, rounds=ref_repeat)
-        ref, ours = timed["ref"], timed["ours"]
-        ratio = ref.median / ours.median
-        rows.append(Row("reference: bvhio.readAsHierarchy", fmt_seconds(ref.median),
-                        note=f"median, no warm-up; {ref.spread()}"))
-        rows.append(Row("ours: read_bvh + forward_kinematics", fmt_seconds(ours.median),
-                        note=f"median; {ours.spread()}; taking turns with the reference"))
-        rows.append(Row("ratio reference / ours", f"{ratio:.1f}x", f">= {RATIO_TARGET:.0f}x",
-                        ratio >= RATIO_TARGET))
-
-    # (d) writing
     with tempfile.TemporaryDirectory(prefix="mc_bench_") as folder:
         out = Path(folder) / "out.bvh"
-        write = time_runs(lambda: write_bvh(motion, out), repeat, label="write")
+        calls = {"loadtxt": (lambda: np.loadtxt(rows, comments=None, ndmin=2), repeat),
+                 "read": (lambda: read_and_fk(path), repeat),
+                 "write": (lambda: write_bvh(motion, out), repeat),
+                 "format": (lambda: format_bvh(motion), repeat)}
+        for fn, _ in calls.values():                                   # warm-up
+            fn()
+        timed = time_interleaved(calls, rounds=repeat)
         size = out.stat().st_size
-    rows.append(Row("write_bvh (atomic, fsynced)", fmt_seconds(write.median),
-                    f"< {WRITE_TARGET} s", write.median < WRITE_TARGET,
-                    f"median; {write.spread()}; {size / 1e6:.1f} MB written"))
+    ref, read, write = timed["loadtxt"], timed["read"], timed["write"]
+    table = [
+        Row("reference: numpy.loadtxt of the MOTION rows", fmt_seconds(ref.median),
+            note=f"median; {ref.spread()}"),
+        ratio_row("read_bvh + forward_kinematics / reference", read, ref, READ_TARGET),
+        ratio_row("write_bvh (atomic, fsynced) / reference", write, ref, WRITE_RATIO_TARGET),
+        Row("write_bvh", fmt_seconds(write.median), f"< {WRITE_TARGET} s",
+            write.median < WRITE_TARGET, f"median; {write.spread()}; {size / 1e6:.1f} MB"),
+        Row("  of which format_bvh (the text)", fmt_seconds(timed["format"].median),
+            note=f"{timed['format'].median / ref.median:.2f}x the reference"),
+    ]
+    if args.bvhio:
+        import bvhio
+        bv = time_interleaved({"bvhio": (lambda: bvhio.readAsHierarchy(str(path)), 3),
+                               "read": (lambda: read_and_fk(path), 3)}, rounds=3)
+        table.append(ratio_row("bvhio.readAsHierarchy / read + FK", bv["bvhio"], bv["read"],
+                               BVHIO_TARGET, at_most=False))
 
-    rows.append(Row("peak RSS of read + FK, above baseline", f"{rss['delta_mib']:.1f} MiB",
-                    f"< {MEMORY_TARGET:.0f} MB", rss["delta_mib"] < MEMORY_TARGET,
-                    f"ru_maxrss: peak {rss['peak_mib']:.1f} - {rss['baseline_peak_mib']:.1f} MiB "
-                    f"after imports" + ("" if rss["hwm_delta_mib"] is None else
-                                        f"; VmHWM says {rss['hwm_delta_mib']:.1f} MiB")))
+    table.append(Row("peak RSS of read + FK, above baseline", f"{rss['delta_mib']:.1f} MiB",
+                     f"< {MEMORY_TARGET:.0f} MB", rss["delta_mib"] < MEMORY_TARGET,
+                     f"ru_maxrss: peak {rss['peak_mib']:.1f} - {rss['baseline_peak_mib']:.1f} "
+                     f"MiB after imports" + ("" if rss["hwm_delta_mib"] is None else
+                                             f"; VmHWM says {rss['hwm_delta_mib']:.1f} MiB")))
     if rss["baseline_peak_mib"] <= parent_peak + 1.0:
-        rows[-1].note += (f" (UNRELIABLE: the child's baseline is the parent's "
-                          f"{parent_peak:.1f} MiB)")
-    rows.append(Row("tracemalloc peak of read + FK", f"{traced['peak_mib']:.1f} MiB",
-                    f"< {MEMORY_TARGET:.0f} MB", traced["peak_mib"] < MEMORY_TARGET,
-                    "numpy buffers and Python objects; "
-                    f"{traced['numpy_live_mib']:.1f} MiB of numpy buffers live at the end "
-                    f"(result arrays {traced['result_mib']:.1f} MiB)"))
-
-    print_table(f"BVH benchmark, {path.name}", rows)
+        table[-1].note += (f" (UNRELIABLE: the child's baseline is the parent's "
+                           f"{parent_peak:.1f} MiB)")
+    table.append(Row("tracemalloc peak of read + FK", f"{traced['peak_mib']:.1f} MiB",
+                     f"< {MEMORY_TARGET:.0f} MB", traced["peak_mib"] < MEMORY_TARGET,
+                     "numpy buffers and Python objects; "
+                     f"{traced['numpy_live_mib']:.1f} MiB of numpy buffers live at the end "
+                     f"(result arrays {traced['result_mib']:.1f} MiB)"))
+    ratio = big["delta_mib"] / big_size
+    table.append(Row(f"peak RSS of reading a {big_size:.0f} MiB file / its size",
+                     f"{ratio:.2f}x", f"<= {BIG_TARGET:g}x", ratio <= BIG_TARGET,
+                     f"{big['delta_mib']:.0f} MiB above the baseline after imports; "
+                     f"{big['frames']:,} frames (the rows tiled, in a temporary folder)"))
+    print_table(f"BVH benchmark, {path.name}", table)
     return 0
 
 

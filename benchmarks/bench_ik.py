@@ -7,7 +7,9 @@ Measures, on one core (BLAS threads pinned to 1 before numpy loads):
 * the CMU walk (``cmu_max_131_01_walk.bvh``, 994 frames) converted onto the Bandai skeleton,
   with automatic foot contacts (detected on the capture) and one hand position constraint
   (41 frames active, ramps of 20, second priority), both passes: frames per second over the whole clip
-  (target >= 1000); the paper reports about 1.25 frames per second, GMR 35-70;
+  (target >= 1000); the paper reports about 1.25 frames per second, GMR 35-70; beside it the
+  planted ankles' and toes' drift and the worst angular speed around a ramp over its no-pop
+  limit (``engine.correction.quality``, target <= 1);
 * the interactive case: re-solving one 300-frame hand constraint (a path 15 cm above the
   hand's own) alone after an edit (target <= 0.1 s), so the window can follow a dragged
   handle;
@@ -115,9 +117,9 @@ def main() -> None:
 
     from motion_composer.engine import forward_kinematics, read_bvh
     from motion_composer.engine.correction.constraints import Constraint
-    from motion_composer.engine.correction.contacts import (contact_constraints, detect_contacts,
-                                                            horizontal_drift)
+    from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts
     from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.correction.quality import quality
     from motion_composer.engine.conversion import retarget
 
     performer, target = read_bvh(WALK), read_bvh(BANDAI)
@@ -147,10 +149,10 @@ def main() -> None:
     result = enforce(composed, job)
     residual = max(np.nanmax(result.residual[i][c.start:c.end + 1])
                    for i, c in enumerate(job))
-    drift_d = np.mean([horizontal_drift(composed, c.joint, c.start, c.end)
-                       for c in cons if c.kind == "position"])
-    drift_c = np.mean([horizontal_drift(result.motion, c.joint, c.start, c.end)
-                       for c in cons if c.kind == "position"])
+    figures = quality(performer, composed, result.motion, job, result.residual)
+    drift = {part: [c for c in figures["contacts"] if c["part"] == part]
+             for part in ("heel", "toe")}
+    pops = figures["pops"][0] if figures["pops"] else None
     edit = time_runs(lambda: enforce(composed, [follow]), args.repeat, label="one constraint")
     edit_result = enforce(composed, [follow])
     edit_residual = float(np.nanmax(edit_result.residual[0][350:650]))
@@ -178,8 +180,16 @@ def main() -> None:
                note=f"{F / warm.median:,.0f} frames per second")] if warm else []),
         Row("largest residual on active frames", f"{residual * 1000:.3f} mm", "<= 1 mm",
             residual <= 1e-3),
-        Row("planted-foot drift, direct conversion", f"{drift_d * 1000:.1f} mm", ""),
-        Row("planted-foot drift, with contacts", f"{drift_c * 1000:.2f} mm", ""),
+        *[Row(f"planted {name} drift, direct -> with contacts (mean, max)",
+              f"{np.mean([c['drift_direct_m'] for c in held]) * 1000:.1f} -> "
+              f"{np.mean([c['drift_corrected_m'] for c in held]) * 1000:.2f} mm", "",
+              note=f"max {max(c['drift_corrected_m'] for c in held) * 1000:.2f} mm over "
+                   f"{len(held)} contacts")
+          for name, held in (("ankle (heel)", drift["heel"]), ("toe", drift["toe"])) if held],
+        *([Row("worst angular speed / no-pop limit around a ramp", f"{pops['ratio']:.2f}",
+               "<= 1", pops["ratio"] <= 1.0,
+               note=f"{pops['joint']} at frame {pops['frame']}: {pops['speed_deg_s']:.0f} "
+                    f"deg/s, limit {pops['limit_deg_s']:.0f}")] if pops else []),
         Row(f"contact building, {SCALING_FRAMES[0]:,} / {SCALING_FRAMES[1]:,} frames",
             f"{fmt_seconds(short)} / {fmt_seconds(long)}", ""),
         Row(f"  ratio {SCALING_FRAMES[1] // 1000}k/{SCALING_FRAMES[0] // 1000}k", f"{ratio:.2f}",

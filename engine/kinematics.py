@@ -2,6 +2,8 @@
 
 The only loop is over the hierarchy's depth levels (a 100-joint skeleton has about a dozen):
 each step places every joint of one level, all frames at once, from its parent's world pose.
+The work is done on component arrays (:mod:`engine.quaternions`): ``(4, J, F)`` rotations and
+``(3, J, F)`` positions, one contiguous row of frames per joint and component.
 """
 from __future__ import annotations
 
@@ -10,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .motion import Motion
-from .quaternions import qmul, qrot
+from .quaternions import cmul, crot
 from .skeleton import Skeleton
 
-__all__ = ["WorldPose", "forward_kinematics", "fk_arrays"]
+__all__ = ["WorldPose", "forward_kinematics", "fk_arrays", "fk_components", "joint_major"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,38 +47,67 @@ def fk_arrays(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarra
         rotations: ``(F, J, 4)`` local rotations (unit quaternions).
         translations: ``(F, J, 3)`` [m] local translations of every joint (offsets included),
             or ``(F, K, 3)`` for the joints in ``skeleton.translated`` only.
+
+    The pose's arrays are views of :func:`fk_components`' component arrays.
     """
     rotations = np.asarray(rotations, dtype=float)
-    F, J = rotations.shape[:2]
     translations = np.asarray(translations, dtype=float)
-    # joint-major (J, F, ...) keeps each joint's frames together; a level's joints are
-    # gathered from the inputs' transposed views, which costs no more than a copy up front
-    local_q = rotations.transpose(1, 0, 2)
-    if translations.shape[1] != J or J == len(skeleton.translated):
-        local_t = np.empty((J, F, 3))
-        local_t[:] = skeleton.offsets[:, None, :]
-        local_t[skeleton.translated] = translations.transpose(1, 0, 2)
+    world_q, world_p, end_p = fk_components(skeleton, joint_major(rotations),
+                                            joint_major(translations), end_sites=end_sites)
+    return WorldPose(world_q.T, world_p.T, end_p.T)
+
+
+def joint_major(values: np.ndarray) -> np.ndarray:
+    """``(n, J, F)`` contiguous component arrays of ``(F, J, n)`` values (quaternions or
+    vectors); their transpose ``.T`` is the other way back, as a view."""
+    return np.ascontiguousarray(np.asarray(values, dtype=float).T)
+
+
+def fk_components(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                  *, end_sites: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`fk_arrays` on component arrays: local ``rotations (4, J, F)`` and ``translations``
+    ``(3, J, F)`` or ``(3, K, F)`` (``skeleton.translated`` only), [m]. Returns the world
+    rotations ``(4, J, F)``, joint positions ``(3, J, F)`` and End Site positions
+    ``(3, E, F)``."""
+    J, F = rotations.shape[1:]
+    slot = np.full(J, -1, dtype=np.intp)
+    if translations.shape[1] == J and J != len(skeleton.translated):
+        slot[:] = np.arange(J)
     else:
-        local_t = translations.transpose(1, 0, 2)
+        slot[skeleton.translated] = np.arange(len(skeleton.translated))
+    offsets = skeleton.offsets.T[:, :, None]                                 # (3, J, 1)
     parents = skeleton.parents
-    world_q = np.empty((J, F, 4))
-    world_p = np.empty((J, F, 3))
-    world_q[0] = local_q[0]
-    world_p[0] = local_t[0]
+    world_q = np.empty((4, J, F))
+    world_p = np.empty((3, J, F))
+    world_q[:, 0] = rotations[:, 0]
+    world_p[:, 0] = translations[:, slot[0]] if slot[0] >= 0 else offsets[:, 0]
     for joints in _levels(skeleton):
         up = parents[joints]
-        parent_q = world_q[up]
-        world_q[joints] = qmul(parent_q, local_q[joints])
-        world_p[joints] = world_p[up] + qrot(parent_q, local_t[joints])
+        parent_q = world_q[:, up]
+        world_q[:, joints] = cmul(parent_q, rotations[:, joints])
+        local_t = _local_translations(joints, slot, offsets, translations)
+        world_p[:, joints] = world_p[:, up] + crot(parent_q, local_t)
     sites = skeleton.end_sites if end_sites else ()
     if sites:
         up = np.array([site.parent for site in sites])
-        offsets = np.array([site.offset for site in sites])[:, None, :]    # (E, 1, 3)
-        end_p = world_p[up] + qrot(world_q[up], offsets)
+        site_offsets = np.array([site.offset for site in sites]).T[:, :, None]  # (3, E, 1)
+        end_p = world_p[:, up] + crot(world_q[:, up], site_offsets)
     else:
-        end_p = np.empty((0, F, 3))
-    return WorldPose(world_q.transpose(1, 0, 2), world_p.transpose(1, 0, 2),
-                     end_p.transpose(1, 0, 2))
+        end_p = np.empty((3, 0, F))
+    return world_q, world_p, end_p
+
+
+def _local_translations(joints: np.ndarray, slot: np.ndarray, offsets: np.ndarray,
+                        translations: np.ndarray) -> np.ndarray:
+    """Local translations of ``joints``: their offsets ``(3, n, 1)`` where none of them is
+    animated, else ``(3, n, F)`` with the animated ones' rows of ``translations``."""
+    moving = slot[joints] >= 0
+    if not moving.any():
+        return offsets[:, joints]
+    out = np.empty((3, len(joints), translations.shape[2]))
+    out[:] = offsets[:, joints]
+    out[:, moving] = translations[:, slot[joints[moving]]]
+    return out
 
 
 def _levels(skeleton: Skeleton) -> list[np.ndarray]:

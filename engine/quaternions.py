@@ -6,14 +6,23 @@ and ``from_euler`` about 200 ms, against 2 to 4 ms for the numpy below; forward 
 BVH reading run these once per joint per call. The test suite checks every function here
 against scipy value by value.
 
-All quaternions are x, y, z, w (scipy's order), shape ``(..., 4)``.
+All quaternions are x, y, z, w (scipy's order), shape ``(..., 4)``. The hot paths (forward
+kinematics, the Motion Converter and Composer) hold them as *component arrays* instead, shape
+``(4, ...)`` with one contiguous row per component (and vectors as ``(3, ...)``): numpy's loops
+then read and write contiguous memory, where the components of interleaved ``(..., 4)``
+arrays are strided views (``cmul`` and friends below: on 2752 x 31 rotations about three
+times faster than :func:`qmul`). :func:`cmul` and :func:`crot` give :func:`qmul`'s and
+:func:`qrot`'s values bit for bit (the same arithmetic in the same order); the others agree
+to rounding. The interleaved functions stay the general ones: on a few quaternions, turning
+them into component arrays and back costs more than it saves.
 """
 from __future__ import annotations
 
 import numpy as np
 
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
-           "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix"]
+           "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix",
+           "components", "interleaved", "cmul", "cconj", "crot", "cquat_between", "ctwist_about"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -242,3 +251,163 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
     out[..., 2, 1] = 2 * (y * z + x * w)
     out[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return out
+
+
+# --------------------------------------------------------------------------- component arrays
+def components(q: np.ndarray) -> np.ndarray:
+    """``(n, ...)`` component rows of ``(..., n)`` quaternions (n = 4) or vectors (n = 3), each
+    row contiguous (a copy).
+
+    The functions below broadcast the rows against each other (``a[k]`` with ``b[k]``), so
+    ``(4, 7)`` and ``(4, 500, 7)`` combine as ``(7, 4)`` and ``(500, 7, 4)`` do; numpy's own
+    broadcasting of whole component arrays would not."""
+    q = np.asarray(q, dtype=float)
+    return np.ascontiguousarray(np.moveaxis(q, -1, 0))
+
+
+def interleaved(c: np.ndarray) -> np.ndarray:
+    """``(..., n)`` C-contiguous quaternions or vectors from component rows ``(n, ...)``."""
+    return np.ascontiguousarray(np.moveaxis(c, 0, -1))
+
+
+def _rows(n: int, shape: tuple, out: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``out`` (a new ``(n, *shape)`` array if None) and a view of it whose rows are arrays,
+    ``(n, 1)`` for a single quaternion or vector, as ``out=`` arguments need."""
+    out = np.empty((n,) + shape) if out is None else out
+    return out, (out if shape else out[:, None])
+
+
+def cmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`qmul` on component arrays: ``a (4, ...) * b (4, ...)``, broadcasting, into ``out``
+    (``(4, ...)``, not overlapping ``a`` or ``b``) when given. One temporary, no strided
+    loops."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    shape = np.broadcast_shapes(np.shape(ax), np.shape(bx))
+    out, rows = _rows(4, shape, out)
+    x, y, z, w = rows
+    t = np.empty(x.shape)
+    np.multiply(aw, bx, out=x)
+    x += np.multiply(ax, bw, out=t)
+    x += np.multiply(ay, bz, out=t)
+    x -= np.multiply(az, by, out=t)
+    np.multiply(aw, by, out=y)
+    y -= np.multiply(ax, bz, out=t)
+    y += np.multiply(ay, bw, out=t)
+    y += np.multiply(az, bx, out=t)
+    np.multiply(aw, bz, out=z)
+    z += np.multiply(ax, by, out=t)
+    z -= np.multiply(ay, bx, out=t)
+    z += np.multiply(az, bw, out=t)
+    np.multiply(aw, bw, out=w)
+    w -= np.multiply(ax, bx, out=t)
+    w -= np.multiply(ay, by, out=t)
+    w -= np.multiply(az, bz, out=t)
+    return out
+
+
+def cconj(q: np.ndarray) -> np.ndarray:
+    """:func:`qconj` on a component array ``(4, ...)``."""
+    out = np.negative(q)
+    out[3] = q[3]
+    return out
+
+
+def crot(q: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`qrot` on component arrays: ``q (4, ...)`` rotating ``v (3, ...)``, broadcasting,
+    into ``out`` (``(3, ...)``, not overlapping the inputs) when given."""
+    ux, uy, uz, w = q
+    vx, vy, vz = v
+    shape = np.broadcast_shapes(np.shape(ux), np.shape(vx))
+    out, rows = _rows(3, shape, out)
+    t = np.empty(rows.shape)
+    tx, ty, tz = t
+    s = np.empty(tx.shape)
+    # t = 2 u x v
+    np.multiply(uy, vz, out=tx)
+    tx -= np.multiply(uz, vy, out=s)
+    tx *= 2.0
+    np.multiply(uz, vx, out=ty)
+    ty -= np.multiply(ux, vz, out=s)
+    ty *= 2.0
+    np.multiply(ux, vy, out=tz)
+    tz -= np.multiply(uy, vx, out=s)
+    tz *= 2.0
+    # v + w t + u x t, summed left to right as (v + w t) + (u x t)
+    for k, (c, (ui, ti), (uj, tj)) in enumerate([(vx, (uy, tz), (uz, ty)),
+                                                (vy, (uz, tx), (ux, tz)),
+                                                (vz, (ux, ty), (uy, tx))]):
+        o = rows[k]
+        np.multiply(w, t[k], out=o)
+        np.add(c, o, out=o)
+        cross = np.multiply(ui, ti)
+        cross -= np.multiply(uj, tj, out=s)
+        o += cross
+    return out
+
+
+def _cdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of component arrays ``(n, ...)``, summed in component order (as numpy's
+    ``sum`` and ``linalg.norm`` sum a short last axis)."""
+    out = a[0] * b[0]
+    for k in range(1, len(a)):
+        out += a[k] * b[k]
+    return out
+
+
+def _einsum_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of component arrays ``(3, ...)`` or ``(4, ...)`` summed as numpy's
+    ``einsum("...i,...i->...")`` sums contiguous rows of three or four (components 0 and 2
+    first, then 1 and 3: its two-lane kernel), so that :func:`cquat_between` gives
+    :func:`quat_between`'s values bit for bit."""
+    out = a[0] * b[0]
+    out += a[2] * b[2]
+    if len(a) == 3:
+        out += a[1] * b[1]
+        return out
+    odd = a[1] * b[1]
+    odd += a[3] * b[3]
+    out += odd
+    return out
+
+
+def cquat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`quat_between` on component arrays: directions ``a``, ``b`` ``(3, ...)`` (any
+    length, broadcasting), rotations ``(4, ...)``."""
+    ax, ay, az = a
+    bx, by, bz = b
+    shape = np.broadcast_shapes(ax.shape, bx.shape)
+    # q = (a x b, |a||b| + a.b), normalised: the half-way rotation without normalising a, b
+    q = np.empty((4,) + shape)
+    np.subtract(ay * bz, az * by, out=q[0])
+    np.subtract(az * bx, ax * bz, out=q[1])
+    np.subtract(ax * by, ay * bx, out=q[2])
+    lengths = np.sqrt(np.broadcast_to(_einsum_dot(a, a) * _einsum_dot(b, b), shape))
+    np.add(lengths, _einsum_dot(a, b), out=q[3])
+    opposite = q[3] < 1e-9 * np.maximum(lengths, 1e-300)
+    if np.any(opposite):
+        aa = np.stack([np.broadcast_to(c, shape)[opposite] for c in a], axis=-1)
+        # any axis normal to a: cross with the coordinate axis least aligned with it
+        pick = np.eye(3)[np.argmin(np.abs(aa), axis=-1)]
+        axis = np.cross(aa, pick)
+        q[:3, opposite] = (axis / np.linalg.norm(axis, axis=-1, keepdims=True)).T
+        q[3, opposite] = 0.0
+    q /= np.sqrt(_einsum_dot(q, q))
+    return q
+
+
+def ctwist_about(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """:func:`twist_about` on component arrays: ``q (4, ...)`` about unit ``axis (3, ...)``."""
+    along = _cdot(q[:3], axis)
+    shape = np.broadcast_shapes(along.shape, q.shape[1:])
+    t = np.empty((4,) + shape)
+    for k in range(3):
+        np.multiply(along, axis[k], out=t[k])
+    t[3] = q[3]
+    norm = np.sqrt(_cdot(t, t))
+    small = norm < 1e-12
+    if np.any(small):
+        t[:, small] = np.array([0.0, 0.0, 0.0, 1.0])[:, None]
+        norm[small] = 1.0
+    t /= norm
+    return t

@@ -9,12 +9,14 @@ made from one another, so an edit recomputes only what it touches::
     binding      <- performer, target, correspondence, bind options      (Anatomic Binding)
     intermediate <- binding, root options                                (Motion Converter)
     composed     <- intermediate                                         (Motion Composer)
-    motion       <- composed, displacement map                           (the final motion)
+    edited       <- composed, animator layers                            (what IK starts from)
+    motion       <- edited, solved layer                                 (the final motion)
 
 A constraint edit therefore binds and converts nothing; a mapping edit re-binds. What was
 computed is counted in ``scene.derived.computed`` (a test reads it). IK never runs implicitly:
 :meth:`Scene.solve` runs the two passes of section 3.3 and returns a :class:`Solution` whose
-``scene`` carries the solved constraints and their correction as displacement keys.
+``scene`` carries the solved constraints and their correction as displacement keys: the solved
+layer, on top of the composed motion with the animator's layers (which a solve keeps).
 
 The command line (``retarget``, ``export``, ``batch``), project files and the window all go
 through a scene, so a result never depends on which of them asked for it.
@@ -38,9 +40,10 @@ from .conversion.converter import convert
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
-                                  horizontal_drift)
+                                  horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction import preview as _preview
+from .correction.quality import quality
 from .errors import MotionComposerError
 from .motion import Motion
 from .project import (Project, Source, check_project, correction_keys, open_project,
@@ -107,9 +110,11 @@ class Solution:
     """What :meth:`Scene.solve` gives.
 
     Attributes:
-        scene: the scene with the constraints solved and their correction as keys.
+        scene: the scene with the constraints solved and their correction as keys (the
+            solved layer).
         constraints: every constraint enforced.
-        correction: the dense IK result (``None`` without enabled constraints).
+        correction: the dense IK result (``None`` without enabled constraints), before its
+            keys were fitted.
         report: JSON-ready figures (residuals, contact drift, timings) and ``"warnings"``:
             lines on what the settings asked for but could not do (feet for automatic
             contacts, :meth:`Scene.contact_warnings`).
@@ -122,8 +127,9 @@ class Solution:
 
     @property
     def motion(self) -> Motion:
-        """The dense corrected motion (the IK result itself, before key reduction)."""
-        return self.correction.motion if self.correction is not None else self.scene.composed
+        """The motion delivered: the solved scene's (the keys, as a saved project evaluates
+        to), not the dense IK result."""
+        return self.scene.motion
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,6 +201,10 @@ class Scene:
             curves = p.displacement.restricted_to(names)
             if curves is not p.displacement:
                 changes["displacement"] = curves
+            layers = tuple(layer.replace(displacement=layer.displacement.restricted_to(names))
+                           for layer in p.layers)
+            if any(a.displacement is not b.displacement for a, b in zip(layers, p.layers)):
+                changes["layers"] = layers
         if self.performer is not None:
             last = self.performer.num_frames - 1
             kept = tuple(c for c in changes.get("constraints", p.constraints)
@@ -263,8 +273,13 @@ class Scene:
             return self.derived.get("composed", key, lambda: compose(
                 binding, pose, self.performer.frame_time, name=name))
         composed = self._raw("composed")
-        return self.derived.get("motion", (key, p.displacement),
-                                lambda: p.displacement.apply(composed))
+        layers = tuple((layer.displacement, layer.weight, layer.mute) for layer in p.layers)
+        if stage == "edited":
+            return self.derived.get("edited", (key, layers),
+                                    lambda: _apply_layers(p.layers, composed))
+        edited = self._raw("edited")
+        return self.derived.get("motion", (key, layers, p.displacement),
+                                lambda: p.displacement.apply(edited))
 
     def _value(self, stage: str):
         value = self._raw(stage)
@@ -287,8 +302,15 @@ class Scene:
         return self._value("composed")
 
     @property
+    def edited(self) -> Motion | None:
+        """The direct conversion with the animator's layers applied: what a solve starts
+        from (the IK's attraction posture), or None."""
+        return self._value("edited")
+
+    @property
     def motion(self) -> Motion | None:
-        """The final motion: the direct conversion plus the displacement map (no IK runs)."""
+        """The final motion: the direct conversion, the animator's layers, then the solved
+        layer (no IK runs)."""
         return self._value("motion")
 
     @property
@@ -322,22 +344,38 @@ class Scene:
     def automatic_constraints(self) -> list[Constraint]:
         """The constraints the project's settings generate: foot contacts found in the
         performer (``auto_contacts``, with ``contact_options``) and keep-above-floor planes on
-        the target's feet (``floor``). Empty without a direct conversion."""
+        the target's feet (``floor``), each foot joint at or above its planted height over the
+        floor (:meth:`ground`). Empty without a direct conversion."""
         composed = self.composed
         if composed is None:
             return []
         p = self.project
         out: list[Constraint] = []
+        ground = self.ground()
         if p.auto_contacts:
             out += contact_constraints(self.contacts(), self.performer, composed,
                                        p.correspondence.pairs, p.contact_options,
-                                       floor=p.floor)
+                                       ground=ground)
         if p.floor is not None:
             for ankle, toe in find_feet(self.target.skeleton):
                 for joint in (ankle, toe):
                     if joint:
-                        out.append(floor_constraint(joint, composed.num_frames, p.floor))
+                        out.append(floor_constraint(joint, composed.num_frames,
+                                                    p.floor + ground.heights[joint]))
         return out
+
+    def ground(self):
+        """Where the target's feet stand (:class:`~engine.correction.contacts.Ground`): the
+        target's feet in its reference pose on the floor under them (the lowest mesh vertex
+        of the feet where the character has a mesh), moved to ``floor`` where it is set."""
+        by_performer = {p: t for t, p in self.correspondence.pairs.items()}
+        mapped = [(by_performer[a], by_performer.get(t)) for a, t in
+                  find_feet(self.performer.skeleton) if a in by_performer]
+        feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
+        reference = self.project.bind_options.target_reference
+        sole = _sole(self.character, self.target, feet, reference)
+        return target_ground(self.target, feet, reference=reference, floor=self.project.floor,
+                             sole=sole)
 
     def contact_warnings(self) -> list[str]:
         """Why automatic contacts (``auto_contacts``) cannot pin some or all feet, one line
@@ -371,8 +409,10 @@ class Scene:
 
         ``constraints``: the list to enforce (default: the scene's own). With
         ``regenerate``, the automatic constraints are dropped and made again from the
-        project's settings (:meth:`automatic_constraints`) beside the user's. The solved
-        layer replaces the displacement map. ``ik_options`` overrides the project's. Raises
+        project's settings (:meth:`automatic_constraints`) beside the user's. The IK starts
+        from :attr:`edited` (the composed motion with the animator's layers) and its
+        correction, as fitted keys, replaces the solved layer only: the animator's layers are
+        kept bit for bit. ``ik_options`` overrides the project's. Raises
         :class:`~engine.errors.MotionComposerError` (``cancel()`` returning True stops it).
         """
         timings = {}
@@ -393,15 +433,30 @@ class Scene:
         if any(c.enabled for c in chosen):
             t0 = time.perf_counter()
             options = ik_options if ik_options is not None else self.project.ik_options
-            correction = enforce(composed, chosen, options=options,
+            correction = enforce(self.edited, chosen, options=options,
                                  progress=progress, cancel=cancel, warm_start=warm_start)
             timings["ik_s"] = time.perf_counter() - t0
             timings.update({f"ik_{k.replace(' ', '_')}_s": v
                             for k, v in correction.seconds.items()})
         scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
+        # measured on what is delivered: the keys on top of the animator's layers
+        report["quality"] = quality(self.performer, composed, scene.motion, chosen,
+                                    correction.residual if correction is not None else None,
+                                    self.binding)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
+
+    def quality(self) -> dict | None:
+        """The quality figures (:func:`~engine.correction.quality.quality`) of the motion as
+        it is now, without solving: between solves, what an edit (a key on an animator layer,
+        a moved constraint) breaks in the contacts and the turning speeds. No residuals (no
+        IK ran). None without a final motion."""
+        motion = self.motion
+        if motion is None:
+            return None
+        return quality(self.performer, self.composed, motion, list(self.constraints), None,
+                       self.binding)
 
     def preview(self, constraints: list, *, base_constraints: list | None = None,
                 base_motion: Motion | None = None, whole: bool = True) -> tuple[Motion, str]:
@@ -412,7 +467,7 @@ class Scene:
         (mode ``"full"``); otherwise only the frames the change from ``base_constraints`` can
         reach are solved and spliced into ``base_motion`` (mode ``"window"``, see
         :mod:`engine.correction.preview`)."""
-        composed = self.composed
+        composed = self.edited
         if composed is None:
             raise MotionComposerError("nothing to preview: the scene has no direct conversion")
         options = self.project.ik_options
@@ -430,7 +485,8 @@ _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))
 
 
 class ProjectMotion(NamedTuple):
-    """``composed``: the direct conversion; ``motion``: with the displacement map applied."""
+    """``composed``: the direct conversion; ``motion``: with the displacement layers
+    applied."""
 
     composed: Motion
     motion: Motion
@@ -487,6 +543,37 @@ def remap(correspondence: Correspondence, target, performer) -> Correspondence:
     return Correspondence(ordered, notes)
 
 
+def _apply_layers(layers, motion: Motion) -> Motion:
+    """``motion`` with the animator ``layers`` applied in order (muted ones skipped)."""
+    for layer in layers:
+        motion = layer.apply(motion)
+    return motion
+
+
+def _sole(character, target: Motion, feet, reference) -> float | None:
+    """[m] The lowest vertex of ``character``'s feet (vertices bound mostly to a foot joint or
+    a joint below it) in ``target``'s reference pose, or None (no mesh, or none on the
+    feet)."""
+    if character is None or not character.meshes or not feet or \
+            character.skeleton.names != target.skeleton.names:
+        return None
+    from .conversion.binding import reference_pose
+    from .skinning import skin_character
+    sk = target.skeleton
+    joints = {sk.index[n] for foot in feet for n in foot if n}
+    foot = np.array([bool(set(sk.ancestors(j)) & joints) or j in joints
+                     for j in range(sk.num_joints)])
+    rot, tra, _ = reference_pose(target, reference)
+    pose = Motion._trusted(sk, rot[None], tra[None], target.frame_time, target.name)
+    lowest = []
+    for mesh, vertices in zip(character.meshes, skin_character(character, pose)):
+        main = mesh.joints[np.arange(len(mesh.joints)), np.argmax(mesh.weights, axis=1)]
+        on_feet = foot[main]
+        if on_feet.any():
+            lowest.append(float(vertices[0, on_feet, 1].min()))
+    return min(lowest) if lowest else None
+
+
 def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:
     report = {
         "frames": composed.num_frames,
@@ -497,12 +584,13 @@ def _report(composed: Motion, correction, constraints: list, mapped: int, timing
         "timings": timings,
     }
     motion = correction.motion if correction is not None else composed
-    pins = [c for c in constraints if c.auto and c.meta.get("source") == "contact"
-            and c.kind_object.fixed_point]
+    # the foot parts' pins, the longest first
+    pins = sorted((c for c in constraints if c.auto and c.meta.get("source") == "contact"
+                   and "part" in c.meta), key=lambda c: (c.start - c.end, c.start))
     if pins:
         for c in pins:
             report["contacts"].append({
-                "joint": c.joint, "start": c.start, "end": c.end,
+                "joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
                 "drift_direct_m": horizontal_drift(composed, c.joint, c.start, c.end),
                 "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, c.end)})
         drift_d = [x["drift_direct_m"] for x in report["contacts"]]

@@ -57,7 +57,7 @@ def test_a_dense_ik_result_becomes_few_keys_and_applies_back():
                    380, 420, 520, 570)
     result = enforce(composed, [c])
     dmap = result.displacement_map(rotation_tolerance=np.radians(0.01),
-                                   translation_tolerance=1e-5)
+                                   position_tolerance=1e-5)
     keys = sum(len(curve) for curve in dmap.curves.values())
     dense = np.count_nonzero(result.rotvecs)                # channel-frames the IK changed
     # the corrections follow a walking arm: about half the frames stay keys at 0.01 degree

@@ -246,3 +246,18 @@ def test_the_largest_weight_is_accepted():
     c = Constraint("LeftFoot", "position", {"point": [0.0, 0.1, 0.0]}, 0, 5, 10, 15,
                    weight=1e6)
     assert c.weight == 1e6
+
+
+def test_a_zero_length_range_inside_the_clip_is_refused_naming_the_range():
+    """``[20, 20, 20, 20]``: one frame held with no ramps would jump there and back (issue 14
+    point 2); at the clip's first or last frame there is nothing to jump from."""
+    from motion_composer.engine.correction.enforcement import enforce
+    walk, tpose = read_motion(WALK), read_motion(TPOSE)
+    scene = scene_of(walk, tpose, automap(tpose.skeleton, walk.skeleton))
+    composed = scene.composed
+    point = {"point": [0.0, 0.0, 0.0]}
+    with pytest.raises(ConstraintError, match=r"\[20, 20, 20, 20\].*ramps") as caught:
+        enforce(composed, [Constraint("Hips", "position", point, 20, 20, 20, 20)])
+    assert caught.value.field == "range"
+    last = composed.num_frames - 1
+    enforce(composed, [Constraint("Hips", "position", point, last, last, last, last)])

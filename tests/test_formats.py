@@ -2,8 +2,9 @@
 
 Every real file is sniffed (the bundled clips and, where present, every BVH and GLB of
 ../shared/data), renamed copies read the same as the originals (a GLB as ``.vrm``, a BVH as
-``.txt`` or with no suffix), FBX is refused as not supported yet, anything else (garbage, an
-empty file, a folder, a device) with a typed error naming the file. Writing refuses a suffix no
+``.txt`` or with no suffix), FBX is recognised by content and a corrupt one refused by the FBX
+reader, anything else (garbage, an empty file, a folder, a device) with a typed error naming the
+file. Writing refuses a suffix no
 format writes, in the engine and on the command line before any work. A static check keeps
 every suffix test inside engine/formats.
 """
@@ -22,9 +23,10 @@ import pytest
 from motion_composer.app.cli import main
 from conftest import BUNDLED_BVH, REPO, SHARED_BVH, clip_path, shared_path
 from motion_composer.engine import formats
-from motion_composer.engine.errors import (BVHError, FileFormatError, GLTFError, MotionComposerError,
-                           UnknownFormatError, UnsupportedFormatError)
-from motion_composer.engine.formats import (BVH, FORMATS, GLB, GLTF, HEAD_BYTES, open_filters, output_format,
+from motion_composer.engine.errors import (BVHError, FBXError, FileFormatError, GLTFError,
+                                           MotionComposerError, UnknownFormatError,
+                                           UnsupportedFormatError)
+from motion_composer.engine.formats import (BVH, FBX, FORMATS, GLB, GLTF, HEAD_BYTES, open_filters, output_format,
                             output_suffixes, read_character, read_motion, read_performer,
                             save_filters, sniff, with_output_suffix, write_motion)
 from motion_composer.engine.formats.bvh import read_bvh
@@ -38,6 +40,10 @@ SHARED_GLB = ["target_fox.glb", "target_mixamo_ely.glb", "target_mixamo_mannequi
 #: FBX files of ../shared/data/fbx: binary (several versions) and ASCII
 SHARED_FBX = ["fbx/mixamo.fbx", "fbx/blender_279_sausage_7400_binary.fbx",
               "fbx/maya_character_6100_ascii.fbx", "fbx/nurbs_ascii_7200.fbx"]
+#: the problem each of them raises when read (``None``: it reads)
+FBX_PROBLEMS = {"fbx/mixamo.fbx": None, "fbx/blender_279_sausage_7400_binary.fbx": None,
+                "fbx/maya_character_6100_ascii.fbx": None,
+                "fbx/nurbs_ascii_7200.fbx": "not a character"}
 ROBOT = "target_robot_expressive.glb"
 
 
@@ -160,24 +166,31 @@ FBX_BINARY_HEADER = b"Kaydara FBX Binary  \x00\x1a\x00\xe8\x1c\x00\x00"
 FBX_ASCII_HEADER = b"; FBX 7.4.0 project file\n; ----\n\nFBXHeaderExtension:  {\n"
 
 
-@pytest.mark.parametrize("head", [FBX_BINARY_HEADER, FBX_ASCII_HEADER,
-                                  b"FBXHeaderExtension:  {\n\tFBXVersion: 6100\n}\n"],
-                         ids=["binary", "ascii", "ascii-without-comment"])
-def test_fbx_is_not_supported_yet(tmp_path, head):
+@pytest.mark.parametrize("head, problem", [
+    (FBX_BINARY_HEADER, "byte"), (FBX_ASCII_HEADER, "not UTF-8"),
+    (b"FBXHeaderExtension:  {\n\tFBXVersion: 6100\n}\n", "not UTF-8")],
+    ids=["binary", "ascii", "ascii-without-comment"])
+def test_a_corrupt_fbx_file_is_sniffed_as_fbx_and_refused_by_its_reader(tmp_path, head,
+                                                                        problem):
     path = tmp_path / "rig.bvh"                       # the name does not matter
     path.write_bytes(head + bytes(range(256)) * 4)
-    for read in (sniff, read_motion, read_character, read_performer):
-        with pytest.raises(UnsupportedFormatError) as info:
+    assert sniff(path) is FBX
+    for read in (read_motion, read_character, read_performer):
+        with pytest.raises(FBXError) as info:
             read(path)
-        check_error(info.value, path, "FBX is not supported yet")
+        check_error(info.value, path, problem)
 
 
 @pytest.mark.parametrize("name", SHARED_FBX)
-def test_real_fbx_files_are_not_supported_yet(name):
+def test_real_fbx_files_are_sniffed_as_fbx(name):
     path = shared_path(name)
-    with pytest.raises(UnsupportedFormatError) as info:
+    assert sniff(path) is FBX
+    if FBX_PROBLEMS[name] is None:
+        assert read_character(path) is not None and read_motion(path).num_frames == 1
+        return
+    with pytest.raises(FBXError) as info:
         read_motion(path)
-    check_error(info.value, path, "FBX is not supported yet")
+    check_error(info.value, path, FBX_PROBLEMS[name])
 
 
 def test_binary_garbage_names_the_file_and_the_formats(tmp_path):
@@ -348,14 +361,15 @@ def test_a_project_target_reads_by_content(tmp_path):
     assert target.skeleton.names == read_gltf(avatar).skeleton.names
 
 
-def test_a_project_with_an_fbx_target_says_so(tmp_path):
+def test_a_project_with_a_corrupt_fbx_target_says_so(tmp_path):
     rig = tmp_path / "rig.fbx"
     rig.write_bytes(FBX_BINARY_HEADER + bytes(64))
     project = Project(performer=Source(str(WALK)), target=Source(str(rig)))
     with pytest.raises(ProjectError) as info:
         read_sources(project, path="p.mcp")
     assert info.value.field == "target.path"
-    assert "FBX is not supported yet" in str(info.value) and "rig.fbx" in str(info.value)
+    assert "the target character cannot be read" in str(info.value)
+    assert "rig.fbx" in str(info.value) and "not a character" in str(info.value)
 
 
 # --------------------------------------------------------------------------- command line
@@ -409,10 +423,10 @@ def test_cli_info_reads_by_content(capsys, tmp_path):
     assert json.loads(out)["character"] == "robot" and json.loads(out)["meshes"]
 
 
-def test_cli_info_on_fbx_says_it_is_not_supported(capsys, tmp_path):
+def test_cli_info_on_a_truncated_fbx_says_so(capsys, tmp_path):
     rig = tmp_path / "rig.fbx"
     rig.write_bytes(FBX_ASCII_HEADER)
-    one_line_exit_2(*run(capsys, "info", rig), "rig.fbx", "FBX is not supported yet")
+    one_line_exit_2(*run(capsys, "info", rig), "rig.fbx", "truncated")
 
 
 def test_cli_retarget_refuses_a_gltf_performer(capsys, tmp_path):

@@ -9,6 +9,7 @@ offscreen alike.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 
@@ -30,7 +31,7 @@ from motion_composer.app.gui.commands import push_constraints  # noqa: E402
 from motion_composer.app.gui.curve_editor import CurveEditor  # noqa: E402
 from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
 from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
-from motion_composer.engine.correction.displacement import ROOT  # noqa: E402
+from motion_composer.engine.correction.displacement import ROOT, hermite_basis  # noqa: E402
 
 from gui_support import WAIT_MS, demo_document  # noqa: E402
 
@@ -555,3 +556,168 @@ def test_screenshot(editor, doc, qtbot, tmp_path):
     editor.set_selection([("rx", i), ("rx", i + 1)])
     qtbot.wait(30)
     assert editor.grab().save(str(tmp_path / "curve_editor.png"))
+
+
+# ---------------------------------------------------------------------------- tangents, layers
+def _smooth_key(curve, lo=272, hi=328):
+    """An interior key inside the IK range with smooth segments on both sides."""
+    i = _roomy_key(curve, lo, hi)
+    assert curve.interpolation[i - 1] == curve.interpolation[i] == "smooth"
+    return i
+
+
+def _hermite(curve, k, t):
+    """The Hermite cubic of keys ``k`` and ``k + 1`` of ``curve`` at frames ``t``."""
+    f0, f1 = curve.frames[k], curve.frames[k + 1]
+    m = curve.tangent_slopes()
+    h = f1 - f0
+    b0, b1, b2, b3 = hermite_basis((np.asarray(t) - f0) / h)
+    return b0 * curve.values[k] + b1 * h * m[k, 1] + b2 * curve.values[k + 1] + \
+        b3 * h * m[k + 1, 0]
+
+
+def test_dragging_a_tangent_handle_sets_the_slope_as_the_hermite_maths_says(editor, doc,
+                                                                            qtbot):
+    curve = doc.scene.displacement.curves[(JOINT, "rx")]
+    i = _smooth_key(curve)
+    editor.set_selection([("rx", i)])
+    _settle(qtbot, editor)
+    vp_start = editor.plot_widget.mapFromScene(editor.handle_scene_pos("rx", i, 1))
+    vp_end = vp_start + QtCore.QPoint(0, -40)
+    count = doc.undo_stack.count()
+    seen = {}
+
+    def during():
+        seen["count"] = doc.undo_stack.count()
+        seen["dragging"] = editor.dragging
+
+    _drag(qtbot, editor, vp_start, vp_end, during=during)
+    assert seen == {"count": count, "dragging": True}
+    assert doc.undo_stack.count() == count + 1
+    assert doc.undo_stack.text(count) == f"Set the tangent of 1 key of {JOINT}.rx"
+    new = doc.scene.displacement.curves[(JOINT, "rx")]
+    # the slope goes through where the handle was let go, on both sides (aligned)
+    at = _to_view(editor, vp_end)
+    slope = (at.y() / DEG - curve.values[i]) / (at.x() - curve.frames[i])
+    assert new.tangents[i] == "aligned"
+    np.testing.assert_allclose(new.tangent_slopes()[i], [slope, slope], rtol=1e-9)
+    assert slope > curve.tangent_slopes()[i, 1]              # dragged up: steeper
+    # between the keys either side the curve is the Hermite cubic with the new slope;
+    # keys and the other segments are as they were
+    for k in (i - 1, i):
+        t = np.linspace(new.frames[k], new.frames[k + 1], 9)
+        np.testing.assert_allclose(new.evaluate(t), _hermite(new, k, t), atol=1e-12)
+    mid = (new.frames[i] + new.frames[i + 1]) / 2
+    assert new.evaluate([mid])[0] > curve.evaluate([mid])[0]
+    np.testing.assert_array_equal(new.values, curve.values)
+    far = np.arange(0, int(new.frames[i - 1]))
+    np.testing.assert_array_equal(new.evaluate(far), curve.evaluate(far))
+    doc.undo_stack.undo()
+    assert doc.scene.displacement.curves[(JOINT, "rx")] is curve
+
+
+def test_a_broken_tangent_moves_one_side_only(editor, doc, qtbot):
+    curve = doc.scene.displacement.curves[(JOINT, "ry")]
+    i = _smooth_key(curve)
+    editor.set_selection([("ry", i)])
+    editor.tangent_combo.setCurrentIndex(editor.tangent_combo.findData("broken"))
+    editor.tangent_combo.activated.emit(editor.tangent_combo.currentIndex())
+    broken = doc.scene.displacement.curves[(JOINT, "ry")]
+    assert broken.tangents[i] == "broken"
+    np.testing.assert_array_equal(broken.tangent_slopes()[i], curve.tangent_slopes()[i])
+    _settle(qtbot, editor)
+    start = editor.plot_widget.mapFromScene(editor.handle_scene_pos("ry", i, 0))
+    _drag(qtbot, editor, start, start + QtCore.QPoint(0, 35))
+    new = doc.scene.displacement.curves[(JOINT, "ry")]
+    assert new.tangents[i] == "broken"
+    assert new.tangent_slopes()[i, 1] == broken.tangent_slopes()[i, 1]     # out side kept
+    assert new.tangent_slopes()[i, 0] != broken.tangent_slopes()[i, 0]
+    after = np.linspace(new.frames[i], new.frames[i + 1], 7)
+    np.testing.assert_array_equal(new.evaluate(after), broken.evaluate(after))
+    # flat and linear tangents, chosen for the key
+    editor.set_tangent("flat")
+    np.testing.assert_array_equal(doc.scene.displacement.curves[(JOINT, "ry")]
+                                  .tangent_slopes()[i], [0.0, 0.0])
+
+
+def test_the_selected_layer_alone_is_edited_and_weight_mute_are_commands(editor, doc, qtbot):
+    solved = doc.scene.displacement
+    assert [x.name for x in doc.scene.layers] == ["edit"]
+    assert [editor.layer_combo.itemText(k) for k in range(editor.layer_combo.count())] == \
+        ["solved (IK)", "edit"]
+    editor.layer_combo.setCurrentIndex(1)
+    editor.layer_combo.activated.emit(1)
+    assert editor.layer == 1 and all(len(g.frames) == 0 for g in editor.key_graphs.values())
+    assert editor.weight_box.isEnabled() and editor.mute_check.isEnabled()
+    editor.add_keys(300, ["rx"])
+    assert doc.scene.displacement is solved                  # the solved layer untouched
+    keyed = doc.scene.layers[0].displacement.curves[(JOINT, "rx")]
+    assert list(keyed.frames) == [300.0]
+    # an animator key: the solved keys are drawn thin, not editable
+    editor.set_selection([("rx", 0)])
+    editor._set_single_key(value=10.0)
+    assert doc.scene.layers[0].displacement.curves[(JOINT, "rx")].values[0] == \
+        pytest.approx(10.0 / DEG)
+    moved = doc.motion.rotations.copy()
+    count = doc.undo_stack.count()
+    editor.weight_box.setValue(0.5)
+    assert doc.undo_stack.count() == count + 1 and doc.scene.layers[0].weight == 0.5
+    editor.mute_check.setChecked(True)
+    assert doc.undo_stack.count() == count + 2 and doc.scene.layers[0].mute
+    np.testing.assert_array_equal(doc.motion.rotations, doc.scene.replace(
+        layers=(doc.scene.layers[0].replace(mute=False, weight=0.0),)).motion.rotations)
+    doc.undo_stack.undo()
+    doc.undo_stack.undo()
+    np.testing.assert_array_equal(doc.motion.rotations, moved)
+    assert not editor.mute_check.isChecked() and editor.weight_box.value() == 1.0
+    # a new layer is one command, and the editor edits it
+    editor.new_layer_button.click()
+    assert [x.name for x in doc.scene.layers] == ["edit", "edit 2"] and editor.layer == 2
+
+
+def test_f_frames_the_selected_keys_and_a_frames_all(editor, doc, qtbot):
+    curve = doc.scene.displacement.curves[(JOINT, "rz")]
+    i = _roomy_key(curve)
+    editor.set_selection([("rz", i), ("rz", i + 1)])
+    editor.plot_widget.setFocus()
+    qtbot.keyClick(editor.plot_widget, Qt.Key.Key_F)
+    (x0, x1), (y0, y1) = editor.view_box.viewRange()
+    assert x0 < curve.frames[i] < curve.frames[i + 1] < x1 and x1 - x0 < 30
+    for k in (i, i + 1):
+        assert y0 < curve.values[k] * DEG < y1
+    qtbot.keyClick(editor.plot_widget, Qt.Key.Key_A)
+    (x0, x1), _ = editor.view_box.viewRange()
+    assert x0 < 0 and x1 > doc.scene.num_frames - 1
+
+
+def test_constraint_names_elide_instead_of_overlapping(editor, doc, qtbot):
+    base = doc.scene.constraints[0]
+    crowd = [base.with_range(270 + 3 * k, 272 + 3 * k, 300 + k, 320 + k) for k in range(5)]
+    crowd = [dataclasses.replace(c, name=f"a rather long constraint name number {k}")
+             for k, c in enumerate(crowd)]
+    doc.edit("Crowd", constraints=tuple(crowd))
+    editor.view_box.setRange(xRange=(262, 338), padding=0)
+    _settle(qtbot, editor)
+    texts = editor.range_label_texts()
+    names = [c.name for c in crowd]
+    # every name drawn is the name or its start cut short; crowded, some are cut
+    assert len(texts) == 5
+    for text, name in zip(texts, names):
+        assert text == name or (text.endswith("\u2026") and name.startswith(text[:-1]))
+    assert any(t != n for t, n in zip(texts, names))
+    # names on one line of text never overlap
+    lines = {}
+    for label, *_ in editor.range_labels:
+        if label.textItem.toPlainText():
+            box = label.sceneBoundingRect()
+            lines.setdefault(round(box.top()), []).append((box.left(), box.right()))
+    assert len(lines) > 1                                    # they use more than one line
+    for boxes in lines.values():
+        boxes.sort()
+        for (l0, r0), (l1, _r1) in zip(boxes, boxes[1:]):
+            assert r0 <= l1 + 1
+    # alone, a name has room and shows whole
+    doc.edit("One", constraints=(crowd[0],))
+    editor.view_box.setRange(xRange=(262, 338), padding=0)
+    _settle(qtbot, editor)
+    assert editor.range_label_texts() == ["a rather long constraint name number 0"]

@@ -19,7 +19,7 @@ from motion_composer.engine.conversion import BindOptions, RootOptions
 from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
 from motion_composer.engine.correction.constraints import KINDS, Constraint
 from motion_composer.engine.correction.contacts import ContactOptions
-from motion_composer.engine.correction.displacement import ROOT, Curve, DisplacementMap
+from motion_composer.engine.correction.displacement import ROOT, Curve, DisplacementMap, Layer
 from motion_composer.engine.correction.ik import IKOptions
 from motion_composer.engine.formats import read_motion
 from motion_composer.engine.project import (Project, Source, ViewerState, embed_sources, project_to_json,
@@ -60,7 +60,8 @@ def every_kind() -> tuple:
 def full_project() -> Project:
     """Every field of a project away from its default."""
     return Project(
-        performer=Source(str(WALK), units="cmu", up_axis="+Y", position_mode="absolute"),
+        performer=Source(str(WALK), units="cmu", up_axis="+Y", position_mode="absolute",
+                         take="Take 001"),
         target=Source(str(TPOSE), scale=0.0254 / 0.45, up_axis="+Y",
                       position_mode={"Hips": "absolute"}),
         correspondence=Correspondence(MAX_TO_HOLDEN, {"Hips": "by hand", "Head": BY_HAND,
@@ -82,6 +83,11 @@ def full_project() -> Project:
                                          ("smooth", "constant", "linear")),
             ("Head", "ry"): Curve([0.0, 400.0], [0.05, -0.05], ("linear", "smooth")),
             (ROOT, "ty"): Curve([300.0, 320.0, 340.0], [0.0, 0.02, 0.0], ("smooth",) * 3)}),
+        layers=(Layer("arm raise", DisplacementMap({
+            ("LeftArm", "rz"): Curve([380.0, 440.0, 500.0], [0.0, 0.3, 0.0], ("smooth",) * 3,
+                                     ("flat", "aligned", "broken"),
+                                     [(0.0, 0.0), (0.004, 0.004), (-0.01, 0.02)])}),
+                      weight=0.75, mute=True), Layer("second")),
         viewer=ViewerState(current_frame=417, play_range=(100, 900),
                            camera={"center": [0.1, 0.9, -0.2], "distance": 3.75,
                                    "azimuth": -31.5, "elevation": 12.25},

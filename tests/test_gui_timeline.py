@@ -1,7 +1,8 @@
 """The constraint timeline, the inspector and the live re-solve, on the bundled walk.
 
-The document is the bundled CMU walk on the bundled T-pose skeleton with the automatic foot
-contacts of ``engine.correction.contacts`` (solved) and a manual hand constraint, all set through
+The document is the bundled CMU walk on the bundled T-pose skeleton with its ankle-pin foot
+contacts (as ``engine.correction.contacts`` built them before the foot model, recorded in
+``data/contact_constraints_before.json``; solved) and a manual hand constraint, all set through
 ``push_constraints``. Handles are dragged with real mouse events on the plot's viewport
 (frames mapped to pixels through the ViewBox): the handle moves and clamps, the motion is
 previewed during the drag with no undo step, release pushes one named command, undo restores,
@@ -10,6 +11,9 @@ add, delete, duplicate; the inspector's edits are undoable. pyqtgraph 2D only: t
 under Xvfb and offscreen alike.
 """
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +30,6 @@ from motion_composer.app.gui.timeline import FIELDS, ConstraintTimeline, moved_r
 from motion_composer.engine.correction.preview import (affected_frames, changed_window,  # noqa: E402
                                        overlapping, retimed, window_problem)
 from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
-from motion_composer.engine.correction.contacts import (contact_constraints, detect_contacts,  # noqa: E402
-                                        find_feet)
 from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
 from motion_composer.engine.kinematics import forward_kinematics  # noqa: E402
 
@@ -40,11 +42,12 @@ HAND = "reach LeftHand"
 
 # ====================================================================== fixtures
 def _contacts(doc) -> list:
-    mapped = set(doc.scene.correspondence.pairs.values())
-    feet = [(a, t if t in mapped else None) for a, t in find_feet(doc.scene.performer.skeleton)
-            if a in mapped]
-    return contact_constraints(detect_contacts(doc.scene.performer, feet), doc.scene.performer,
-                               doc.scene.composed, doc.scene.correspondence.pairs)
+    """The walk's automatic contacts of the ankle-pin model: a realistic, fixed list of ranges
+    (the timeline's tests name its rows and ranges)."""
+    recorded = json.loads((Path(__file__).parent / "data" / "contact_constraints_before.json")
+                          .read_text(encoding="utf-8"))["walk_on_holden"]["constraints"]
+    return [Constraint.from_dict({**c, "auto": True, "meta": {"source": "contact"}})
+            for c in recorded]
 
 
 def _hand(doc) -> Constraint:

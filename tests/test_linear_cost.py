@@ -3,7 +3,8 @@ the same results as before.
 
 ``data/contact_constraints_before.json`` holds the contacts and contact constraints that the
 code before the change (one percentile per contact, commit 20ec277) built for three real
-clips, written with full float precision; today's must be equal to them.
+clips, written with full float precision; today's contacts must be equal to them (the
+constraints built on them are now the foot model's).
 """
 from __future__ import annotations
 
@@ -21,24 +22,16 @@ BEFORE = json.loads((Path(__file__).parent / "data" / "contact_constraints_befor
                     .read_text(encoding="utf-8"))
 
 
-def _goal(constraint) -> dict:
-    return {k: v if isinstance(v, str) else np.asarray(v, dtype=float).tolist()
-            for k, v in constraint.goal.items()}
-
-
 @pytest.mark.parametrize("case", [walk_on_holden, walk_on_bandai, run_on_bandai],
                          ids=["walk-bundled", "walk-bandai", "run-bandai"])
-def test_contact_constraints_are_those_built_before(case):
+def test_contacts_are_those_found_before(case):
+    """The foot contacts are those found before; the constraints built on them are the foot
+    model's (issue 14 point 1: heel and toe held, not an ankle pin), so they are no longer
+    those recorded (tests/test_foot_contacts.py checks what they do)."""
     performer, target, corr, composed = case()
     expected = BEFORE[case.__name__]
     contacts = detect_contacts(performer)
     assert [[c.joint, c.toe, c.start, c.end] for c in contacts] == expected["contacts"]
-    cons = contact_constraints(contacts, performer, composed, corr.pairs)
-    assert len(cons) == len(expected["constraints"])
-    for c, e in zip(cons, expected["constraints"]):
-        assert (c.name, c.joint, c.kind, list(c.range)) == \
-            (e["name"], e["joint"], e["kind"], e["range"])
-        assert _goal(c) == e["goal"], c.name          # bit for bit
 
 
 def test_ik_in_small_chunks_equals_one_batch():

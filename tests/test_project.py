@@ -345,13 +345,24 @@ def saved(tmp_path):
     return path
 
 
-def test_a_truncated_file(saved):
+@pytest.mark.parametrize("share", [0.5, 0.33, 0.9])
+def test_a_truncated_file(saved, share):
     text = saved.read_text()
-    saved.write_text(text[:len(text) // 2])
+    saved.write_text(text[:int(len(text) * share)])
     with pytest.raises(ProjectError) as exc:
         load_project(saved)
     assert exc.value.path == str(saved) and "truncated" in str(exc.value)
     assert "line" in str(exc.value)
+
+
+def test_a_file_cut_anywhere_says_truncated(saved):
+    """Cut inside a number, a key, a string or between values: always named truncated."""
+    text = saved.read_text()
+    rng = random.Random(7)
+    for cut in sorted(rng.sample(range(1, len(text) - 2), 60)):
+        saved.write_text(text[:cut])
+        with pytest.raises(ProjectError, match="truncated"):
+            load_project(saved)
 
 
 def test_broken_json(saved):
@@ -407,14 +418,14 @@ BAD_FIELDS = [
     (_set(["viewer", "camera", "distance"], "far"), "viewer.camera.distance", "number"),
     (_set(["viewer", "shown"], ["everything"]), "viewer.shown[0]", "intermediate"),
     (_set(["viewer", "options", "grid"], [1]), "viewer.options.grid", "string, number"),
-    (_set(["displacement", "channels", 0, "values"], "x"), "displacement.channels[0].values",
+    (_set(["layers", 0, "channels", 0, "values"], "x"), "layers[0].channels[0].values",
      "list"),
-    (_set(["displacement", "channels", 0, "frames", 1], -5.0),
-     "displacement.channels[0].frames", "increase"),
-    (_set(["displacement", "channels", 0, "channel"], "tx"),
-     "displacement.channels[0].channel", "rx, ry, rz"),
-    (_set(["displacement", "channels", 0, "interpolation"], "cubic"),
-     "displacement.channels[0].interpolation", "linear"),
+    (_set(["layers", 0, "channels", 0, "frames", 1], -5.0),
+     "layers[0].channels[0].frames", "increase"),
+    (_set(["layers", 0, "channels", 0, "channel"], "tx"),
+     "layers[0].channels[0].channel", "rx, ry, rz"),
+    (_set(["layers", 0, "channels", 0, "interpolation"], "cubic"),
+     "layers[0].channels[0].interpolation", "linear"),
     (_set(["correspondence", "pairs", "Hips"], 3), "correspondence.pairs.Hips", "string"),
     (_set(["correspondence"], _DELETE), "correspondence", "missing"),
     (_set(["performer", "units"], "furlongs"), "performer.units", "cmu"),
@@ -448,8 +459,8 @@ BAD_JOINTS = [
     (_set(["constraints", 2, "joint"], "Tail"), "constraints[2].joint", "not a joint"),
     (_set(["constraints", 0, "range"], [0, 0, 5, 5000]), "constraints[0].range",
      "past the last frame"),
-    (_set(["displacement", "channels", 3, "joint"], "Tail"),
-     "displacement.channels[3].joint", "not a joint"),
+    (_set(["layers", 0, "channels", 3, "joint"], "Tail"),
+     "layers[0].channels[3].joint", "not a joint"),
     (_set(["viewer", "current_frame"], 994), "viewer.current_frame", "past the last frame"),
     (_set(["binding", "target_reference"], 1), "binding.target_reference", "past the clip"),
     (_set(["target", "position_mode"], {"Nope": "absolute"}), "target.position_mode",

@@ -135,3 +135,48 @@ def test_qslerp_matches_scipys_slerp():
         _same_up_to_sign(got[k:k + 1], want, atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, rtol=0, atol=1e-14)
     np.testing.assert_allclose(qslerp(q0, q1, np.zeros(len(q0))), q0, rtol=0, atol=1e-15)
+
+
+def test_component_functions_give_the_interleaved_values_bit_for_bit():
+    """The hot paths' component-array kernels equal the general functions exactly, with the
+    broadcasting the hot paths use: per-joint constants ``(4, n, 1)`` against ``(4, n, F)``."""
+    from motion_composer.engine.quaternions import (cconj, cmul, components, cquat_between,
+                                                    crot, ctwist_about, interleaved,
+                                                    quat_between, twist_about)
+    rng = _rng(90)
+    a = _unit_quats(rng, 7 * 300).reshape(300, 7, 4)
+    b = _unit_quats(rng, 7 * 300).reshape(300, 7, 4)
+    const = _unit_quats(rng, 7)
+    v = rng.normal(scale=2.0, size=(300, 7, 3))
+    axis = rng.normal(size=(7, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    v[0, 0] = -3.0 * axis[0]                         # opposite directions: a half turn
+    v[1, 1] = 0.5 * axis[1]                          # the same direction: identity
+
+    def per_joint(c):                                # (n, k) -> (k, n, 1)
+        return components(c)[:, :, None]
+
+    def joint_major(x):                              # (F, n, k) -> (k, n, F)
+        return np.ascontiguousarray(x.T)
+
+    def back(c):                                     # (k, n, F) -> (F, n, k)
+        return np.ascontiguousarray(c.T)
+
+    A, B, V = joint_major(a), joint_major(b), joint_major(v)
+    np.testing.assert_array_equal(back(cmul(A, B)), qmul(a, b))
+    np.testing.assert_array_equal(back(cmul(A, per_joint(const))), qmul(a, const))
+    np.testing.assert_array_equal(back(cmul(per_joint(const), B)), qmul(const, b))
+    np.testing.assert_array_equal(interleaved(cmul(components(const[0]), components(const[1]))),
+                                  qmul(const[0], const[1]))
+    np.testing.assert_array_equal(back(cconj(A)), qconj(a))
+    np.testing.assert_array_equal(back(crot(A, V)), qrot(a, v))
+    np.testing.assert_array_equal(back(crot(A, per_joint(axis))), qrot(a, axis))
+    np.testing.assert_array_equal(back(cquat_between(per_joint(axis), V)),
+                                  quat_between(axis, v))
+    np.testing.assert_array_equal(back(cquat_between(V, V[:, ::-1])),
+                                  quat_between(v, v[:, ::-1]))
+    np.testing.assert_array_equal(back(ctwist_about(A, per_joint(axis))), twist_about(a, axis))
+    half_turn = np.append(np.cross(axis[2], [1.0, 0.0, 0.0]), 0.0)
+    a[2, 2] = half_turn / np.linalg.norm(half_turn)  # normal to the axis: the twist is identity
+    np.testing.assert_array_equal(back(ctwist_about(joint_major(a), per_joint(axis))),
+                                  twist_about(a, axis))

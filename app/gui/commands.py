@@ -11,7 +11,8 @@ from motion_composer.app.gui.qt import QtGui
 from motion_composer.engine.conversion.correspondence import Correspondence
 
 __all__ = ["push_scene", "replace_scene", "push_sources", "push_correspondence", "push_pair", "push_options",
-           "push_constraints", "push_displacement", "merge_id"]
+           "push_constraints", "push_displacement", "push_layer_keys", "push_layers",
+           "layer_map", "merge_id"]
 
 _MERGE_IDS: dict[str, int] = {}
 
@@ -118,3 +119,25 @@ def push_constraints(doc, constraints: list, displacement=None, text: str = "Edi
 
 def push_displacement(doc, displacement, text: str = "Edit curves") -> None:
     doc.edit(text, displacement=displacement)
+
+
+def layer_map(scene, layer: int):
+    """The displacement map of layer ``layer`` of ``scene``: 0 is the solved layer, 1 and up
+    the animator's layers in order."""
+    return scene.displacement if layer == 0 else scene.layers[layer - 1].displacement
+
+
+def push_layer_keys(doc, layer: int, displacement, text: str = "Edit curves") -> None:
+    """Set the keys of one layer (0: the solved layer, see :func:`layer_map`), one command."""
+    if layer == 0:
+        push_displacement(doc, displacement, text)
+        return
+    layers = list(doc.scene.layers)
+    layers[layer - 1] = layers[layer - 1].replace(displacement=displacement)
+    doc.edit(text, layers=tuple(layers))
+
+
+def push_layers(doc, layers, text: str, merge: str | None = None) -> None:
+    """Set the animator's layers (a weight, a mute, a new layer), one command; ``merge``
+    joins consecutive edits of one control (a weight being typed) into one step."""
+    doc.edit(text, merge=merge, layers=tuple(layers))

@@ -41,12 +41,12 @@ import numpy as np
 import pyqtgraph as pg
 from scipy.spatial.transform import Rotation
 
-from motion_composer.app.gui.commands import push_displacement
+from motion_composer.app.gui.commands import layer_map, push_layer_keys, push_layers
 from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
-from motion_composer.engine.correction.displacement import (INTERPOLATIONS, ROOT, Curve,
-                                                            DisplacementMap)
+from motion_composer.engine.correction.displacement import (INTERPOLATIONS, ROOT, TANGENTS,
+                                                            Curve, DisplacementMap, Layer)
 
-__all__ = ["CurveEditor", "KeyGraph", "UNITS", "CHANNEL_COLORS"]
+__all__ = ["CurveEditor", "KeyGraph", "TangentHandles", "UNITS", "CHANNEL_COLORS"]
 
 Qt = QtCore.Qt
 
@@ -77,6 +77,7 @@ _KEY_SIZE = 9
 _SELECTED_SIZE = 12
 _PICK_PX = 10            # how near (pixels) a double-click must be to a curve to key it
 _PICK_KEY_PX = 7         # how near (pixels) a click must be to a key to pick it
+_LABEL_LANES = 3         # lines of constraint names at the top of the plot
 
 
 def _label(joint: str) -> str:
@@ -179,6 +180,83 @@ class KeyGraph(pg.GraphItem):
             self.editor._drag_move(delta.x(), delta.y())
 
 
+class TangentHandles(pg.GraphItem):
+    """The tangent handles of the selected smooth keys: a point a third of the way to the
+    neighbouring key on each side, on the key's tangent, joined to the key by a line.
+    Dragging a handle sets that key's slope (both sides, unless the key is broken): one
+    command on release."""
+
+    def __init__(self, editor: "CurveEditor"):
+        super().__init__()
+        self.editor = editor
+        #: per handle: (channel, key index, side 0 in / 1 out)
+        self.handles: list[tuple[str, int, int]] = []
+        self.points = np.zeros((0, 2))
+        self._dragging: tuple | None = None
+        self.scatter.setParentItem(None)
+        self.scatter = _KeySymbols()
+        self.scatter.setParentItem(self)
+        self.setZValue(15)
+
+    def set_handles(self, handles, points, anchors) -> None:
+        """``handles`` as (channel, index, side), their ``points`` and the keys they hang
+        from (``anchors``), both ``(H, 2)`` in frames and display units."""
+        self.handles = list(handles)
+        self.points = np.asarray(points, dtype=float).reshape(-1, 2)
+        anchors = np.asarray(anchors, dtype=float).reshape(-1, 2)
+        if not self.handles:
+            self.setData(pos=np.zeros((0, 2)), adj=None)
+            return
+        pos = np.concatenate([self.points, anchors])
+        n = len(self.handles)
+        adj = np.column_stack([np.arange(n), np.arange(n) + n])
+        colors = [CHANNEL_COLORS[_axis(c)] for c, _, _ in self.handles]
+        self.setData(pos=pos, adj=adj, pen=pg.mkPen(230, 230, 230, 170, width=1),
+                     symbol=["s"] * n + ["o"] * n, size=[8] * n + [0] * n,
+                     symbolBrush=[pg.mkBrush(*c) for c in colors] + [None] * n,
+                     symbolPen=[pg.mkPen(255, 255, 255, width=1)] * n + [None] * n,
+                     pxMode=True)
+
+    def handle_at(self, pos) -> int | None:
+        """Index of the handle drawn under ``pos`` (item coordinates), by pixel distance."""
+        if not self.handles or not self.isVisible():
+            return None
+        px, py = self.pixelWidth(), self.pixelHeight()
+        if not (px > 0 and py > 0):
+            return None
+        d2 = ((self.points[:, 0] - pos.x()) / px) ** 2 + \
+            ((self.points[:, 1] - pos.y()) / py) ** 2
+        i = int(np.argmin(d2))
+        return i if d2[i] <= _PICK_KEY_PX ** 2 else None
+
+    def mouseClickEvent(self, ev):
+        if self.handle_at(ev.pos()) is None:
+            ev.ignore()
+        else:
+            ev.accept()
+
+    def mouseDragEvent(self, ev):
+        if ev.button() != Qt.MouseButton.LeftButton:
+            ev.ignore()
+            return
+        if ev.isStart():
+            index = self.handle_at(ev.buttonDownPos())
+            if index is None:
+                ev.ignore()
+                return
+            self._dragging = self.handles[index]
+            self.editor._tangent_drag_start(*self._dragging)
+        elif self._dragging is None:
+            ev.ignore()
+            return
+        ev.accept()
+        if ev.isFinish():
+            self._dragging = None
+            self.editor._tangent_drag_finish(ev.pos())
+        else:
+            self.editor._tangent_drag_move(ev.pos())
+
+
 class _KeyViewBox(pg.ViewBox):
     """Left-drag on the background draws a rubber band, double-click adds a key; middle-drag
     pans and right-drag or the wheel zoom as in any ViewBox."""
@@ -239,8 +317,14 @@ class CurveEditor(QtWidgets.QWidget):
         self.doc = document
         self.joint: str = ROOT                  # joint name or ROOT
         self.channels: tuple[str, ...] = TRANSLATION
+        #: the layer whose keys are shown and edited: 0 the solved layer (where the editor
+        #: starts: a solve's keys are what there is to see), 1 and up the animator's, which
+        #: a solve keeps (see :func:`app.gui.commands.layer_map`)
+        self.layer: int = 0
         self.selected: set[tuple[str, float]] = set()   # (channel, key frame)
         self._drag: dict | None = None
+        self._tangent_drag: dict | None = None
+        self.range_labels: list = []        # (TextItem, name, start, end) per constraint
         self._base_cache: tuple | None = None
         self._shown_map: DisplacementMap | None = None
         self._drawn: dict = {}          # what is on screen, to redraw only what changed
@@ -284,13 +368,38 @@ class CurveEditor(QtWidgets.QWidget):
                                    "on the right-hand axis")
         self.base_check.toggled.connect(self._visibility_changed)
         self.frame_all_button = QtWidgets.QPushButton("Frame all")
-        self.frame_all_button.setToolTip("Fit the visible curves (F)")
+        self.frame_all_button.setToolTip("Fit the visible curves (A; F frames the selected "
+                                         "keys)")
         self.frame_all_button.clicked.connect(self.frame_all)
+        # ---- layers: which one is edited, its weight and mute
+        self.layer_combo = QtWidgets.QComboBox()
+        self.layer_combo.setToolTip("The layer whose keys are shown and edited; the others "
+                                    "are drawn thin. A solve replaces the solved layer only")
+        self.layer_combo.activated.connect(self._layer_chosen)
+        self.weight_box = QtWidgets.QDoubleSpinBox()
+        self.weight_box.setRange(0.0, 10.0)
+        self.weight_box.setSingleStep(0.1)
+        self.weight_box.setDecimals(2)
+        self.weight_box.setPrefix("weight ")
+        self.weight_box.setKeyboardTracking(False)
+        self.weight_box.setToolTip("The layer's offsets are scaled by its weight")
+        self.weight_box.valueChanged.connect(self._weight_typed)
+        self.mute_check = QtWidgets.QCheckBox("Mute")
+        self.mute_check.setToolTip("A muted layer has no effect on the motion")
+        self.mute_check.toggled.connect(self._mute_toggled)
+        self.new_layer_button = QtWidgets.QPushButton("New layer")
+        self.new_layer_button.setToolTip("Add an empty animator layer on top")
+        self.new_layer_button.clicked.connect(self.add_layer)
 
         top = QtWidgets.QHBoxLayout()
         top.setContentsMargins(0, 0, 0, 0)
         top.addWidget(self.title)
         top.addStretch(1)
+        top.addWidget(QtWidgets.QLabel("Layer"))
+        top.addWidget(self.layer_combo)
+        top.addWidget(self.weight_box)
+        top.addWidget(self.mute_check)
+        top.addWidget(self.new_layer_button)
         top.addWidget(self.root_button)
         for button in self.channel_buttons.values():
             top.addWidget(button)
@@ -310,6 +419,14 @@ class CurveEditor(QtWidgets.QWidget):
             self.interp_combo.addItem(kind.capitalize(), kind)
         self.interp_combo.setToolTip("Interpolation of the segment after each selected key")
         self.interp_combo.activated.connect(self._interp_chosen)
+        self.tangent_combo = QtWidgets.QComboBox()
+        for mode in TANGENTS:
+            self.tangent_combo.addItem(mode.capitalize(), mode)
+        self.tangent_combo.setToolTip("Tangent of each selected key: auto (smooth through "
+                                      "its neighbours), flat, linear (towards the "
+                                      "neighbours), aligned (one slope, drag a handle) or "
+                                      "broken (in and out slopes apart)")
+        self.tangent_combo.activated.connect(self._tangent_chosen)
         self.frame_box = QtWidgets.QSpinBox()
         self.frame_box.setPrefix("frame ")
         self.frame_box.setSpecialValueText("frame –")
@@ -338,6 +455,8 @@ class CurveEditor(QtWidgets.QWidget):
         keys.addWidget(self.delete_button)
         keys.addWidget(QtWidgets.QLabel("Interpolation"))
         keys.addWidget(self.interp_combo)
+        keys.addWidget(QtWidgets.QLabel("Tangent"))
+        keys.addWidget(self.tangent_combo)
         keys.addWidget(self.frame_box)
         keys.addWidget(self.value_box)
         keys.addStretch(1)
@@ -393,6 +512,7 @@ class CurveEditor(QtWidgets.QWidget):
         self.ranges: list[pg.LinearRegionItem] = []
 
         self.curves: dict[int, pg.PlotDataItem] = {}
+        self.others: dict[int, pg.PlotDataItem] = {}
         self.bases: dict[int, pg.PlotDataItem] = {}
         self.key_graphs: dict[int, KeyGraph] = {}
         for axis in range(3):
@@ -401,6 +521,10 @@ class CurveEditor(QtWidgets.QWidget):
                                                 style=Qt.PenStyle.DashLine))
             self.base_box.addItem(base)
             self.bases[axis] = base
+            other = pg.PlotDataItem(pen=pg.mkPen(*color, 110, width=1))
+            other.setZValue(4)
+            self.view_box.addItem(other)
+            self.others[axis] = other
             curve = pg.PlotDataItem(pen=pg.mkPen(*color, width=2))
             curve.setZValue(5)
             self.view_box.addItem(curve)
@@ -408,10 +532,15 @@ class CurveEditor(QtWidgets.QWidget):
             graph = KeyGraph(self, "")
             self.view_box.addItem(graph)
             self.key_graphs[axis] = graph
-        self.legend = pg.LegendItem(offset=(-10, 10), labelTextColor=_FOREGROUND,
+        self.handles = TangentHandles(self)
+        self.view_box.addItem(self.handles)
+        self.view_box.sigRangeChanged.connect(self._place_range_labels)
+        # below the lines of constraint names
+        self.legend = pg.LegendItem(offset=(-10, 58), labelTextColor=_FOREGROUND,
                                     brush=pg.mkBrush(20, 20, 22, 170),
                                     pen=pg.mkPen(90, 90, 90))
         self.legend.setParentItem(self.view_box)
+        self._legend_other = pg.PlotDataItem(pen=pg.mkPen(170, 170, 170, 160, width=1))
         self._legend_base = pg.PlotDataItem(pen=pg.mkPen(170, 170, 170, 160, width=1.2,
                                                          style=Qt.PenStyle.DashLine))
 
@@ -424,7 +553,10 @@ class CurveEditor(QtWidgets.QWidget):
         self.backspace_shortcut.activated.connect(self.delete_selected)
         self.frame_shortcut = QtGui.QShortcut(QtGui.QKeySequence(Qt.Key.Key_F), self)
         self.frame_shortcut.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
-        self.frame_shortcut.activated.connect(self.frame_all)
+        self.frame_shortcut.activated.connect(self.frame_selected)
+        self.all_shortcut = QtGui.QShortcut(QtGui.QKeySequence(Qt.Key.Key_A), self)
+        self.all_shortcut.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+        self.all_shortcut.activated.connect(self.frame_all)
         self.cancel_shortcut = QtGui.QShortcut(QtGui.QKeySequence(Qt.Key.Key_Escape), self)
         self.cancel_shortcut.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
         self.cancel_shortcut.activated.connect(self.cancel_drag)
@@ -462,8 +594,35 @@ class CurveEditor(QtWidgets.QWidget):
 
     def curve(self, channel: str) -> Curve | None:
         """The shown map's curve of ``channel`` of the shown joint (None if it has none)."""
-        shown = self._shown_map if self._shown_map is not None else self.doc.scene.displacement
+        shown = self._shown_map if self._shown_map is not None else self._layer_map()
         return shown.curves.get((self.joint, channel))
+
+    def _layer_map(self) -> DisplacementMap:
+        """The keys of the layer being edited."""
+        return layer_map(self.doc.scene, self.layer)
+
+    def _scene_with(self, new_map: DisplacementMap):
+        """The document's scene with the edited layer's keys ``new_map`` (a preview)."""
+        scene = self.doc.scene
+        if self.layer == 0:
+            return scene.replace(displacement=new_map)
+        layers = list(scene.layers)
+        layers[self.layer - 1] = layers[self.layer - 1].replace(displacement=new_map)
+        return scene.replace(layers=tuple(layers))
+
+    def _other_offsets(self, channel: str, frames: np.ndarray) -> np.ndarray | None:
+        """The other layers' offsets of ``channel`` (weighted, muted ones left out), summed,
+        or None when no other layer keys it."""
+        scene = self.doc.scene
+        maps = [(scene.displacement, 1.0)] + [(x.displacement, x.weight)
+                                               for x in scene.layers if not x.mute]
+        total, any_curve = np.zeros(len(frames)), False
+        for i, (displacement, weight) in enumerate(maps):
+            curve = displacement.curves.get((self.joint, channel))
+            if i != self.layer and curve is not None:
+                total += weight * curve.evaluate(frames)
+                any_curve = True
+        return total if any_curve else None
 
     def show_joint(self, joint: str) -> None:
         """Show ``joint``'s rotation channels, or the root's translation for ROOT."""
@@ -506,12 +665,12 @@ class CurveEditor(QtWidgets.QWidget):
 
     def _constraints_changed(self) -> None:
         # a new IK result: show its keys whole
-        if self._drag is None:
+        if not self.dragging:
             self.refresh()
             self.frame_all()
 
     def _motion_changed(self) -> None:
-        if self._drag is not None:
+        if self.dragging:
             return                              # our own preview
         self._update_playhead_bounds()
         self.refresh()
@@ -569,8 +728,16 @@ class CurveEditor(QtWidgets.QWidget):
                 else:
                     self.curves[axis].setData(frames, np.zeros(F))
                     graph.set_keys([], [], [])
+            scene = self.doc.scene
+            ostate = (self.joint, channel, F, self.layer, scene.displacement, scene.layers)
+            if ostate != self._drawn.get(("others", axis)):
+                self._drawn[("others", axis)] = ostate
+                others = self._other_offsets(channel, frames) if ready else None
+                self.others[axis].setData(frames if others is not None else [],
+                                          others * self.scale if others is not None else [])
             if self.curves[axis].isVisible() != shown:
                 self.curves[axis].setVisible(shown)
+                self.others[axis].setVisible(shown)
                 graph.setVisible(shown)
             if base is not self._drawn.get(("base", axis)):
                 self._drawn[("base", axis)] = base
@@ -582,13 +749,16 @@ class CurveEditor(QtWidgets.QWidget):
             base_shown = shown and self.base_check.isChecked()
             if self.bases[axis].isVisible() != base_shown:
                 self.bases[axis].setVisible(base_shown)
+        self._update_handles()
         self._update_ranges()
+        self._update_layer_widgets()
         self._update_key_widgets()
         if self.playhead.value() != self.doc.scene.viewer.current_frame:
             self._show_frame(self.doc.scene.viewer.current_frame)
         if ready != self._drawn.get("ready"):
             self._drawn["ready"] = ready
-            for widget in (self.add_button, self.root_button, self.frame_all_button):
+            for widget in (self.add_button, self.root_button, self.frame_all_button,
+                           self.layer_combo, self.new_layer_button):
                 widget.setEnabled(ready)
 
     def _update_labels(self) -> None:
@@ -606,12 +776,14 @@ class CurveEditor(QtWidgets.QWidget):
             axis = _axis(channel)
             if self.channel_buttons[axis].isChecked():
                 self.legend.addItem(self.curves[axis], f"{channel} offset")
+        self.legend.addItem(self._legend_other, "other layers (thin)")
         if self.base_check.isChecked():
             self.legend.addItem(self._legend_base, "base motion (right axis)")
 
     def _update_ranges(self) -> None:
         """Faint bands where constraints act (easing in and out), stronger where they hold,
-        with the constraint's name."""
+        each with the constraint's name, elided to the room it has (:meth:`_place_range_labels`)
+        so that names never overlap."""
         ready = self.doc.scene.composed is not None
         spans = tuple((c.name or c.joint, c.smooth_in, c.start, c.end, c.smooth_out)
                       for c in self.doc.scene.constraints if getattr(c, "enabled", True)) \
@@ -622,6 +794,7 @@ class CurveEditor(QtWidgets.QWidget):
         for item in self.ranges:
             self.view_box.removeItem(item)
         self.ranges = []
+        self.range_labels = []
         for name, smooth_in, start, end, smooth_out in spans:
             for lo, hi, alpha in ((smooth_in, smooth_out, 14), (start, end, 22)):
                 region = pg.LinearRegionItem((lo, hi), movable=False,
@@ -630,18 +803,64 @@ class CurveEditor(QtWidgets.QWidget):
                 region.setZValue(-50)
                 self.view_box.addItem(region, ignoreBounds=True)
                 self.ranges.append(region)
-            line = pg.InfiniteLine(start, angle=90, movable=False, pen=pg.mkPen(None),
-                                   label=name, labelOpts={"position": 0.97,
-                                                          "anchors": [(-0.05, 0), (-0.05, 0)],
-                                                          "color": (170, 170, 170)})
-            line.setZValue(-40)
-            self.view_box.addItem(line, ignoreBounds=True)
-            self.ranges.append(line)
+            label = pg.TextItem("", color=(170, 170, 170), anchor=(0, 0))
+            label.setZValue(-40)
+            self.view_box.addItem(label, ignoreBounds=True)
+            self.ranges.append(label)
+            self.range_labels.append((label, name, float(start), float(end)))
+        self._place_range_labels()
+
+    def _place_range_labels(self, *_args) -> None:
+        """Each constraint's name at the top of its active band, in one of
+        :data:`_LABEL_LANES` lines of text: a name goes in the first line that is free where
+        its band starts (else in the line that frees first) and is elided to its band's width
+        and to the room before the next name on its line, in pixels (again on every zoom or
+        pan), so that names never overlap."""
+        labels = self.range_labels
+        if not labels:
+            return
+        (x0, x1), (y0, y1) = self.view_box.viewRange()
+        px, py = self.view_box.viewPixelSize()
+        if not (px > 0 and py > 0):
+            return
+        metrics = QtGui.QFontMetrics(labels[0][0].textItem.font())
+        order = sorted(range(len(labels)), key=lambda k: (max(labels[k][2], x0), k))
+        lane_end = [-math.inf] * _LABEL_LANES
+        lanes: list[list[int]] = [[] for _ in range(_LABEL_LANES)]
+        for k in order:
+            _label, name, start, end = labels[k]
+            left = max(start, x0)
+            free = [n for n in range(_LABEL_LANES) if lane_end[n] <= left]
+            lane = free[0] if free else int(np.argmin(lane_end))
+            want = min(metrics.horizontalAdvance(name) + 8, (end - left) / px) * px
+            lane_end[lane] = left + want
+            lanes[lane].append(k)
+        for lane, members in enumerate(lanes):
+            for n, k in enumerate(members):
+                label, name, start, end = labels[k]
+                left = max(start, x0)
+                stop = min(end, x1)
+                if n + 1 < len(members):
+                    stop = min(stop, max(labels[members[n + 1]][2], x0))
+                room = (stop - left) / px - 6
+                text = metrics.elidedText(name, Qt.TextElideMode.ElideRight,
+                                          int(max(room, 0)))
+                label.setText(text if room >= metrics.horizontalAdvance("\u2026") * 3 else "")
+                label.setPos(left, y1 - lane * metrics.height() * py)
+
+    def range_label_texts(self) -> list[str]:
+        """The constraint names as drawn (elided), in constraint order."""
+        return [label.textItem.toPlainText() for label, *_ in self.range_labels]
 
     def _update_key_widgets(self) -> None:
         """Interpolation combo and frame/value boxes from the selection (no signals out)."""
         keys = self._selected_keys()
         kinds = {self.curve(c).interpolation[i] for c, i in keys}
+        modes = {self.curve(c).tangents[i] for c, i in keys}
+        with _Blocker(self.tangent_combo):
+            self.tangent_combo.setEnabled(bool(keys))
+            self.tangent_combo.setCurrentIndex(TANGENTS.index(modes.pop())
+                                               if len(modes) == 1 else -1)
         with _Blocker(self.interp_combo):
             self.interp_combo.setEnabled(bool(keys))
             if len(kinds) == 1:
@@ -725,6 +944,22 @@ class CurveEditor(QtWidgets.QWidget):
         x0, x1, y0, y1 = extent
         self.view_box.setRange(xRange=(x0, x1), yRange=(y0, y1), padding=0.04)
 
+    def frame_selected(self) -> None:
+        """Fit the view to the selected keys (F); with none selected, to everything."""
+        keys = self._selected_keys()
+        if not keys:
+            self.frame_all()
+            return
+        frames = [float(self.curve(c).frames[i]) for c, i in keys]
+        values = [float(self.curve(c).values[i] * self.scale) for c, i in keys]
+        x0, x1 = min(frames), max(frames)
+        y0, y1 = min(values), max(values)
+        if x1 - x0 < 10:
+            x0, x1 = x0 - 5, x1 + 5
+        if y1 - y0 < 1e-3:
+            y0, y1 = y0 - 0.5, y1 + 0.5
+        self.view_box.setRange(xRange=(x0, x1), yRange=(y0, y1), padding=0.15)
+
     def key_scene_pos(self, channel: str, index: int) -> QtCore.QPointF:
         """Where key ``index`` of ``channel`` is drawn, in scene coordinates."""
         curve = self.curve(channel)
@@ -804,7 +1039,7 @@ class CurveEditor(QtWidgets.QWidget):
         return DisplacementMap(curves)
 
     def _push(self, new_map: DisplacementMap, text: str) -> None:
-        push_displacement(self.doc, new_map, text=text)
+        push_layer_keys(self.doc, self.layer, new_map, text=text)
 
     def _snap_step(self) -> int:
         return 5 if self.snap5_check.isChecked() else 1
@@ -820,7 +1055,7 @@ class CurveEditor(QtWidgets.QWidget):
                 self.selected.add((channel, frame))
             else:
                 self.selected = {(channel, frame)}
-        original = self.doc.scene.displacement
+        original = self._layer_map()
         keys = self._selected_keys()
         F = self.doc.scene.composed.num_frames
         # how far the selection may move in time: keys never pass an unselected neighbour
@@ -883,7 +1118,7 @@ class CurveEditor(QtWidgets.QWidget):
             values = curve.values.copy()
             frames[idx] += dframe
             values[idx] += dvalue / self.scale
-            changed[c] = Curve(frames, values, curve.interpolation)
+            changed[c] = curve.moved(frames, values)
         return self._with_curves(d["original"], changed)
 
     def _drag_move(self, dx: float, dy: float) -> None:
@@ -897,7 +1132,7 @@ class CurveEditor(QtWidgets.QWidget):
         self._drag["map"] = new_map
         self._shown_map = new_map
         self.selected = {(c, f + delta[0]) for c, f in self._drag_frames()}
-        self.doc.show_preview(new_map.apply(self.doc.scene.composed))
+        self.doc.show_preview(self._scene_with(new_map).motion)
         self.refresh()
 
     def _drag_frames(self) -> set:
@@ -914,14 +1149,21 @@ class CurveEditor(QtWidgets.QWidget):
         moved = {(c, f + delta[0]) for c, f in self._drag_frames()}
         self._drag = None
         self._shown_map = None
-        if new_map is self.doc.scene.displacement:
+        if new_map is self._layer_map():
             self.doc.show_preview(None)         # back to the evaluated motion
             return
         self.selected = moved
         self._push(new_map, f"Move {self._what(keys)}")
 
     def cancel_drag(self) -> None:
-        """Abandon a key drag (Escape): the document shows its own motion again."""
+        """Abandon a key or tangent drag (Escape): the document shows its own motion again."""
+        if self._tangent_drag is not None:
+            self._tangent_drag = None
+            self._shown_map = None
+            self.handles._dragging = None
+            self.doc.show_preview(None)
+            self.refresh()
+            return
         if self._drag is None:
             return
         self.selected = self._drag_frames()
@@ -933,7 +1175,8 @@ class CurveEditor(QtWidgets.QWidget):
 
     @property
     def dragging(self) -> bool:
-        return self._drag is not None
+        """A key or a tangent handle is being dragged (the document shows a preview)."""
+        return self._drag is not None or self._tangent_drag is not None
 
     # ================================================================== other edits
     def add_keys(self, frame: float, channels=None) -> None:
@@ -957,12 +1200,14 @@ class CurveEditor(QtWidgets.QWidget):
             frames = np.insert(curve.frames, i, frame)
             values = np.insert(curve.values, i, value)
             interp = curve.interpolation[:i] + (kind,) + curve.interpolation[i:]
-            changed[channel] = Curve(frames, values, interp)
+            tangents = curve.tangents[:i] + ("auto",) + curve.tangents[i:]
+            slopes = np.insert(curve.slopes, i, (0.0, 0.0), axis=0)
+            changed[channel] = Curve(frames, values, interp, tangents, slopes)
             added.append((channel, frame))
         if not changed:
             return
         self.selected = set(added)
-        self._push(self._with_curves(self.doc.scene.displacement, changed),
+        self._push(self._with_curves(self._layer_map(), changed),
                    f"Add {self._what(added)} at frame {frame:g}")
 
     def add_keys_at_current_frame(self) -> None:
@@ -996,10 +1241,9 @@ class CurveEditor(QtWidgets.QWidget):
             curve = self.curve(c)
             keep = np.ones(len(curve), dtype=bool)
             keep[[i for cc, i in keys if cc == c]] = False
-            changed[c] = Curve(curve.frames[keep], curve.values[keep],
-                               tuple(np.array(curve.interpolation, dtype=object)[keep]))
+            changed[c] = curve.take(keep)
         self.selected = set()
-        self._push(self._with_curves(self.doc.scene.displacement, changed),
+        self._push(self._with_curves(self._layer_map(), changed),
                    f"Delete {self._what(keys)}")
 
     def set_interpolation(self, kind: str, keys=None) -> None:
@@ -1015,10 +1259,11 @@ class CurveEditor(QtWidgets.QWidget):
                 if cc == c:
                     interp[i] = kind
             if tuple(interp) != curve.interpolation:
-                changed[c] = Curve(curve.frames, curve.values, tuple(interp))
+                changed[c] = Curve(curve.frames, curve.values, tuple(interp), curve.tangents,
+                                   curve.slopes)
         if not changed:
             return
-        self._push(self._with_curves(self.doc.scene.displacement, changed),
+        self._push(self._with_curves(self._layer_map(), changed),
                    f"Set {self._what(keys)} to {kind}")
 
     def _interp_chosen(self, index: int) -> None:
@@ -1045,8 +1290,8 @@ class CurveEditor(QtWidgets.QWidget):
             return
         self.selected = {(c, float(frames[i]))}
         verb = "Move" if frame is not None else "Set"
-        self._push(self._with_curves(self.doc.scene.displacement,
-                                     {c: Curve(frames, values, curve.interpolation)}),
+        self._push(self._with_curves(self._layer_map(),
+                                     {c: curve.moved(frames, values)}),
                    f"{verb} {self._what(keys)}")
 
     def _frame_typed(self, frame: int) -> None:
@@ -1073,3 +1318,154 @@ class CurveEditor(QtWidgets.QWidget):
         menu.addSeparator()
         menu.addAction("Delete", self.delete_selected)
         return menu
+
+    # ================================================================== layers
+    def _update_layer_widgets(self) -> None:
+        """The layer combo, weight and mute from the document (no signals out)."""
+        scene = self.doc.scene
+        names = ["solved (IK)"] + [layer.name for layer in scene.layers]
+        self.layer = min(self.layer, len(names) - 1)
+        with _Blocker(self.layer_combo):
+            if [self.layer_combo.itemText(i) for i in range(self.layer_combo.count())] != names:
+                self.layer_combo.clear()
+                self.layer_combo.addItems(names)
+            self.layer_combo.setCurrentIndex(self.layer)
+        animator = scene.layers[self.layer - 1] if self.layer else None
+        with _Blocker(self.weight_box), _Blocker(self.mute_check):
+            self.weight_box.setEnabled(animator is not None)
+            self.mute_check.setEnabled(animator is not None)
+            self.weight_box.setValue(animator.weight if animator else 1.0)
+            self.mute_check.setChecked(bool(animator and animator.mute))
+
+    def set_layer(self, layer: int) -> None:
+        """Show and edit layer ``layer`` (0: solved, 1 and up: the animator's)."""
+        if layer != self.layer:
+            self.selected = set()
+        self.layer = layer
+        self.refresh()
+
+    def _layer_chosen(self, index: int) -> None:
+        if index >= 0:
+            self.set_layer(index)
+
+    def _set_animator(self, text: str, merge: str | None = None, **changes) -> None:
+        if self.layer == 0:
+            return
+        layers = list(self.doc.scene.layers)
+        layers[self.layer - 1] = layers[self.layer - 1].replace(**changes)
+        push_layers(self.doc, layers, text, merge=merge)
+
+    def _weight_typed(self, value: float) -> None:
+        name = self.doc.scene.layers[self.layer - 1].name if self.layer else ""
+        self._set_animator(f"Set the weight of layer {name} to {value:g}",
+                           merge=f"layer weight {self.layer}", weight=float(value))
+
+    def _mute_toggled(self, on: bool) -> None:
+        name = self.doc.scene.layers[self.layer - 1].name if self.layer else ""
+        self._set_animator(f"{'Mute' if on else 'Unmute'} layer {name}", mute=bool(on))
+
+    def add_layer(self) -> None:
+        """Add an empty animator layer on top and edit it (one command)."""
+        taken = {layer.name for layer in self.doc.scene.layers}
+        n = len(taken) + 1
+        while f"edit {n}" in taken:
+            n += 1
+        layers = list(self.doc.scene.layers) + [Layer(f"edit {n}")]
+        self.layer = len(layers)
+        self.selected = set()
+        push_layers(self.doc, layers, f"Add layer edit {n}")
+
+    # ================================================================== tangents
+    def _update_handles(self) -> None:
+        """Handles of the selected keys' tangents where a smooth segment meets them."""
+        handles, points, anchors = [], [], []
+        visible = set(self.visible_channels()) if self.doc.scene.composed is not None else set()
+        for channel, i in self._selected_keys():
+            if channel not in visible:
+                continue
+            curve = self.curve(channel)
+            slopes = curve.tangent_slopes()
+            f, v = curve.frames[i], curve.values[i] * self.scale
+            for side in (0, 1):
+                j = i - 1 if side == 0 else i + 1
+                if not 0 <= j < len(curve):
+                    continue
+                if curve.interpolation[min(i, j)] != "smooth":
+                    continue
+                dx = (curve.frames[j] - f) / 3.0
+                points.append((f + dx, v + slopes[i, side] * self.scale * dx))
+                anchors.append((f, v))
+                handles.append((channel, i, side))
+        state = (tuple(handles), tuple(points))
+        if state != self._drawn.get("handles"):
+            self._drawn["handles"] = state
+            self.handles.set_handles(handles, points, anchors)
+
+    def handle_scene_pos(self, channel: str, index: int, side: int) -> QtCore.QPointF:
+        """Where the handle of key ``index`` of ``channel`` on ``side`` (0 in, 1 out) is
+        drawn, in scene coordinates."""
+        k = self.handles.handles.index((channel, index, side))
+        x, y = self.handles.points[k]
+        return self.view_box.mapViewToScene(QtCore.QPointF(float(x), float(y)))
+
+    def set_tangent(self, mode: str, keys=None) -> None:
+        """Set the tangent mode of the selected keys (or ``keys``), as one command; aligned
+        and broken keys keep the slopes they have now."""
+        if mode not in TANGENTS:
+            raise ValueError(f"tangent must be one of {TANGENTS}, not {mode!r}")
+        keys = self._selected_keys() if keys is None else list(keys)
+        changed = {}
+        for c in {k[0] for k in keys}:
+            curve = self.curve(c)
+            for cc, i in keys:
+                if cc == c and curve.tangents[i] != mode:
+                    curve = curve.with_tangent(i, mode)
+            if curve is not self.curve(c):
+                changed[c] = curve
+        if changed:
+            self._push(self._with_curves(self._layer_map(), changed),
+                       f"Set the tangents of {self._what(keys)} to {mode}")
+
+    def _tangent_chosen(self, index: int) -> None:
+        if index >= 0:
+            self.set_tangent(self.tangent_combo.itemData(index))
+
+    def _tangent_drag_start(self, channel: str, index: int, side: int) -> None:
+        self._tangent_drag = {"channel": channel, "index": index, "side": side,
+                              "original": self._layer_map()}
+
+    def _tangent_map(self, pos) -> DisplacementMap:
+        """The edited layer with the dragged handle at ``pos`` (view coordinates): the key's
+        slope through it (only that side for a broken key; aligned otherwise)."""
+        d = self._tangent_drag
+        curve = d["original"].curves[(self.joint, d["channel"])]
+        i, side = d["index"], d["side"]
+        f, v = curve.frames[i], curve.values[i] * self.scale
+        dx = pos.x() - f
+        dx = max(dx, 1e-3) if side == 1 else min(dx, -1e-3)     # a handle stays its side
+        slope = (pos.y() - v) / dx / self.scale
+        now = curve.tangent_slopes()[i]
+        if curve.tangents[i] == "broken":
+            pair = (slope, now[1]) if side == 0 else (now[0], slope)
+            new = curve.with_tangent(i, "broken", pair)
+        else:
+            new = curve.with_tangent(i, "aligned", (slope, slope))
+        return self._with_curves(d["original"], {d["channel"]: new})
+
+    def _tangent_drag_move(self, pos) -> None:
+        if self._tangent_drag is None:
+            return
+        new_map = self._tangent_map(pos)
+        self._shown_map = new_map
+        self.doc.show_preview(self._scene_with(new_map).motion)
+        self.refresh()
+
+    def _tangent_drag_finish(self, pos) -> None:
+        if self._tangent_drag is None:
+            return
+        new_map = self._tangent_map(pos)
+        d = self._tangent_drag
+        self._tangent_drag = None
+        self._shown_map = None
+        keys = [(d["channel"], d["index"])]
+        self._push(new_map, f"Set the tangent of {self._what(keys)}")

@@ -33,10 +33,10 @@ a hand's thumb does not hang from the metacarpal of its primary finger), so its 
 """
 from .automap import automap
 from .binding import BindOptions, Binding, bind, is_upright, reference_pose
-from .composer import compose, retarget
+from .composer import compose, retarget, transfer
 from .converter import IntermediatePose, RootOptions, convert
 from .correspondence import Correspondence
 
 __all__ = ["Correspondence", "automap", "BindOptions", "Binding", "bind", "is_upright",
            "reference_pose", "IntermediatePose", "RootOptions", "convert", "compose",
-           "retarget"]
+           "retarget", "transfer"]

@@ -9,11 +9,11 @@ import numpy as np
 
 from .. import limits
 from ..errors import MappingError, MotionComposerError
-from ..kinematics import fk_arrays
+from ..kinematics import fk_components, joint_major
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qpow, qrot, quat_between, twist_about
-from ..skeleton import Skeleton
-from .binding import Binding, _align
+from ..quaternions import (cconj, cmul, components, cquat_between, crot, ctwist_about,
+                           interleaved, qconj, qmul, qpow)
+from .binding import Binding
 
 __all__ = ["RootOptions", "IntermediatePose", "convert"]
 
@@ -74,33 +74,40 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
             progress=None) -> IntermediatePose:
     """Motion Converter: orient the intermediate bones along the virtual bones, every frame."""
     root = root or RootOptions()
-    if performer.skeleton.names != binding.performer.names:
-        raise MappingError("this binding was made for another performer skeleton")
+    _check_performer(binding, performer)
     F, J = performer.num_frames, binding.target.num_joints
     world = np.empty((F, J, 4))
     positions = {j: np.empty((F, 3)) for j in binding.driven}
     known = None
-    for lo in range(0, F, _CHUNK):
-        hi = min(F, lo + _CHUNK)
-        w, pos, known = _convert_frames(binding, performer.skeleton,
-                                        performer.rotations[lo:hi],
-                                        performer.translations[lo:hi], root)
-        world[lo:hi] = w
+    for lo, hi in chunks(F):
+        w, pos, known = convert_frames(binding, performer, lo, hi, root)
+        world[lo:hi] = w.T
         for j, p in pos.items():
-            positions[j][lo:hi] = p
+            positions[j][lo:hi] = p.T
         if progress is not None:
             progress(hi / F)
     return IntermediatePose(world=world, positions=positions, known=known)
 
 
-def _convert_frames(binding: Binding, psk: Skeleton, rotations: np.ndarray,
-                    translations: np.ndarray, root: RootOptions):
-    """:func:`convert` on a run of frames: world rotations, driven positions, known mask."""
+def chunks(frames: int) -> list[tuple[int, int]]:
+    """``(first, end)`` of the runs of at most :data:`_CHUNK` frames converted at a time."""
+    return [(lo, min(frames, lo + _CHUNK)) for lo in range(0, frames, _CHUNK)]
+
+
+def _check_performer(binding: Binding, performer: Motion) -> None:
+    if performer.skeleton.names != binding.performer.names:
+        raise MappingError("this binding was made for another performer skeleton")
+
+
+def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: RootOptions):
+    """:func:`convert` on frames ``lo`` to ``hi`` (exclusive), on component arrays: the
+    intermediate world rotations ``(4, J, n)`` (filled where ``known``), the driven joints'
+    positions ``{j: (3, n)}`` [m] and the ``(J,)`` known mask."""
     tsk = binding.target
-    pose = fk_arrays(psk, rotations, translations, end_sites=False)
-    pq, pp = pose.rotations, pose.positions
-    F, J = rotations.shape[0], tsk.num_joints
-    world = np.empty((F, J, 4))
+    pq, pp, _ = fk_components(performer.skeleton, joint_major(performer.rotations[lo:hi]),
+                              joint_major(performer.translations[lo:hi]), end_sites=False)
+    F, J = hi - lo, tsk.num_joints
+    world = np.empty((4, J, F))
     local_t = np.broadcast_to(tsk.offsets, (J, 3)).copy()
     local_t[tsk.translated] = binding.root_translation
     mapped = binding.mapped
@@ -115,24 +122,23 @@ def _convert_frames(binding: Binding, psk: Skeleton, rotations: np.ndarray,
     # world = pq * (ref^-1 * rest_world), one product with a constant
     whole = [k for k, j in enumerate(mj) if not bones[j].children]
     if whole:
-        world[:, mj[whole]] = qmul(pq[:, pm[whole]],
-                                   qmul(ref_inv[whole], binding.rest_world[mj[whole]]))
+        world[:, mj[whole]] = cmul(pq[:, pm[whole]],
+                                   _rows(qmul(ref_inv[whole], binding.rest_world[mj[whole]])))
     by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
     if by_twist:
         js = mj[by_twist]
         ref = np.array([bones[j].reference[0] for j in js])                # (T, 3)
         now = pp[:, [bones[j].performer[0] for j in js]] - pp[:, mapped[js]]
-        swing = quat_between(ref, now)
-        axis = ref / np.linalg.norm(ref, axis=-1, keepdims=True)
-        full = qmul(pq[:, pm[by_twist]], ref_inv[by_twist])
-        twist = twist_about(qmul(qconj(swing), full), axis)
-        world[:, js] = qmul(qmul(swing, twist), binding.rest_world[js])
+        swing = cquat_between(_rows(ref), now)
+        axis = _rows(ref / np.linalg.norm(ref, axis=-1, keepdims=True))
+        full = cmul(pq[:, pm[by_twist]], _rows(ref_inv[by_twist]))
+        twist = ctwist_about(cmul(cconj(swing), full), axis)
+        world[:, js] = cmul(cmul(swing, twist), _rows(binding.rest_world[js]))
     for k, j in enumerate(mj):
         b = bones[j]
         if b.children and b.roll_by_bones:
-            now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (F, C, 3)
-            delta = _align(np.broadcast_to(b.reference, now.shape), now, True)
-            world[:, j] = qmul(delta, binding.rest_world[j])
+            now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (3, C, F)
+            world[:, j] = cmul(_align_rows(b.reference, now), binding.rest_world[j][:, None])
 
     # unmapped joints follow their parent (their local value is their bound rest one, so only
     # those above a mapped joint need a world rotation); chains share their first joint's turn
@@ -150,61 +156,82 @@ def _convert_frames(binding: Binding, psk: Skeleton, rotations: np.ndarray,
             continue
         if not binding.above_mapped[j]:
             continue
-        world[:, j] = (np.broadcast_to(binding.rest_local[j], (F, 4)) if parent < 0
-                       else qmul(world[:, parent], binding.rest_local[j]))
+        rest = binding.rest_local[j][:, None]
+        world[:, j] = rest if parent < 0 else cmul(world[:, parent], rest)
         known[j] = True
     positions = {}
     for j in binding.driven:
         ph = mapped[j]
-        disp = pp[:, ph] - binding.performer_rest_positions[ph]
         if root.mode == "absolute":
             positions[j] = pp[:, ph].copy()
-        else:
-            h, v = root.scale if root.scale is not None else (binding.hip_height_ratio,) * 2
-            scaled = disp * np.array([h, v, h])
-            if root.mode == "in-place":
-                scaled[:, [0, 2]] = 0.0
-            positions[j] = binding.rest_positions[j] + scaled
+            continue
+        disp = pp[:, ph] - binding.performer_rest_positions[ph][:, None]
+        h, v = root.scale if root.scale is not None else (binding.hip_height_ratio,) * 2
+        scaled = disp * np.array([h, v, h])[:, None]
+        if root.mode == "in-place":
+            scaled[[0, 2]] = 0.0
+        positions[j] = binding.rest_positions[j][:, None] + scaled
     return world, positions, known
+
+
+def _rows(values: np.ndarray) -> np.ndarray:
+    """Constants ``(n, c)`` (quaternions or vectors, one per joint) as component arrays
+    ``(c, n, 1)`` that broadcast over frames."""
+    return np.asarray(values, dtype=float).T[:, :, None]
+
+
+def _align_rows(reference: np.ndarray, now: np.ndarray) -> np.ndarray:
+    """:func:`binding._align` with roll by bones on component arrays: the rotation ``(4, F)``
+    taking the ``reference`` virtual bones ``(C, 3)`` (the primary first) to the bones ``now``
+    ``(3, C, F)``: the primary exactly, the roll about it to best match the others."""
+    swing = cquat_between(reference[0][:, None], now[:, 0])
+    if len(reference) < 2:
+        return swing
+    n = now[:, 0] / np.sqrt(_dot(now[:, 0], now[:, 0]))                    # (3, F)
+    a = crot(swing[:, None], _rows(reference[1:]))                          # (3, C-1, F)
+    b = now[:, 1:]
+    a = a - _dot(a, n[:, None]) * n[:, None]
+    b = b - _dot(b, n[:, None]) * n[:, None]
+    a = a / np.maximum(np.sqrt(_dot(a, a)), 1e-12)
+    b = b / np.maximum(np.sqrt(_dot(b, b)), 1e-12)
+    cross = np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                      a[0] * b[1] - a[1] * b[0]])
+    sin = np.sum(_dot(cross, n[:, None]), axis=0)
+    cos = np.sum(_dot(a, b), axis=0)
+    half = 0.5 * np.arctan2(sin, cos)
+    roll = np.concatenate([n * np.sin(half), np.cos(half)[None]])
+    return cmul(roll, swing)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of vectors as component arrays ``(3, ...)``, broadcasting."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
                 world: np.ndarray, target_dir: np.ndarray, local_t: np.ndarray) -> np.ndarray:
-    """Spread joint ``j``'s turn over ``j`` and the unmapped ``chain`` below it, then turn the
-    whole chain so that the primary child still lies along ``target_dir``. Fills ``world`` for
-    the chain's joints and returns ``j``'s world rotation."""
+    """Spread joint ``j``'s turn (``rigid``, ``(4, F)``) over ``j`` and the unmapped ``chain``
+    below it, then turn the whole chain so that the primary child still lies along
+    ``target_dir`` (``(3, F)``). Fills ``world`` (``(4, J, F)``) for the chain's joints and
+    returns ``j``'s world rotation."""
     tsk = binding.target
     parent = tsk.parents[j]
-    follow = (np.broadcast_to(binding.rest_local[j], rigid.shape) if parent < 0
-              else qmul(world[:, parent], binding.rest_local[j]))
+    rest = binding.rest_local[j][:, None]
+    follow = (np.broadcast_to(rest, rigid.shape) if parent < 0
+              else cmul(world[:, parent], rest))
     n = len(chain) + 1
-    step = qpow(qmul(rigid, qconj(follow)), 1.0 / n)
-    rots = [qmul(step, follow)]
+    step = components(qpow(interleaved(cmul(rigid, cconj(follow))), 1.0 / n))
+    rots = [cmul(step, follow)]
     for k in chain:
-        rots.append(qmul(step, qmul(rots[-1], binding.rest_local[k])))
+        rots.append(cmul(step, cmul(rots[-1], binding.rest_local[k][:, None])))
     # where the primary child ends up, relative to j
     child = binding.bones[j].children[0]
-    pos = np.zeros(rigid.shape[:-1] + (3,))
+    pos = np.zeros((3,) + rigid.shape[1:])
     for r, k in zip(rots, chain + [child]):
-        pos = pos + qrot(r, local_t[k])
-    fix = quat_between(pos, target_dir)
-    rots = [qmul(fix, r) for r in rots]
+        pos = pos + crot(r, local_t[k][:, None])
+    fix = cquat_between(pos, target_dir)
+    rots = [cmul(fix, r) for r in rots]
     for r, k in zip(rots[1:], chain):
         world[:, k] = r
     return rots[0]
 
-
-def _chain_fk(skeleton: Skeleton, local: np.ndarray, translations: np.ndarray, slot: dict,
-              joint: int):
-    """World rotations and positions of ``joint`` and its ancestors only: dicts of ``(F, ...)``."""
-    chain = [joint] + skeleton.ancestors(joint)
-    rot, pos = {}, {}
-    for k in reversed(chain):
-        t = translations[:, slot[k]] if k in slot else skeleton.offsets[k]
-        p = skeleton.parents[k]
-        if p < 0:
-            rot[k], pos[k] = local[:, k], np.broadcast_to(t, (local.shape[0], 3))
-        else:
-            rot[k] = qmul(rot[p], local[:, k])
-            pos[k] = pos[p] + qrot(rot[p], t)
-    return rot, pos

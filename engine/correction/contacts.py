@@ -1,11 +1,14 @@
-"""Automatic foot (and hand) contacts: detect where the performer plants a foot, then pin the
-target's foot there with eased constraints.
+"""Automatic foot contacts: detect where the performer plants a foot, heel and toe apart, then
+hold the target's foot there with eased constraints.
 
 Foot sliding is the first complaint of anyone who retargets: the converted foot follows the
-performer's leg directions but the target's legs have other lengths, so a planted foot drifts.
-:func:`detect_contacts` finds the performer's contacts from height and speed;
-:func:`contact_constraints` turns each into an editable position constraint on the mapped
-target joint (plus a keep-above-the-floor plane on its toe), with ramps.
+performer's leg directions but the target's legs have other lengths, so a planted foot drifts;
+and it follows the performer's foot pitch, so on a character whose ankle stands higher or lower
+above its toe the converted toe floats or sinks. :func:`detect_contacts` finds the performer's
+contacts from height and speed, per foot part (heel strike, flat, heel-off with the toe
+pivoting, toe-off); :func:`contact_constraints` holds the target's ankle and toe at the heights
+they have in the character's own rest pose above its floor (:func:`target_ground`), the toe
+where it planted while the heel rises, with ramps.
 """
 from __future__ import annotations
 
@@ -16,10 +19,19 @@ import numpy as np
 from .constraints import Constraint
 from ..kinematics import fk_arrays
 from ..motion import Motion
+from ..quaternions import qconj, qmul, qrot
 from ..skeleton import Skeleton
 
-__all__ = ["Contact", "ContactOptions", "detect_contacts", "contact_constraints",
-           "find_feet", "horizontal_drift", "estimate_floor"]
+__all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
+           "find_feet", "horizontal_drift", "estimate_floor", "target_ground",
+           "converted_ground", "PART_MIN_FRAMES", "PART_HEIGHT"]
+
+#: a part's planted run is this many frames or more (a heel strike lasts a few frames)
+PART_MIN_FRAMES = 3
+#: within a contact a part is held where it is within this share of ``ContactOptions.height``
+#: above its planted height: a heel rising off the floor is let go (heel-off) while the foot
+#: as a whole is still on the ground
+PART_HEIGHT = 1.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -44,13 +56,37 @@ class ContactOptions:
 
 @dataclass(frozen=True)
 class Contact:
-    """A detected contact: performer ``joint`` (and ``toe``) planted from ``start`` to ``end``
-    (frames, inclusive)."""
+    """A detected foot contact: performer ``joint`` (the ankle, and ``toe``) on the ground from
+    ``start`` to ``end`` (frames, inclusive), and within it the runs ``(first, last)`` where
+    each part is planted: ``heel`` (the ankle) and ``ball`` (the toe joint). A step is heel
+    strike (a heel run alone), flat (both), heel-off with the toe pivoting (a ball run alone),
+    toe-off."""
 
     joint: str
     toe: str | None
     start: int
     end: int
+    heel: tuple = ()
+    ball: tuple = ()
+
+
+@dataclass(frozen=True)
+class Ground:
+    """Where the target's feet stand: the floor and each foot joint's height above it when
+    planted.
+
+    Attributes:
+        floor: [m] the floor's height (internal +Y up).
+        heights: target joint -> [m] its height above the floor when its part is planted (its
+            height in the character's rest pose above the rest pose's floor).
+        flat: target ankle -> ``(rotation (4,), toe (3,) or None)``: the ankle's world rotation
+            with the foot flat (x, y, z, w; the rest pose's) and the vector [m] from the ankle
+            to its toe then (``None`` without a toe).
+    """
+
+    floor: float
+    heights: dict
+    flat: dict
 
 
 def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
@@ -79,9 +115,32 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
+def _close_gaps(mask: np.ndarray, gap: int) -> np.ndarray:
+    """``mask`` with its inner gaps of at most ``gap`` frames filled."""
+    mask = mask.copy()
+    for s, e in _runs(~mask):
+        if 0 < s and e < len(mask) - 1 and e - s + 1 <= gap:
+            mask[s:e + 1] = True
+    return mask
+
+
+def _part_runs(mask: np.ndarray, start: int, end: int, gap: int) -> tuple:
+    """The runs ``(first, last)`` of a part's planted ``mask`` within ``[start, end]`` (gaps
+    closed, runs of :data:`PART_MIN_FRAMES` frames or more)."""
+    inner = _close_gaps(mask[start:end + 1], gap)
+    return tuple((start + a, start + b) for a, b in _runs(inner) if b - a + 1 >= PART_MIN_FRAMES)
+
+
 def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = None,
                     options: ContactOptions | None = None) -> list[Contact]:
-    """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted)."""
+    """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted).
+
+    A part (the heel: the ankle joint; the ball: the toe joint) is planted where it is low
+    (within ``options.height`` of the stature above its planted height, the 5th percentile of
+    its height above the floor) and slow (horizontally under ``options.speed`` statures per
+    second). A foot is on the ground where either part is planted, gaps under
+    ``options.max_gap`` closed and contacts under ``options.min_duration`` dropped; each
+    contact keeps the runs where each part is held: lower still (:data:`PART_HEIGHT`)."""
     from ..describe import stature
     options = options or ContactOptions()
     sk = motion.skeleton
@@ -98,111 +157,230 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
         points.append(idx)
     low_all = np.concatenate([pos[:, idx, 1] for idx in points], axis=1)
     floor = estimate_floor(low_all)
+    gap = max(1, int(round(options.max_gap * fps)))
+    shortest = max(2, int(round(options.min_duration * fps)))
     contacts = []
     for (ankle, toe), idx in zip(feet, points):
-        planted = np.zeros(motion.num_frames, dtype=bool)
+        parts, held = [], []
         for j in idx:
             y = pos[:, j, 1] - floor
             rest = np.percentile(y, 5.0)                        # its height when planted
             vel = np.gradient(pos[:, j][:, [0, 2]], axis=0) * fps
-            speed = np.linalg.norm(vel, axis=1)
-            planted |= (y < rest + options.height * size) & (speed < options.speed * size)
-        gap = max(1, int(round(options.max_gap * fps)))
-        for s, e in _runs(~planted):
-            if 0 < s and e < len(planted) - 1 and e - s + 1 <= gap:
-                planted[s:e + 1] = True
-        shortest = max(2, int(round(options.min_duration * fps)))
+            slow = np.linalg.norm(vel, axis=1) < options.speed * size
+            parts.append((y < rest + options.height * size) & slow)
+            held.append((y < rest + PART_HEIGHT * options.height * size) & slow)
+        planted = _close_gaps(np.logical_or.reduce(parts), gap)
         for s, e in _runs(planted):
             if e - s + 1 >= shortest:
-                contacts.append(Contact(ankle, toe, s, e))
+                heel = _part_runs(held[0], s, e, gap)
+                ball = _part_runs(held[1], s, e, gap) if toe else ()
+                contacts.append(Contact(ankle, toe, s, e, heel, ball))
     contacts.sort(key=lambda c: (c.start, c.joint))
     return contacts
 
 
+def target_ground(target: Motion, feet: list[tuple[str, str | None]], *,
+                  reference: str | int = "auto", floor: float | None = None,
+                  sole: float | None = None) -> Ground:
+    """The :class:`Ground` of a character from its feet ``(ankle, toe)`` (target joint names).
+
+    The feet stand as in the character's reference pose
+    (:func:`~engine.conversion.binding.reference_pose`, as the binding chooses it); where that
+    pose is a frame of a clip (a BVH target whose zero pose does not stand), each foot stands
+    as on the frame of the clip where it is lowest, and the floor is the clip's (the floor
+    under its feet), so that a foot raised on the reference frame is not taken as planted.
+
+    A foot joint's planted height is its height above the floor; the rest floor is the lowest
+    point of the feet (``sole`` [m], the lowest mesh vertex of the feet in the reference pose,
+    where the character has a mesh; else the lowest foot joint or End Site). The floor is at
+    ``floor`` [m] where given, else where the character stands."""
+    from ..conversion.binding import reference_pose
+    sk = target.skeleton
+    rot, tra, label = reference_pose(target, reference)
+    if label.startswith("frame"):
+        pose = fk_arrays(sk, target.rotations, target.translations, end_sites=True)
+    else:
+        pose = fk_arrays(sk, rot[None], tra[None], end_sites=True)
+    y = pose.positions[..., 1]
+    ends = pose.end_positions[..., 1]
+    joints, lows = {}, []
+    for ankle, toe in feet:
+        idx = [sk.index[n] for n in (ankle, toe) if n]
+        below = {k for k in range(sk.num_joints) if k in idx or set(sk.ancestors(k)) & set(idx)}
+        sites = [k for k, site in enumerate(sk.end_sites) if site.parent in below]
+        joints[ankle] = idx
+        lows.append(np.concatenate([y[:, idx], ends[:, sites]], axis=1).min(axis=1))
+    if not lows:
+        return Ground(0.0 if floor is None else float(floor), {}, {})
+    # each foot as on the frame where it is lowest; the floor under the lowest of them
+    chosen = [int(np.argmin(y[:, joints[ankle]].sum(axis=1))) for ankle, _ in feet]
+    lowest = min(float(low[f]) for low, f in zip(lows, chosen))
+    rest_floor = lowest if sole is None else min(float(sole), lowest)
+    heights, flat = {}, {}
+    for (ankle, toe), f in zip(feet, chosen):
+        for j in joints[ankle]:
+            heights[sk.names[j]] = float(y[f, j]) - rest_floor
+        a = sk.index[ankle]
+        flat[ankle] = (pose.rotations[f, a],
+                       pose.positions[f, sk.index[toe]] - pose.positions[f, a] if toe else None)
+    return Ground(rest_floor if floor is None else float(floor), heights, flat)
+
+
+def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
+                     floor: float | None = None) -> Ground:
+    """A :class:`Ground` from the direct conversion alone, for a caller without the character's
+    rest pose: each foot flat as on the frame where it is lowest, on the floor under the lowest
+    of them (or on ``floor``)."""
+    sk = composed.skeleton
+    pose = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
+    pos = pose.positions
+    chosen = []
+    for ankle, toe in feet:
+        idx = [sk.index[n] for n in (ankle, toe) if n]
+        chosen.append((idx, int(np.argmin(pos[:, idx, 1].sum(axis=1)))))
+    ground = min(float(pos[f, idx, 1].min()) for idx, f in chosen)
+    heights, flat = {}, {}
+    for (ankle, toe), (idx, f) in zip(feet, chosen):
+        for j in idx:
+            heights[sk.names[j]] = float(pos[f, j, 1]) - ground
+        a = sk.index[ankle]
+        flat[ankle] = (pose.rotations[f, a], pos[f, sk.index[toe]] - pos[f, a] if toe else None)
+    return Ground(ground if floor is None else float(floor), heights, flat)
+
+
+def _heading(converted: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """The turn (x, y, z, w) about +Y from the rest foot's heading (the ankle-to-toe vector
+    ``rest`` (3,)) to the converted foot's (``converted`` (n, 3), its median)."""
+    d = np.median(converted[:, [0, 2]], axis=0)
+    angle = np.arctan2(d[0], d[1]) - np.arctan2(rest[0], rest[2])
+    return np.array([0.0, np.sin(angle / 2), 0.0, np.cos(angle / 2)])
+
+
+def _spans(runs: list[tuple[str, int, int]], ramp: int, F: int) -> list[tuple[int, int]]:
+    """``(smooth_in, smooth_out)`` of each run ``(joint, start, end)``: at most ``ramp`` frames
+    either side, and never over the next run of the same joint (they meet halfway)."""
+    spans = [[max(0, s - ramp), min(F - 1, e + ramp)] for _, s, e in runs]
+    previous: dict[str, int] = {}
+    for i in sorted(range(len(runs)), key=lambda k: runs[k][1]):
+        joint, s, _ = runs[i]
+        if joint in previous:
+            k = previous[joint]
+            end = runs[k][2]
+            half = max(0, (s - end - 1) // 2)
+            spans[i][0] = max(spans[i][0], s - half)
+            spans[k][1] = min(spans[k][1], end + half)
+        previous[joint] = i
+    return [tuple(x) for x in spans]
+
+
 def contact_constraints(contacts: list[Contact], performer: Motion, composed: Motion,
                         pairs: dict[str, str], options: ContactOptions | None = None, *,
-                        floor: float | None = None, priority: int = 1) -> list[Constraint]:
-    """Constraints that pin the target's feet during the performer's ``contacts``.
+                        floor: float | None = None, ground: Ground | None = None,
+                        priority: int = 1) -> list[Constraint]:
+    """Constraints that hold the target's feet during the performer's ``contacts``.
 
-    ``pairs``: target joint -> performer joint (the correspondence). Each contact gives a
-    position constraint on the target joint mapped to the performer's ankle: horizontally at
-    the converted foot's median position over the contact, vertically at the target's planted
-    ankle height (measured above the ground the converted feet stand on) above ``floor``
-    [m, the target's own vertical axis; that ground when None], plus the performer's own lift
-    above its planted height, scaled to the target. Where the toe is
-    mapped, a plane constraint keeps it on or above the floor over the same range.
+    ``pairs``: target joint -> performer joint (the correspondence). The foot is held whole
+    while flat and by its toe while it pivots:
+
+    * a heel run pins the target ankle at its planted height above the floor, horizontally
+      at the converted ankle's median position over the run; where the target has no mapped
+      toe the ankle is pinned over the whole contact and its world orientation is held too
+      (the converted orientation at the contact's middle frame);
+    * a ball run pins the target toe at its planted height: where the run overlaps a heel run
+      (the flat foot), at the flat foot's toe (the ankle's goal plus the foot's horizontal
+      length along the converted foot's heading), so that it stays there while the heel
+      rises; else at the converted toe's median position;
+    * on every frame each held foot joint stays at or above its planted height (a one-sided
+      plane: the floor rule).
+
+    ``ground``: where the feet stand (:func:`target_ground`); by default the direct
+    conversion's own (:func:`converted_ground`, on ``floor`` where given).
     """
-    from ..describe import stature
     options = options or ContactOptions()
     by_performer = {p: t for t, p in pairs.items()}
     sk = composed.skeleton
     F = composed.num_frames
-    fps = composed.fps
-    ramp = max(1, int(round(options.ramp * fps)))
-    t_pos = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False).positions
-    p_pos = fk_arrays(performer.skeleton, performer.rotations, performer.translations,
-                      end_sites=False).positions
-    feet_t = sorted({by_performer[c.joint] for c in contacts if c.joint in by_performer})
-    if not feet_t:
+    ramp = max(1, int(round(options.ramp * composed.fps)))
+    used = [c for c in contacts if c.joint in by_performer]
+    if not used:
         return []
-    # the ground is under the lowest point of the feet: the toes where they are mapped
-    low_t = feet_t + sorted({by_performer[c.toe] for c in contacts if c.toe in by_performer})
-    t_low = t_pos[:, [sk.index[n] for n in low_t], 1]
-    ground = estimate_floor(t_low)              # where the converted feet stand
-    t_floor = ground if floor is None else float(floor)
-    p_feet = sorted({c.joint for c in contacts} | {c.toe for c in contacts if c.toe})
-    p_low = p_pos[:, [performer.skeleton.index[n] for n in p_feet], 1]
-    p_floor = estimate_floor(p_low)
-    ratio = max(stature(composed), 0.1) / max(stature(performer), 0.1)
-    # ramps: at most `ramp` frames, and never over the next contact of the same joint
-    spans: dict[int, list[int]] = {}
-    order = sorted(range(len(contacts)), key=lambda i: contacts[i].start)
-    previous: dict[str, int] = {}
-    for i in order:
-        c = contacts[i]
-        target = by_performer.get(c.joint)
-        if target is None:
-            continue
-        lo = max(0, c.start - ramp)
-        if target in previous:
-            before = contacts[previous[target]]
-            half = max(0, (c.start - before.end - 1) // 2)
-            lo = max(lo, c.start - half)
-            spans[previous[target]][1] = min(spans[previous[target]][1], before.end + half)
-        spans[i] = [lo, min(F - 1, c.end + ramp)]
-        previous[target] = i
-    # each joint's planted height, once per joint (not per contact: linear in the clip)
-    planted_t = {t: max(0.0, np.percentile(t_pos[:, sk.index[t], 1] - ground, 5.0))
-                 for t in {by_performer[contacts[i].joint] for i in spans}}
-    planted_p = {p: np.percentile(p_pos[:, performer.skeleton.index[p], 1] - p_floor, 5.0)
-                 for p in {contacts[i].joint for i in spans}}
-    out = []
-    for i in order:
-        if i not in spans:
-            continue
-        c = contacts[i]
-        target = by_performer[c.joint]
-        smooth_in, smooth_out = spans[i]
-        j = sk.index[target]
-        pj = performer.skeleton.index[c.joint]
-        window = slice(c.start, c.end + 1)
-        lift = float(np.median(p_pos[window, pj, 1] - p_floor)) - planted_p[c.joint]
-        goal = np.median(t_pos[window, j], axis=0)
-        goal[1] = t_floor + planted_t[target] + max(lift, 0.0) * ratio
-        name = f"contact {target} {c.start}-{c.end}"
-        out.append(Constraint(joint=target, kind="position", goal={"point": goal},
-                              smooth_in=smooth_in, start=c.start, end=c.end,
-                              smooth_out=smooth_out, priority=priority, name=name, auto=True,
-                              meta={"source": "contact", "performer_joint": c.joint}))
+    t_pos = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
+    feet_t = sorted({(by_performer[c.joint], by_performer.get(c.toe) if c.toe else None)
+                     for c in used}, key=lambda f: f[0])
+    if ground is None:
+        ground = converted_ground(composed, feet_t, floor=floor)
+    runs = []          # (target joint, what, start, end, smooth_in, part, contact, goal)
+    for c in used:
+        ankle = by_performer[c.joint]
         toe = by_performer.get(c.toe) if c.toe else None
-        if toe is not None:
-            out.append(Constraint(joint=toe, kind="plane",
-                                  goal={"point": [0.0, t_floor, 0.0], "normal": [0, 1, 0],
-                                        "side": "above"},
-                                  smooth_in=smooth_in, start=c.start, end=c.end,
-                                  smooth_out=smooth_out, priority=priority,
-                                  name=f"floor {toe} {c.start}-{c.end}", auto=True,
-                                  meta={"source": "contact", "performer_joint": c.toe}))
+        a = sk.index[ankle]
+        frames = slice(c.start, c.end + 1)
+        if toe is None:
+            # without a toe the ankle holds the whole contact, its orientation too
+            goal = np.median(t_pos.positions[frames, a], axis=0)
+            goal[1] = ground.floor + ground.heights[ankle]
+            turn = t_pos.rotations[(c.start + c.end) // 2, a]
+            runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal),
+                     (ankle, "turn", c.start, c.end, None, None, c, turn)]
+            continue
+        t = sk.index[toe]
+        rest_turn, rest_toe = ground.flat[ankle]
+        # the flat foot's placement: the ankle at its planted height where the converted heel
+        # stands, turned from the rest pose's flat foot to the converted foot's heading; the
+        # toe where that puts it (a tiptoe contact: where the converted toe stands)
+        turn = qmul(_heading(t_pos.positions[frames, t] - t_pos.positions[frames, a],
+                             rest_toe), rest_turn)
+        offset = qrot(qmul(turn, qconj(rest_turn)), rest_toe)
+        heel_frames = np.concatenate([np.arange(s, e + 1) for s, e in c.heel]) if c.heel \
+            else np.arange(c.start, c.end + 1)
+        if c.heel:
+            ankle_at = np.median(t_pos.positions[heel_frames, a], axis=0)
+            ankle_at[1] = ground.floor + ground.heights[ankle]
+            toe_at = ankle_at + offset
+        else:
+            toe_at = np.median(t_pos.positions[frames, t], axis=0)
+            toe_at[1] = ground.floor + ground.heights[toe]
+        for s, e in c.heel:
+            runs.append((ankle, "pin", s, e, None, "heel", c, ankle_at))
+        for s, e in c.ball:
+            flats = [(max(s, hs), min(e, he)) for hs, he in c.heel if hs <= e and s <= he]
+            for fs, fe in flats:
+                runs.append((ankle, "turn", fs, fe, None, None, c, turn))
+            # from the flat foot on, the toe is where the flat foot puts it: held from there,
+            # it needs no ramp in (a ramp in would pull it against the flat foot's)
+            first = flats[0][0] if flats else None
+            runs.append((toe, "pin", s if first is None else first, e, first, "toe", c,
+                         toe_at))
+    spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
+    out = []
+    for (joint, _, s, e, first, part, c, goal), (lo, hi) in zip(runs, spans):
+        lo = lo if first is None else first
+        performer_joint = c.toe if part == "toe" else c.joint
+        if part is not None:
+            out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
+                                  smooth_in=lo, start=s, end=e, smooth_out=hi,
+                                  priority=priority, name=f"contact {joint} {s}-{e}", auto=True,
+                                  meta={"source": "contact", "part": part,
+                                        "performer_joint": performer_joint}))
+        else:
+            # one level lower: while it eases in or out it yields to the pins and the floor
+            out.append(Constraint(joint=joint, kind="orientation", goal={"quaternion": goal},
+                                  smooth_in=lo, start=s, end=e, smooth_out=hi,
+                                  priority=priority + 1, name=f"foot flat {joint} {s}-{e}",
+                                  auto=True, meta={"source": "contact",
+                                                   "performer_joint": performer_joint}))
+    # the floor rule: each held foot joint at or above its planted height over the floor,
+    # on every frame (one-sided: it acts only where the joint would go lower)
+    for joint in sorted({r[0] for r in runs if r[5] is not None}):
+        height = ground.floor + ground.heights[joint]
+        out.append(Constraint(joint=joint, kind="plane",
+                              goal={"point": [0.0, height, 0.0], "normal": [0, 1, 0],
+                                    "side": "above"},
+                              smooth_in=0, start=0, end=F - 1, smooth_out=F - 1,
+                              priority=priority, name=f"floor {joint}", auto=True,
+                              meta={"source": "contact", "floor": True,
+                                    "performer_joint": pairs[joint]}))
+    out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
 
 

@@ -15,10 +15,13 @@ the key postures. Pass two, as section 3.3 says:
   ``ramp_goal``);
 * active range: the goal itself;
 * output ramp ``(end, smooth_out]``: the joint values of the constrained joint's chain, from
-  the effector up to the root, are interpolated between the pass-one postures at ``end`` and at
-  ``smooth_out``. The interpolated values replace the attraction posture on that chain, so
-  where another constraint is still active its IK pulls towards them rather than fighting
-  them, and where none is they are the result.
+  the effector up to the root, are interpolated between the posture at ``end`` and the
+  composed motion at ``smooth_out``; the other joints corrected at ``end`` (other
+  constraints' chains) keep their correction there, fading out over the ramp. These values
+  replace the attraction posture, so where another constraint is still active its IK pulls
+  towards them rather than fighting them, and where none is they are the result. (The paper
+  interpolates the chain towards the pass-one posture at ``smooth_out``; around other
+  constraints that pops, see :func:`_output_ramps`.)
 
 Frames that share the same set of tasks are solved together as one vectorised batch, each
 starting from its attraction posture (the converted motion). With ``warm_start=True`` frames
@@ -29,8 +32,9 @@ the tasks (a test checks it), and the batch is many times faster.
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
 
 The steps, in order: :func:`_check` (the constraints that apply), :func:`_pass_one` (key
-postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two`, and
-:func:`_correction` (the displacement and the corrected motion).
+postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two` (once more where
+a constraint is released inside another one's ramp, its fade starting from the pass-two
+posture), and :func:`_correction` (the displacement and the corrected motion).
 """
 from __future__ import annotations
 
@@ -56,6 +60,10 @@ __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FR
 #: same as the whole batch's: every frame is solved on its own).
 CHUNK_FRAMES = 2048
 
+#: a joint whose rotation (quaternion components) never moves further than this from its
+#: first frame's is held still by the conversion (rounding aside)
+STILL = 1e-12
+
 
 @dataclass(frozen=True, eq=False)
 class Correction:
@@ -79,12 +87,15 @@ class Correction:
     iterations: np.ndarray
     seconds: dict = field(default_factory=dict)
 
-    def displacement_map(self, *, rotation_tolerance: float = np.radians(0.02),
-                         translation_tolerance: float = 1e-4) -> DisplacementMap:
-        """The correction as editable curves, keys reduced within the tolerances."""
+    def displacement_map(self, *, position_tolerance: float = 1e-4,
+                         rotation_tolerance: float = np.radians(0.02)) -> DisplacementMap:
+        """The correction as editable curves: fitted Hermite keys and slopes
+        (:meth:`DisplacementMap.from_dense`), each joint's channels within
+        ``position_tolerance`` [m] over its lever (at most ``rotation_tolerance`` [rad]),
+        the root's within ``position_tolerance``; exactly zero where the correction is."""
         return DisplacementMap.from_dense(self.motion.skeleton, self.rotvecs, self.root,
-                                          rotation_tolerance=rotation_tolerance,
-                                          translation_tolerance=translation_tolerance)
+                                          position_tolerance=position_tolerance,
+                                          rotation_tolerance=rotation_tolerance)
 
 
 class Residuals(Mapping):
@@ -128,6 +139,11 @@ def _check(constraints, composed: Motion) -> list:
         if c.smooth_out > F - 1:
             raise ConstraintError(f"constraint {c.name or c.joint!r}: smooth_out {c.smooth_out} "
                                   f"is past the last frame ({F - 1})")
+        if c.smooth_in == c.start == c.end == c.smooth_out and 0 < c.start < F - 1:
+            raise ConstraintError(
+                f"constraint {c.name or c.joint!r}: the range {list(c.range)} holds the joint on "
+                "one frame with no ramps, so it would jump there and back; give it ramps "
+                "(smooth_in < start or end < smooth_out) or a longer range", "range")
         out.append(c)
     return out
 
@@ -160,10 +176,6 @@ def _assign_slots(entries, cons, sk, F) -> list[dict]:
     return slots
 
 
-def _chain(sk, joint: int) -> np.ndarray:
-    return np.array(sorted(sk.ancestors(joint) + [joint]), dtype=np.intp)
-
-
 @dataclass(frozen=True, eq=False)
 class _Problem:
     """What every solve of one :func:`enforce` shares: the composed motion (the attraction
@@ -176,6 +188,7 @@ class _Problem:
     progress: object
     cancel: object
     chunk_frames: int = CHUNK_FRAMES
+    locked: frozenset = frozenset()
 
     @property
     def skeleton(self):
@@ -188,6 +201,18 @@ class _Problem:
     def check_cancel(self) -> None:
         if self.cancel is not None and self.cancel():
             raise MotionComposerError("the correction was cancelled")
+
+
+def _still_joints(composed: Motion) -> frozenset:
+    """Joints the correction does not turn: those the composed motion holds still while
+    others move (a ground-level root node, a zero-length hip joint). Turning them would
+    animate what the conversion leaves still (and a root node on the floor turns the whole
+    body about a far pivot: the cheapest way for the solver, a pop for the animator)."""
+    rot = composed.rotations
+    if len(rot) < 2:
+        return frozenset()
+    still = np.all(np.abs(rot - rot[:1]) <= STILL, axis=(0, 2))
+    return frozenset() if still.all() else frozenset(np.flatnonzero(still).tolist())
 
 
 def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
@@ -239,7 +264,7 @@ def _solve_in_chunks(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
         f = frames[part]
         rot[f], tra[f], res[part], it[part] = solve_frames(
             problem.skeleton, [task.take(part) for task in tasks], rot[f], tra[f],
-            attraction_rot[f], attraction_tra[f, 0], problem.options)
+            attraction_rot[f], attraction_tra[f, 0], problem.options, problem.locked)
         problem.check_cancel()
     return res, it
 
@@ -259,7 +284,8 @@ def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_
             r0, t0 = rot[f:f + 1], tra[f:f + 1]
         r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
             problem.skeleton, [task.take([k]) for task in tasks], r0, t0,
-            attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options)
+            attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options,
+            problem.locked)
         rot[f], tra[f] = r[0], t[0]
         if problem.cancel is not None and k % 64 == 0:
             problem.check_cancel()
@@ -310,36 +336,73 @@ def _input_ramps(problem: _Problem, rot1, tra1) -> list:
     return entries
 
 
+def _chain(sk, joint: int) -> np.ndarray:
+    return np.array(sorted(sk.ancestors(joint) + [joint]), dtype=np.intp)
+
+
 def _output_ramps(problem: _Problem, rot1, tra1):
-    """The attraction posture over the output ramps ``(end, smooth_out)``: the constrained
-    joint's chain interpolated between the pass-one postures at ``end`` and ``smooth_out``.
-    Returns the attraction rotations and translations and the frames they changed."""
+    """The attraction posture over the output ramps ``(end, smooth_out)``.
+
+    On the constrained joint's chain the joint values are interpolated from the posture at
+    ``end`` to the composed motion at ``smooth_out``, the posture every frame after the ramp
+    is solved from (the pass-one posture at ``smooth_out``, as the paper has it, would carry
+    the corrections of the constraints active there, which their own tasks then add once
+    more: a jump at ``smooth_out``). The other joints the posture at ``end`` corrects (other
+    constraints' chains) keep that correction, fading out linearly over the ramp, so that the
+    constraints still active start from where they were instead of sharing their correction
+    anew among the joints the released one held (a jump at ``end``). Where ramps overlap, the
+    one that faded least shapes a frame. ``rot1``, ``tra1``: the posture whose values at
+    ``end`` the ramps start from. Returns the attraction rotations and translations and the
+    frames they changed."""
     sk, F = problem.skeleton, problem.num_frames
-    attraction_rot = problem.composed.rotations.copy()
-    attraction_tra = problem.composed.translations.copy()
+    composed = problem.composed
+    attraction_rot = composed.rotations.copy()
+    attraction_tra = composed.translations.copy()
     touched = np.zeros(F, dtype=bool)
+    held = np.zeros(F)                      # the share of its posture at end a frame keeps
     for c in problem.cons:
         if c.smooth_out > c.end + 1:
-            chain = _chain(sk, sk.index[c.joint])
             frames = np.arange(c.end + 1, c.smooth_out)
-            u = ((frames - c.end) / (c.smooth_out - c.end))[:, None]
-            a, b = rot1[c.end, chain], rot1[c.smooth_out, chain]
-            steps = qpow_many(qmul(b, qconj(a)), u[:, 0])                     # (n, C, 4)
+            u = (frames - c.end) / (c.smooth_out - c.end)
+            more = 1.0 - u > held[frames]
+            frames, u = frames[more], u[more]
+            if not len(frames):
+                continue
+            chain = _chain(sk, sk.index[c.joint])
+            a, b = rot1[c.end, chain], composed.rotations[c.smooth_out, chain]
+            steps = qpow_many(qmul(b, qconj(a)), u)                               # (n, C, 4)
             attraction_rot[frames[:, None], chain[None, :]] = qnormalize(qmul(steps, a))
-            root_a, root_b = tra1[c.end, 0], tra1[c.smooth_out, 0]
-            attraction_tra[frames, 0] = root_a + (root_b - root_a) * u
+            others = np.flatnonzero(np.any(rot1[c.end] != composed.rotations[c.end], axis=-1))
+            others = np.setdiff1d(others, chain)
+            if len(others):
+                offset = qmul(rot1[c.end, others], qconj(composed.rotations[c.end, others]))
+                fade = qpow_many(offset, 1.0 - u)                                 # (n, O, 4)
+                attraction_rot[frames[:, None], others[None, :]] = qnormalize(
+                    qmul(fade, composed.rotations[frames[:, None], others[None, :]]))
+            root_a, root_b = tra1[c.end, 0], composed.translations[c.smooth_out, 0]
+            attraction_tra[frames, 0] = root_a + (root_b - root_a) * u[:, None]
+            held[frames] = 1.0 - u
             touched[frames] = True
     return attraction_rot, attraction_tra, touched
 
 
-def _pass_two(problem: _Problem, rot1, tra1):
+def _overlapping_releases(cons) -> bool:
+    """Whether a constraint ends inside another one's output ramp (or input ramp or active
+    range: where pass two's posture differs from pass one's)."""
+    ends = [c.end for c in cons if c.smooth_out > c.end + 1]
+    return any(d.smooth_in <= e <= d.smooth_out and not d.start <= e <= d.end
+               for e in ends for d in cons)
+
+
+def _pass_two(problem: _Problem, rot1, tra1, released):
     """The result: the active ranges and the input ramps solved against the attraction
-    posture that the output ramps shape. Returns rot, tra, residuals, iterations and the
+    posture that the output ramps shape, each fading out from the posture ``released``
+    (``(rot, tra)``) has at its ``end``. Returns rot, tra, residuals, iterations and the
     frames it changed."""
     entries = []
     for active, ramp in zip(_active_entries(problem.cons), _input_ramps(problem, rot1, tra1)):
         entries += [active] if ramp is None else [active, ramp]
-    attraction_rot, attraction_tra, touched = _output_ramps(problem, rot1, tra1)
+    attraction_rot, attraction_tra, touched = _output_ramps(problem, *released)
     rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
     changed = touched.copy()
     for _, frames, _ in entries:
@@ -392,7 +455,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
-    problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames)
+    problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
+                       _still_joints(composed))
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1 = _pass_one(problem)
@@ -400,7 +464,11 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1)
+    rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot1, tra1))
+    if _overlapping_releases(problem.cons):
+        # a constraint released while another one's output ramp is still fading lets go of
+        # the posture pass two solved there, not of pass one's: solved again from it
+        rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot2, tra2))
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)

@@ -267,12 +267,12 @@ def _checked_limits(limits) -> tuple:
 class _Structure:
     """What a task set needs from the skeleton: the unknown joints and each task's chain."""
 
-    def __init__(self, skeleton: Skeleton, tasks: list[Task]):
+    def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset()):
         self.tasks = tasks
         moving: set[int] = set()
         chains = []
         for t in tasks:
-            chain = t.kind.chain(skeleton, t.joint)
+            chain = [j for j in t.kind.chain(skeleton, t.joint) if j not in locked]
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
@@ -319,13 +319,21 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
     ``sticky``: ``(B, T)`` one-sided tasks already activated in this solve stay active (held
     on the plane) so that the attraction cannot pull them back through it on every other
-    iteration; the array is updated in place.
+    iteration, except where a position task holds the same joint (which may hold it clear
+    of the plane); the array is updated in place.
     """
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure.fk_joints, rot, tra, slot)
     err = np.zeros((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
     parent_m = {}
+    # frames where a joint's position is pinned by a task: a one-sided task on that joint does
+    # not stick there (the pin decides, and it may hold the joint clear of the plane)
+    pinned: dict[int, np.ndarray] = {}
+    for task in structure.tasks:
+        if task.kind.fixed_point:
+            weight = task.weight if select is None else task.weight[select]
+            pinned[task.joint] = pinned.get(task.joint, np.zeros(B, dtype=bool)) | (weight > 0)
     for ti, (task, chain, r0) in enumerate(zip(structure.tasks, structure.chains,
                                                structure.row0)):
         e = task.joint
@@ -345,7 +353,7 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
         on = task.weight > 0
         active = on & task.kind.active(task.goal, state)
         if sticky is not None:
-            active |= on & sticky[:, ti]
+            active |= on & sticky[:, ti] & ~pinned.get(e, np.zeros(B, dtype=bool))
             sticky[:, ti] |= active
         rows = slice(r0, r0 + task.rows)
         err[:, rows] = np.where(active[:, None], task.kind.error(task.goal, state), 0.0)
@@ -385,7 +393,8 @@ class _Rows:
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
                  attraction_rot: np.ndarray, attraction_root: np.ndarray,
-                 options: IKOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 options: IKOptions, locked=frozenset()
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of frames that share ``tasks``.
 
     Each iteration: the tasks' errors at the current posture; a step that restores the
@@ -401,6 +410,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             the root's is an unknown).
         attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
         options: the settings; ``options.scale`` must be set.
+        locked: joints whose rotation is no unknown (they stay at their attraction posture).
 
     Returns:
         ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
@@ -411,7 +421,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     rot = np.array(rot, dtype=float)
     tra = np.array(tra, dtype=float)
     B = rot.shape[0]
-    structure = _Structure(skeleton, tasks)
+    structure = _Structure(skeleton, tasks, locked)
     rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints

@@ -1,4 +1,4 @@
-"""File formats: BVH (:mod:`.bvh`), glTF 2.0 / GLB characters (:mod:`.gltf`) and FBX
+"""File formats: BVH (:mod:`.bvh`), glTF 2.0 / GLB characters (:mod:`.gltf`) and FBX scenes
 (:mod:`.fbx`), and the one place that decides which of them a file is.
 
 :data:`FORMATS` is the registry: per format its name, the suffixes it writes, a sniffer of a
@@ -8,9 +8,13 @@ package reads and writes through the functions here and never looks at a suffix 
 * reading goes by **content**, never by the file's name: BVH is text starting with
   ``HIERARCHY`` (after an optional UTF-8 byte-order mark and blank space), glTF JSON is a JSON
   object with an ``"asset"`` member, GLB starts with the magic ``b"glTF"``. So a ``.vrm``
-  avatar (a GLB) reads as glTF and a BVH saved as ``.txt`` reads as BVH. Only the first
-  :data:`HEAD_BYTES` bytes are looked at. FBX is recognised and refused (not supported yet);
-  anything else raises :class:`~engine.errors.UnknownFormatError` naming the formats known.
+  avatar (a GLB) reads as glTF and a BVH saved as ``.txt`` reads as BVH. FBX is binary
+  (``Kaydara FBX Binary``) or ASCII text (a ``; FBX`` comment or ``FBXHeaderExtension``). Only
+  the first :data:`HEAD_BYTES` bytes are looked at; anything else raises
+  :class:`~engine.errors.UnknownFormatError` naming the formats known.
+* an FBX file is a character (its bind pose is :func:`read_motion`'s target) that may hold
+  takes: :func:`read_performer` (and ``take=NAME`` anywhere) picks one, by default the first
+  that moves a joint.
 * writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``); any other
   suffix raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format`
   raises before any work is done.
@@ -24,15 +28,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import (ExportError, FileFormatError, GLTFError, UnknownFormatError,
+from ..errors import (ExportError, FBXError, FileFormatError, GLTFError, UnknownFormatError,
                       UnsupportedFormatError)
 from ..motion import Motion
 from .bvh import read_bvh, write_bvh
+from .fbx.scene import read_fbx, take_motion
 from .fbx.write import write_fbx
 from .gltf import Character, read_gltf, write_gltf
 
-__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff",
-           "read_motion", "read_performer", "read_character", "output_format", "write_motion",
+__all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff", "read_motion",
+           "read_performer", "read_character", "output_format", "write_motion",
            "output_suffixes", "with_output_suffix", "open_filters", "save_filters"]
 
 #: how many bytes of a file sniffing reads (a glTF JSON's ``"asset"`` member is looked for
@@ -63,10 +68,13 @@ class Format:
         write: ``write(motion, path, character, channels)``; ``character`` (may be ``None``)
             gives the mesh and skin of a format that holds them and is ignored by one that
             does not; ``channels`` is :func:`~engine.formats.bvh.format_bvh`'s (``"all"`` or
-            ``"rotation"``), BVH's only.
+            ``"rotation"``), BVH's only; ``None`` for a format that is only read.
         motion: the format holds an animation.
         mesh: the format holds a character with a skinned mesh; its :attr:`read_motion` is
             the character's bind pose (``Character.rest_motion()``), a target, not a capture.
+        read_take: ``read_take(path, take=None) -> Motion``: the named take of a character
+            file that holds animations (FBX), by default its first, a performer clip; ``None``
+            for a format without takes.
     """
 
     name: str
@@ -76,9 +84,10 @@ class Format:
     sniff: Callable[[bytes], bool]
     read_motion: Callable[..., Motion]
     read_character: Callable[[str], Character] | None
-    write: Callable[[Motion, str, Character | None, str], None]
+    write: Callable[[Motion, str, Character | None, str], None] | None
     motion: bool
     mesh: bool
+    read_take: Callable[..., Motion] | None = None
 
 
 # --------------------------------------------------------------------------- signatures
@@ -138,15 +147,23 @@ def _write_fbx(motion: Motion, path, character: Character | None, channels: str)
     write_fbx(motion, path, character=character)
 
 
-def _fbx_not_read(head: bytes) -> bool:
-    """FBX is written, not read yet: its entry claims no file, so :func:`sniff` refuses FBX
-    content by name (:func:`_is_fbx`)."""
-    return False
+def _fbx_options(path, bvh_overrides: dict) -> None:
+    if bvh_overrides:
+        raise FBXError(f"{', '.join(sorted(bvh_overrides))} apply to BVH files only; an FBX "
+                       "file states its units and axes (GlobalSettings)", path)
 
 
-def _read_fbx(path, **bvh_overrides) -> Motion:
-    raise UnsupportedFormatError("FBX is not supported yet; export it from your 3D tool as "
-                                 "BVH (a motion) or glTF/GLB (a character)", path)
+def _fbx_rest_motion(path, take: str | None = None, **bvh_overrides) -> Motion:
+    """An FBX character's bind pose (one frame), or its take ``take`` when named."""
+    _fbx_options(path, bvh_overrides)
+    character = read_fbx(path)
+    return character.rest_motion() if take is None else take_motion(character, take)
+
+
+def _fbx_take(path, take: str | None = None, **bvh_overrides) -> Motion:
+    """An FBX file's take ``take`` (by default its first), a performer clip."""
+    _fbx_options(path, bvh_overrides)
+    return take_motion(read_fbx(path), take)
 
 
 BVH = Format("BVH", "BVH motion", (".bvh",), (), _is_bvh, read_bvh, None, _write_bvh,
@@ -155,9 +172,8 @@ GLTF = Format("glTF", "glTF JSON", (".gltf",), (), _is_gltf_json, _gltf_rest_mot
               read_gltf, _write_gltf, motion=True, mesh=True)
 GLB = Format("GLB", "GLB, binary glTF", (".glb",), (".vrm",), _is_glb, _gltf_rest_motion,
              read_gltf, _write_gltf, motion=True, mesh=True)
-
-FBX = Format("FBX", "FBX binary 7.4", (".fbx",), (), _fbx_not_read, _read_fbx, None,
-             _write_fbx, motion=True, mesh=True)
+FBX = Format("FBX", "FBX scene", (".fbx",), (), _is_fbx, _fbx_rest_motion, read_fbx,
+             _write_fbx, motion=True, mesh=True, read_take=_fbx_take)
 
 #: every format read and written, in the order dialogs list them
 FORMATS: tuple[Format, ...] = (BVH, GLB, GLTF, FBX)
@@ -217,46 +233,59 @@ def sniff(path: str | os.PathLike) -> Format:
 
     Raises:
         FileFormatError: for a missing file, a folder or a device (before reading it).
-        UnsupportedFormatError: for FBX.
-        UnknownFormatError: for anything else that is none of :data:`FORMATS`.
+        UnknownFormatError: for anything that is none of :data:`FORMATS`.
     """
     head = _head(path)
     for fmt in FORMATS:
         if fmt.sniff(head):
             return fmt
-    if _is_fbx(head):
-        raise UnsupportedFormatError("FBX is not supported yet; export it from your 3D tool as "
-                                     "BVH (a motion) or glTF/GLB (a character)", path)
     raise _unknown(head, path)
 
 
+def _without_take(options: dict) -> dict:
+    """The reader options of a format without takes: a ``take`` names one of an FBX file's
+    takes, and a file with one motion (BVH, glTF) has nothing to choose (a project keeps
+    the name; the command line refuses ``--take`` for such a file)."""
+    options.pop("take", None)
+    return options
+
+
 def read_motion(path: str | os.PathLike, **bvh_overrides) -> Motion:
-    """The motion a file holds: a BVH's clip, or a glTF character's bind pose (one frame).
+    """The motion a file holds: a BVH's clip, or a glTF or FBX character's bind pose (one
+    frame); ``take=NAME`` gives an FBX file's take instead.
 
     ``bvh_overrides`` (``units``, ``scale``, ``up_axis``, ``position_mode``) go to
-    :func:`~engine.formats.bvh.read_bvh`; given for a glTF file they raise
-    :class:`~engine.errors.GLTFError`.
+    :func:`~engine.formats.bvh.read_bvh`; given for a glTF or FBX file they raise its format
+    error.
     """
-    return sniff(path).read_motion(path, **bvh_overrides)
+    fmt = sniff(path)
+    if fmt.read_take is None:
+        _without_take(bvh_overrides)
+    return fmt.read_motion(path, **bvh_overrides)
 
 
 def read_performer(path: str | os.PathLike, **bvh_overrides) -> Motion:
-    """A captured clip to retarget (:func:`read_motion` of a format that holds no character).
+    """A captured clip to retarget: a BVH's clip or an FBX file's take (``take=NAME``, by
+    default its first).
 
     Raises:
         UnsupportedFormatError: for a glTF character, which is a target: its motion here is
             its bind pose.
+        FBXError: for an FBX file without a take that moves a joint (a character only).
     """
     fmt = sniff(path)
+    if fmt.read_take is not None:
+        return fmt.read_take(path, **bvh_overrides)
+    _without_take(bvh_overrides)
     if fmt.mesh:
         raise UnsupportedFormatError(f"a {fmt.name} file is a character; use it as the target "
-                                     "(the performer is a BVH clip)", path)
+                                     "(the performer is a BVH clip or an FBX take)", path)
     return fmt.read_motion(path, **bvh_overrides)
 
 
 def read_character(path: str | os.PathLike) -> Character | None:
-    """The glTF character (skeleton, meshes, skins, animations) a file holds, or ``None`` for
-    a format that holds no mesh (BVH)."""
+    """The glTF or FBX character (skeleton, meshes, skins, animations or takes) a file holds,
+    or ``None`` for a format that holds no mesh (BVH)."""
     fmt = sniff(path)
     return fmt.read_character(path) if fmt.mesh else None
 
@@ -264,7 +293,7 @@ def read_character(path: str | os.PathLike) -> Character | None:
 # --------------------------------------------------------------------------- writing
 def output_suffixes() -> tuple[str, ...]:
     """Every suffix a writer writes (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``)."""
-    return tuple(s for fmt in FORMATS for s in fmt.suffixes)
+    return tuple(s for fmt in FORMATS if fmt.write is not None for s in fmt.suffixes)
 
 
 def output_format(path: str | os.PathLike) -> Format:
@@ -275,9 +304,10 @@ def output_format(path: str | os.PathLike) -> Format:
     """
     suffix = Path(path).suffix.lower()
     for fmt in FORMATS:
-        if suffix in fmt.suffixes:
+        if suffix in fmt.suffixes and fmt.write is not None:
             return fmt
-    written = ", ".join(f"{s} ({fmt.name})" for fmt in FORMATS for s in fmt.suffixes)
+    written = ", ".join(f"{s} ({fmt.name})" for fmt in FORMATS if fmt.write is not None
+                        for s in fmt.suffixes)
     what = f"a {suffix} file" if suffix else "a file without a suffix"
     raise UnsupportedFormatError(f"cannot write {what}; the formats written are {written}",
                                  path)
@@ -327,4 +357,5 @@ def open_filters() -> str:
 def save_filters() -> str:
     """The filter string of a save-file dialog: one entry per written format, the default
     (BVH) first."""
-    return ";;".join(f"{fmt.description} ({_patterns(fmt.suffixes)})" for fmt in FORMATS)
+    return ";;".join(f"{fmt.description} ({_patterns(fmt.suffixes)})" for fmt in FORMATS
+                     if fmt.write is not None)

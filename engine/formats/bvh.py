@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ._numparse import parse_number_rows
+from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
 from ..errors import BVHError, ExportError
 from .. import limits
 from ..fileio import atomic_write
@@ -162,16 +162,101 @@ def parse_bvh_text(text: str, path: str | os.PathLike | None = None) -> BVHRecor
     path = os.fspath(path) if path is not None else None
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
-    lines = text.split("\n")
+    lines, rows_at = _head_lines(text)
+    if rows_at is not None:
+        record = _record(lines, path, lambda n_cols, frames: parse_number_rows(
+            text, n_cols, start=rows_at, rows=frames, limit=limits.MAX_MAGNITUDE))
+        if record is not None:
+            return record
+    return _record(text.split("\n"), path, None)
+
+
+def _read_bvh_record(path) -> BVHRecord:
+    """:func:`parse_bvh_text` of the file at ``path``, reading only its header whole: the rows
+    are parsed from the file a piece at a time, so that a large file is never in memory as
+    bytes or text beside its values (its peak memory). A file with carriage returns in its
+    header, whose header the text reading would find elsewhere, or whose rows the fast
+    parser refuses, is read and parsed whole as text, as :func:`parse_bvh_text` does."""
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(_HEAD_BYTES)
+            while True:
+                _, rows_at = _head_lines(data)
+                more = rows_at is None and handle.read(_HEAD_BYTES)
+                if not more:
+                    break
+                data += more
+            if rows_at is not None and b"\r" not in data[:rows_at] \
+                    and b"\0" not in data[:rows_at]:
+                head = _decode(data[:rows_at], path)
+                lines, end = _head_lines(head)
+                if end == len(head):
+                    rest = data[rows_at:]
+                    del data
+                    record = _record(lines, os.fspath(path), lambda n_cols, frames:
+                                     parse_number_pieces(file_pieces(handle, rest), n_cols,
+                                                         rows=frames,
+                                                         limit=limits.MAX_MAGNITUDE))
+                    if record is not None:
+                        return record
+    except FileNotFoundError:
+        raise BVHError("no such file", path, None) from None
+    except IsADirectoryError:
+        raise BVHError("this is a folder, not a BVH file", path, None) from None
+    except OSError as exc:
+        raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
+    return parse_bvh_text(_decode(_read_bytes(path), path), path)
+
+
+#: bytes of a file read at a time while looking for the end of its header
+_HEAD_BYTES = 1 << 16
+
+
+def _record(lines: list[str], path, fast) -> BVHRecord | None:
+    """The record of a file: with ``fast``, ``lines`` are its header and ``fast(columns,
+    frames)`` parses its rows in one pass (:func:`parse_number_rows`' result), the record
+    being None where that fails or finds a value out of range; without, ``lines`` are all its
+    lines and the rows are parsed row by row, so that an error names the line."""
     toks = _Tokens(lines, path)
     tree = _parse_hierarchy(toks)
     head = _parse_motion_header(lines, toks.motion_line, path)
-    values = _parse_values(text, lines, head, tree.names, tree.channels, path)
+    n_cols = sum(len(c) for c in tree.channels)
+    if fast is not None:
+        parsed = fast(n_cols, head.frames) if n_cols else None
+        if parsed is None:
+            return None
+        values = parsed[0]
+    else:
+        values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
+                                       head.frames_line, tree.names, tree.channels, path)
     return BVHRecord(names=tree.names, parents=tree.parents,
                      offsets=np.array(tree.offsets, dtype=float),
                      channels=list(tree.channels),  # type: ignore[arg-type]
                      end_sites=tree.end_sites, frame_time=head.frame_time, values=values,
                      joint_lines=tree.joint_lines, first_row_line=head.first_row + 1, path=path)
+
+
+def _head_lines(text: str | bytes) -> tuple[list, int | None]:
+    """The lines of ``text`` up to and including ``Frame Time:`` (the second line with content
+    after the line starting with MOTION) and the offset of the rows after them, without
+    splitting the rows themselves (a large file's rows are most of it); every line and None
+    where there is no such header (the parsers then say what is missing)."""
+    newline, keyword = ("\n", "MOTION") if isinstance(text, str) else (b"\n", b"MOTION")
+    lines, pos, motion, after = [], 0, False, 0
+    while True:
+        end = text.find(newline, pos)
+        line = text[pos:] if end < 0 else text[pos:end]
+        lines.append(line)
+        if end < 0:
+            return lines, None
+        pos = end + 1
+        if not motion:
+            parts = line.split(None, 1)
+            motion = bool(parts) and parts[0].upper() == keyword
+        elif line.strip():
+            after += 1
+            if after == 2:
+                return lines, pos
 
 
 # ------------------------------------------------------------------ HIERARCHY section
@@ -428,31 +513,6 @@ def _parse_motion_header(lines: list[str], motion_line: int, path) -> _MotionHea
     return _MotionHeader(n_frames, frames_line, frame_time, ft_line)
 
 
-def _parse_values(text: str, lines: list[str], head: _MotionHeader, names, channels,
-                  path) -> np.ndarray:
-    """``(F, C)`` the rows of channel values: parsed in one pass (:mod:`._numparse`), or row by
-    row when that pass fails or finds a count or a value that is wrong, so that the error
-    names the line."""
-    n_cols = sum(len(c) for c in channels)
-    offset = sum(len(line) + 1 for line in lines[:head.first_row])   # the rows, as one slice
-    block = text[offset:]
-    parsed = None
-    if n_cols:
-        try:
-            parsed = parse_number_rows(block.encode("utf-8"), n_cols)
-        except UnicodeEncodeError:
-            parsed = None
-    if parsed is not None and parsed[1] == head.frames:
-        values = parsed[0]
-    else:
-        values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
-                                       head.frames_line, names, channels, path)
-    if not limits.all_usable(values):
-        values = _parse_rows_carefully(lines, head.first_row, n_cols, head.frames,
-                                       head.frames_line, names, channels, path)
-    return values
-
-
 def _channel_label(col: int, names, channels) -> str:
     for name, chans in zip(names, channels):
         if col < len(chans):
@@ -554,6 +614,10 @@ def detect_position_modes(record: BVHRecord) -> dict[str, str]:
     return modes
 
 
+#: angles turned into quaternions at a time by :func:`_local_arrays` (3 MB of them)
+_EULER_VALUES = 1 << 18
+
+
 def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
     """Local rotations (F, J, 4) and translations (F, K, 3) in file units and file axes."""
     values = record.values
@@ -569,9 +633,11 @@ def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
             rotations[:, joints] = (0.0, 0.0, 0.0, 1.0)
             continue
         cols = np.array([rot_cols[j] for j in joints])               # (Jg, n)
-        angles = values[:, cols]                                      # (F, Jg, n)
-        q = euler_to_quat(angles.reshape(-1, len(order)), order)
-        rotations[:, joints] = q.reshape(F, len(joints), 4)
+        step = max(1, _EULER_VALUES // (len(joints) * len(order)))
+        for lo in range(0, F, step):              # frames at a time: small temporaries
+            angles = values[lo:lo + step, cols]                       # (f, Jg, n)
+            q = euler_to_quat(angles.reshape(-1, len(order)), order)
+            rotations[lo:lo + step, joints] = q.reshape(len(angles), len(joints), 4)
     translated = [0] + [j for j in range(1, J) if pos_cols[j]]
     translations = np.empty((F, len(translated), 3))
     for k, j in enumerate(translated):
@@ -794,8 +860,9 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
     if up_axis != "+Y":
         translations[:, 0] = translations[:, 0] @ C.T
         rotations[:, 0] = (Rotation.from_matrix(C) * Rotation.from_quat(rotations[:, 0])).as_quat()
-    return Motion(skeleton=skeleton, rotations=rotations, translations=translations,
-                  frame_time=record.frame_time, name=name)
+    # computed here, unit quaternions (Euler angles or scipy's output) and finite numbers:
+    # the checks and copies of Motion() would only double a large clip's peak memory
+    return Motion._trusted(skeleton, rotations, translations, record.frame_time, name)
 
 
 def _check_mode(mode, path):
@@ -817,6 +884,13 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
     Options (all detected when not given): ``units``, ``scale``, ``up_axis``,
     ``position_mode``; see :func:`record_to_motion`.
     """
+    record = _read_bvh_record(path)
+    options.setdefault("name", Path(path).stem)
+    return record_to_motion(record, **options)
+
+
+def _read_bytes(path) -> bytes:
+    """The bytes of the file at ``path``, or a :class:`BVHError` saying why not."""
     try:
         data = Path(path).read_bytes()
     except FileNotFoundError:
@@ -825,7 +899,7 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
         raise BVHError("this is a folder, not a BVH file", path, None) from None
     except OSError as exc:
         raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
-    return parse_bvh(_decode(data, path), path, **options)
+    return data
 
 
 # --------------------------------------------------------------------------- writing
@@ -917,7 +991,13 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             continue
         flat = q.transpose(1, 0, 2).reshape(-1, 4)                 # joint-major for unwrap
         angles = quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order))
-        angles = np.unwrap(angles, period=360.0, axis=1) if F > 1 else angles
+        # unwrapping changes nothing in a curve where no step reaches half a turn (but the
+        # sign of zeros, which the rows do not write): only the curves that jump are unwrapped
+        if F > 1:
+            jumps = np.any(np.abs(np.diff(angles, axis=1)) >= 180.0, axis=1)    # (Jg, n)
+            g, k = np.nonzero(jumps)
+            if len(g):
+                angles[g, :, k] = np.unwrap(angles[g, :, k], period=360.0, axis=1)
         if len(order) < 3:
             back = euler_to_quat(angles.reshape(-1, len(order)), order).reshape(len(joints), F, 4)
             err = np.abs(np.sum(back * flat.reshape(len(joints), F, 4), axis=-1))
@@ -986,11 +1066,68 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
         for cols in pos_cols:
             column_decimals[list(cols.values())] = length_decimals
         values = np.where(np.abs(values) < 0.5 * 10.0 ** -column_decimals, 0.0, values)
-        row_fmt = " ".join(f"%.{d}f" for d in column_decimals)
-        out.extend(row_fmt % tuple(row) for row in values.tolist())
+        if F:
+            out.append(_format_rows(values, column_decimals))
     else:
         out.extend("" for _ in range(F))
     return "\n".join(out) + "\n"
+
+
+def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
+    """The rows of ``values`` ``(F, C)`` in fixed point with ``decimals[c]`` digits after the
+    point in column ``c``, values separated by a space and rows by a newline: the text of
+    ``"%.6f"``-style formatting, character for character, built for all values at once.
+
+    ``rint(|v| 10^d)`` of the rounded product is the correctly rounded value of the exact
+    product (what ``%`` formatting rounds) unless the product lies within its rounding error of
+    a half (a near tie) or beyond 2^52; those few values are formatted one by one.
+    """
+    F, C = values.shape
+    scale = 10.0 ** decimals                                 # exact up to 22 decimals
+    with np.errstate(over="ignore", invalid="ignore"):      # huge: infinite, formatted alone
+        mag = np.abs(values) * scale
+        near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51) | ~(mag < 2.0 ** 52)
+                | (decimals > 22))
+    number = np.where(near, 0.0, np.rint(mag)).astype(np.int64)     # the digits, no point
+    negative = np.signbit(values)
+    # digits written: those of the number, at least one before the point
+    least = int(decimals.min()) + 1
+    length = np.full((F, C), least, dtype=np.uint8)
+    power = 10 ** least
+    top = number.max(initial=0)
+    while power <= top:
+        length += number >= power
+        power *= 10
+    length = np.maximum(length, (decimals + 1).astype(np.uint8))
+    exact = {(int(f), int(c)): f"{values[f, c]:.{decimals[c]}f}".encode("ascii")
+             for f, c in zip(*np.nonzero(near))}
+    chars = int((length + negative).max(initial=0))          # sign and digits
+    width = max([chars + 2] + [len(text) + 1 for text in exact.values()])   # point, separator
+    cells = np.zeros((F, C, width), dtype=np.uint8)          # right-aligned, NUL-padded
+    cells[:, :, -1] = ord(" ")
+    cells[:, -1, -1] = ord("\n")
+    sign = np.where(negative, ord("-"), 0).astype(np.uint8)
+    rest = number
+    for p in range(chars):                                   # digits from the right, then "-"
+        char = (rest % 10).astype(np.uint8)
+        char += ord("0")
+        rest = rest // 10
+        if p >= least:                                       # past some token's last digit
+            char = np.where(p < length, char, np.where(p == length, sign, np.uint8(0)))
+        after = (p >= decimals) & (decimals > 0)             # (C,): left of the point there
+        for at, where in ((width - 2 - p, ~after), (width - 3 - p, after)):
+            if where.all():
+                cells[:, :, at] = char
+            elif where.any():
+                plane = cells[:, :, at]
+                plane[...] = np.where(where, char, plane)
+    for d in np.unique(decimals[decimals > 0]):              # "%.0f" writes no point
+        plane = cells[:, :, width - 2 - d]
+        plane[...] = np.where(decimals == d, ord("."), plane)
+    for (f, c), text in exact.items():
+        cells[f, c, :-1] = 0
+        cells[f, c, width - 1 - len(text):-1] = np.frombuffer(text, dtype=np.uint8)
+    return cells[cells != 0].tobytes()[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:

@@ -2,9 +2,10 @@
 
 A :class:`Project` is plain data: the performer and target clips (paths, or the BVH text
 embedded), the correspondence, the binding and root choices, automatic-contact settings and a
-floor, the constraints (automatic ones included, as edited), the displacement map currently
-applied (the IK correction reduced to keys, plus the animator's hand edits) and the viewer state.
-Loading never runs IK: the final motion is the direct conversion plus the saved displacement map,
+floor, the constraints (automatic ones included, as edited), the displacement layers (the
+solved layer: the IK correction as fitted keys, which a solve replaces; the animator's layers,
+with weights and mutes, which a solve keeps) and the viewer state.
+Loading never runs IK: the final motion is the direct conversion plus the saved layers,
 so it is the same, bit for bit, as before saving (:func:`engine.scene.evaluate_project`). :func:`engine.scene.solve_project`
 runs IK again and stores the new correction.
 
@@ -14,7 +15,7 @@ gives the same bytes::
 
     {
       "format": "motion-composer-project",
-      "version": 2,
+      "version": 3,
       "performer": {"path": "clips/walk.bvh", "units": null, "scale": null, "up_axis": null,
                     "position_mode": null},
       "target": {...},
@@ -28,8 +29,12 @@ gives the same bytes::
       "viewer": {"current_frame": 0, "play_range": null, "camera": {...},
                  "shown": ["performer", "target"], "options": {}},
       "constraints": [{"joint": "LeftFoot", "kind": "position", ...}, ...],
-      "displacement": {"channels": [{"joint": "LeftLeg", "channel": "rx", "frames": [...],
-                                     "values": [...], "interpolation": "linear"}, ...]},
+      "layers": [{"name": "solved", "kind": "solved",
+                  "channels": [{"joint": "LeftLeg", "channel": "rx", "frames": [...],
+                                "values": [...], "interpolation": "smooth",
+                                "tangents": "aligned", "slopes": [...]}, ...]},
+                 {"name": "edit", "kind": "animator", "weight": 1.0, "mute": false,
+                  "channels": [...]}],
       "embedded": {"performer": "HIERARCHY\\n..."}
     }
 

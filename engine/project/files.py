@@ -93,6 +93,7 @@ def read_sources(project: Project, *, path=None) -> tuple[Motion, Motion]:
 def _read_source(source: Source, role: str, path) -> Motion:
     options = source.reader_options()
     if source.embedded is not None:
+        options.pop("take", None)                  # an embedded clip is BVH text
         try:
             return parse_bvh(source.embedded, None, name=source.name(role), **options)
         except BVHError as exc:
@@ -109,20 +110,28 @@ def _read_source(source: Source, role: str, path) -> Motion:
         present = False
     if not present:
         raise MissingSourceError(role, os.path.abspath(source.path), path)
-    # the file's content says which reader (a glTF character's bind pose is the target)
-    from ..errors import FileFormatError, GLTFError
-    from ..formats import read_motion
+    # the file's content says which reader (a glTF or FBX character's bind pose is the
+    # target; an FBX performer is one of its takes)
+    from ..errors import FBXError, FileFormatError, GLTFError
+    from ..formats import read_motion, read_performer
     try:
-        return read_motion(source.path, **options)
+        return (read_performer if role == "performer" and _has_takes(source.path) else
+                read_motion)(source.path, **options)
     except BVHError as exc:
         if _about_position_mode(exc):
             raise ProjectError(exc.problem, path, f"{role}.position_mode") from None
         raise ProjectError(f"the {role} clip cannot be read: {exc}", path,
                            f"{role}.path") from None
     except FileFormatError as exc:
-        what = "character" if isinstance(exc, GLTFError) else "clip"
+        what = "character" if isinstance(exc, (GLTFError, FBXError)) else "clip"
         raise ProjectError(f"the {role} {what} cannot be read: {exc}", path,
                            f"{role}.path") from None
+
+
+def _has_takes(path) -> bool:
+    """Whether the file is in a format whose performer is a take (FBX)."""
+    from ..formats import sniff
+    return sniff(path).read_take is not None
 
 
 def _about_position_mode(exc: BVHError) -> bool:
@@ -172,10 +181,12 @@ def _check(project: Project, performer: Motion, target: Motion, check_map: bool)
         if joint >= tsk.num_joints:
             raise _Invalid(f"ik.joint_limits[{i}]", f"joint {joint} is past the target's last "
                                                     f"joint ({tsk.num_joints - 1})")
-    for i, (joint, _) in enumerate(project.displacement.curves):
-        if joint != ROOT and joint not in tsk.index:
-            raise _Invalid(f"displacement.channels[{i}].joint",
-                           _not_a_joint(joint, tsk, "target"))
+    maps = [project.displacement] + [layer.displacement for layer in project.layers]
+    for n, displacement in enumerate(maps):
+        for i, (joint, _) in enumerate(displacement.curves):
+            if joint != ROOT and joint not in tsk.index:
+                raise _Invalid(f"layers[{n}].channels[{i}].joint",
+                               _not_a_joint(joint, tsk, "target"))
     v = project.viewer
     if v.current_frame > F - 1:
         raise _Invalid("viewer.current_frame", f"frame {v.current_frame} is past the last frame "
@@ -217,14 +228,16 @@ def embed_sources(project: Project, roles=ROLES) -> Project:
 
 
 # --------------------------------------------------------------------------- stored keys
-#: key reduction of an IK correction stored in a project [rad], [m]
-ROTATION_TOLERANCE = math.radians(0.01)
-TRANSLATION_TOLERANCE = 5e-5
+#: key fitting of an IK correction stored in a project: [m] per joint over its lever, and at
+#: most [rad] per rotation channel
+POSITION_TOLERANCE = 1e-4
+ROTATION_TOLERANCE = math.radians(0.02)
 
 
 def correction_keys(correction: Correction | None) -> DisplacementMap:
-    """An IK correction as the keys a project stores (tight tolerances: 0.01 degree, 0.05 mm)."""
+    """An IK correction as the keys a project stores (fitted within 0.1 mm per joint above a
+    point of the IK result, at most 0.02 degree per channel)."""
     if correction is None:
         return DisplacementMap()
-    return correction.displacement_map(rotation_tolerance=ROTATION_TOLERANCE,
-                                       translation_tolerance=TRANSLATION_TOLERANCE)
+    return correction.displacement_map(position_tolerance=POSITION_TOLERANCE,
+                                       rotation_tolerance=ROTATION_TOLERANCE)

@@ -16,14 +16,15 @@ from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
 from ..correction.constraints import KINDS, Constraint, ConstraintError
 from ..correction.contacts import ContactOptions
-from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS,
-                                       TRANSLATION_CHANNELS, Curve, DisplacementMap)
+from ..correction.displacement import (INTERPOLATIONS, ROOT, ROTATION_CHANNELS, TANGENTS,
+                                       TRANSLATION_CHANNELS, Curve, DisplacementMap, Layer,
+                                       stored_slopes)
 from ..correction.ik import IKOptions
 from ..errors import IKOptionsError, MotionComposerError
 from ..units import AXES, UNITS
 from .migrations import migrate
-from .model import (FORMAT, ROLES, SKELETONS, VERSION, Project, ProjectError, Source,
-                    ViewerState, _Invalid, _kind, _show)
+from .model import (FORMAT, ROLES, SKELETONS, SOLVED_LAYER, VERSION, Project, ProjectError,
+                    Source, ViewerState, _Invalid, _kind, _show)
 
 __all__ = ["project_to_json", "project_from_json", "ik_dict", "IK_FIELDS"]
 
@@ -78,7 +79,11 @@ def _project_dict(p: Project, folder) -> dict:
                    "shown": list(v.shown),
                    "options": dict(sorted(v.options.items()))},
         "constraints": [c.to_dict() for c in p.constraints],
-        "displacement": _displacement_dict(p.displacement),
+        "layers": [{"name": SOLVED_LAYER, "kind": "solved",
+                    **_displacement_dict(p.displacement)}]
+                  + [{"name": layer.name, "kind": "animator", "weight": float(layer.weight),
+                      "mute": bool(layer.mute), **_displacement_dict(layer.displacement)}
+                     for layer in p.layers],
     }
     embedded = {role: getattr(p, role).embedded for role in ROLES
                 if getattr(p, role).embedded is not None}
@@ -95,13 +100,14 @@ def ik_dict(options: IKOptions) -> dict:
 
 
 def _displacement_dict(displacement: DisplacementMap) -> dict:
-    """``DisplacementMap.to_dict`` with one interpolation name instead of a list where every
-    key has the same (the IK's keys are all linear)."""
+    """``DisplacementMap.to_dict`` with one interpolation (or tangent) name instead of a
+    list where every key has the same (the IK's keys are all smooth)."""
     channels = []
     for item in displacement.to_dict()["channels"]:
-        kinds = item["interpolation"]
-        if kinds and all(k == kinds[0] for k in kinds):
-            item = dict(item, interpolation=kinds[0])
+        for name in ("interpolation", "tangents"):
+            kinds = item.get(name)
+            if kinds and all(k == kinds[0] for k in kinds):
+                item = dict(item, **{name: kinds[0]})
         channels.append(item)
     return {"channels": channels}
 
@@ -121,13 +127,18 @@ def _source_dict(source: Source, folder, role: str) -> dict:
         except ValueError:                    # another drive (Windows): keep it absolute
             path = absolute
     mode = source.position_mode
-    return {"path": path, "units": source.units,
-            "scale": float(source.scale) if source.scale is not None else None,
-            "up_axis": source.up_axis,
-            "position_mode": dict(mode) if isinstance(mode, dict) else mode}
+    out = {"path": path, "units": source.units,
+           "scale": float(source.scale) if source.scale is not None else None,
+           "up_axis": source.up_axis,
+           "position_mode": dict(mode) if isinstance(mode, dict) else mode}
+    if source.take is not None:                  # optional: absent in files without one
+        out["take"] = source.take
+    return out
 
 
 _LINE = 100
+#: what a file cut inside a value ends with: part of a number, a word or a string
+_PARTIAL_TOKEN = re.compile(r"[\w.+\-\"]*")
 
 
 def _encode(value, depth: int, where: str, lead: int = 0) -> str:
@@ -236,7 +247,7 @@ def _parse(text: str):
         return data
     except json.JSONDecodeError as exc:
         tail = (" (the file ends there: it looks truncated)"
-                if exc.pos >= len(text.rstrip()) else "")
+                if _ends_the_text(text, exc.pos) else "")
         raise _Invalid("", f"not valid JSON at line {exc.lineno}, column {exc.colno}: "
                            f"{exc.msg}{tail}") from None
     except RecursionError:
@@ -252,6 +263,13 @@ class _NotANumber:
         self.problem = problem
 
 
+def _ends_the_text(text: str, pos: int) -> bool:
+    """Whether a JSON error at ``pos`` is the end of ``text``, or inside a number, word or
+    string cut off there (``1.`` or ``"na`` at the end): the file was truncated."""
+    rest = text[pos:].rstrip()
+    return not rest or (len(rest) < 64 and _PARTIAL_TOKEN.fullmatch(rest) is not None)
+
+
 def _reject_not_a_number(value, where: str) -> None:
     """Raise naming the field of the first :class:`_NotANumber` in ``value``."""
     if isinstance(value, _NotANumber):
@@ -265,7 +283,7 @@ def _reject_not_a_number(value, where: str) -> None:
 
 
 _TOP = ("format", "version", "performer", "target", "correspondence", "binding", "root",
-        "contacts", "floor", "ik", "viewer", "constraints", "displacement", "embedded")
+        "contacts", "floor", "ik", "viewer", "constraints", "layers", "embedded")
 
 
 def _build(data: dict, folder) -> Project:
@@ -287,12 +305,13 @@ def _build(data: dict, folder) -> Project:
         constraints=tuple(_constraint(c, f"constraints[{i}]")
                           for i, c in enumerate(_list(data.get("constraints", []),
                                                       "constraints"))),
-        displacement=_displacement(data.get("displacement", {})),
+        **_layers(data.get("layers", [{"name": SOLVED_LAYER, "kind": "solved"}])),
         viewer=_viewer(data.get("viewer", {})))
 
 
 def _source(data, where: str, folder, embedded) -> Source:
-    d = _obj(data, where, optional=("path", "units", "scale", "up_axis", "position_mode"))
+    d = _obj(data, where, optional=("path", "units", "scale", "up_axis", "position_mode",
+                                    "take"))
     path = _optional(_str, d.get("path"), f"{where}.path")
     if path is not None:
         if not path or "\x00" in path:
@@ -310,10 +329,11 @@ def _source(data, where: str, folder, embedded) -> Source:
                 for k, v in mode.items()}
     elif mode is not None:
         mode = _choice(mode, f"{where}.position_mode", ("absolute", "relative"))
+    take = _optional(_str, d.get("take"), f"{where}.take")
     if path is None and embedded is None:
         raise _Invalid(where, "needs the clip's path or the clip embedded in the project")
     return Source(path=path, embedded=embedded, units=units, scale=scale, up_axis=up_axis,
-                  position_mode=mode)
+                  position_mode=mode, take=take)
 
 
 def _correspondence(data) -> Correspondence:
@@ -432,13 +452,46 @@ def _constraint(data, where: str) -> Constraint:
         raise _Invalid(f"{where}.{sub}" if sub else where, message) from None
 
 
-def _displacement(data) -> DisplacementMap:
-    d = _obj(data, "displacement", optional=("channels",))
+def _layers(data) -> dict:
+    """``displacement`` (the solved layer) and ``layers`` (the animator's) of a project."""
+    items = _list(data, "layers")
+    solved, animator = None, []
+    for i, item in enumerate(items):
+        where = f"layers[{i}]"
+        d = _obj(item, where, required=("name", "kind"),
+                 optional=("name", "kind", "weight", "mute", "channels"))
+        kind = _choice(d["kind"], f"{where}.kind", ("solved", "animator"))
+        name = _str(d["name"], f"{where}.name")
+        curves = _displacement(d, where)
+        if kind == "solved":
+            if i != 0:
+                raise _Invalid(f"{where}.kind", "the solved layer must be the first layer, "
+                                                "and there is only one")
+            if name != SOLVED_LAYER or "weight" in d or "mute" in d:
+                raise _Invalid(where, f"the solved layer is named {SOLVED_LAYER!r} and has "
+                                      "no weight or mute")
+            solved = curves
+            continue
+        if name == SOLVED_LAYER or name in [layer.name for layer in animator]:
+            raise _Invalid(f"{where}.name", f"a second layer named {name!r}")
+        weight = _num(d.get("weight", 1.0), f"{where}.weight")
+        try:
+            animator.append(Layer(name, curves, weight, _bool(d.get("mute", False),
+                                                              f"{where}.mute")))
+        except MotionComposerError as exc:
+            raise _Invalid(f"{where}.weight", str(exc)) from None
+    if solved is None:
+        raise _Invalid("layers", f"expected the solved layer first "
+                                 f"({{\"name\": \"{SOLVED_LAYER}\", \"kind\": \"solved\", ...}})")
+    return {"displacement": solved, "layers": tuple(animator)}
+
+
+def _displacement(d: dict, parent: str) -> DisplacementMap:
     curves = {}
-    for i, item in enumerate(_list(d.get("channels", []), "displacement.channels")):
-        where = f"displacement.channels[{i}]"
+    for i, item in enumerate(_list(d.get("channels", []), f"{parent}.channels")):
+        where = f"{parent}.channels[{i}]"
         c = _obj(item, where, required=("joint", "channel", "frames", "values"),
-                 optional=("interpolation",))
+                 optional=("interpolation", "tangents", "slopes", "slopes_in"))
         joint = _str(c["joint"], f"{where}.joint")
         allowed = TRANSLATION_CHANNELS if joint == ROOT else ROTATION_CHANNELS
         channel = _choice(c["channel"], f"{where}.channel", allowed)
@@ -446,21 +499,39 @@ def _displacement(data) -> DisplacementMap:
                   for k, x in enumerate(_list(c["frames"], f"{where}.frames"))]
         values = [_num(x, f"{where}.values[{k}]")
                   for k, x in enumerate(_list(c["values"], f"{where}.values"))]
-        interp = c.get("interpolation", [])
-        if isinstance(interp, str):           # one name for every key
-            interp = [_choice(interp, f"{where}.interpolation", INTERPOLATIONS)] * len(frames)
-        interp = tuple(_choice(x, f"{where}.interpolation[{k}]", INTERPOLATIONS)
-                       for k, x in enumerate(_list(interp, f"{where}.interpolation")))
+        interp = _names(c.get("interpolation", []), f"{where}.interpolation", INTERPOLATIONS,
+                        len(frames))
+        tangents = _names(c.get("tangents", []), f"{where}.tangents", TANGENTS, len(frames))
+        out, inward = ([_num(x, f"{where}.{side}[{k}]")
+                        for k, x in enumerate(_list(c[side], f"{where}.{side}"))]
+                       if side in c else None for side in ("slopes", "slopes_in"))
+        for side, given in (("slopes", out), ("slopes_in", inward)):
+            if given is not None and len(given) != len(frames):
+                raise _Invalid(f"{where}.{side}", f"expected one slope per key "
+                                                  f"({len(frames)} keys, {len(given)} slopes)")
+        if inward is not None and out is None:
+            raise _Invalid(f"{where}.slopes_in", "in slopes need the (out) slopes beside them")
+        slopes = stored_slopes(tangents, out, inward)
         if (joint, channel) in curves:
             raise _Invalid(where, f"a second curve for {joint} {channel}")
         try:
-            curves[(joint, channel)] = Curve(frames, values, interp)
+            curves[(joint, channel)] = Curve(frames, values, interp, tangents, slopes)
         except MotionComposerError as exc:
             message = str(exc)
             sub = ("interpolation" if "interpolation" in message else
+                   "tangents" if "tangent" in message else
+                   "slopes" if "slope" in message else
                    "frames" if "increase" in message else "values")
             raise _Invalid(f"{where}.{sub}", message) from None
     return DisplacementMap(curves)
+
+
+def _names(value, where: str, allowed, count: int) -> tuple:
+    """Per-key names: one name for every key, or a list."""
+    if isinstance(value, str):
+        return (_choice(value, where, allowed),) * count
+    return tuple(_choice(x, f"{where}[{k}]", allowed)
+                 for k, x in enumerate(_list(value, where)))
 
 
 def _viewer(data) -> ViewerState:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from .model import FORMAT, ROLES, VERSION, _Invalid, _kind, _show
+from .model import FORMAT, ROLES, SOLVED_LAYER, VERSION, _Invalid, _kind, _show
 
 __all__ = ["MIGRATIONS", "migrator", "migrate"]
 
@@ -82,6 +82,25 @@ def _v1_to_v2(old: dict) -> dict:
     """Version 1 had no IK settings: its corrections were solved with the constants the
     solver then had built in, which version 2 holds in the ``"ik"`` object."""
     return dict(old, ik=dict(_SOLVER_BEFORE_V2), version=2)
+
+
+@migrator(2)
+def _v2_to_v3(old: dict) -> dict:
+    """Version 2 had one displacement map, which a solve replaced whole (hand edits
+    included): it becomes version 3's solved layer, and an empty animator layer ("edit") is
+    added for the edits a solve keeps."""
+    data = {k: v for k, v in old.items() if k not in ("displacement", "embedded")}
+    displacement = old.get("displacement", {})
+    if not isinstance(displacement, dict):
+        raise _Invalid("displacement", f"expected an object with \"channels\", not "
+                                       f"{_show(displacement)}")
+    data["layers"] = [{"name": SOLVED_LAYER, "kind": "solved", **displacement},
+                      {"name": "edit", "kind": "animator", "weight": 1.0, "mute": False,
+                       "channels": []}]
+    if "embedded" in old:                           # the embedded clips stay last
+        data["embedded"] = old["embedded"]
+    data["version"] = 3
+    return data
 
 
 #: the IK settings built into the solver up to format version 1

@@ -14,20 +14,22 @@ from ..conversion.binding import BindOptions
 from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
 from ..correction.contacts import ContactOptions
-from ..correction.displacement import DisplacementMap
+from ..correction.displacement import DisplacementMap, Layer
 from ..correction.ik import IKOptions
 from ..errors import MotionComposerError
 from ..motion import Motion
 
 __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceError",
            "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "ROLES",
-           "SKELETONS"]
+           "SKELETONS", "SOLVED_LAYER"]
 
 FORMAT = "motion-composer-project"
 #: the format version this module writes (and the newest it reads)
-VERSION = 2
+VERSION = 3
 SUFFIX = ".mcp"
 ROLES = ("performer", "target")
+#: the solved layer's name in files and in the curve editor
+SOLVED_LAYER = "solved"
 #: skeletons the viewer can show
 SKELETONS = ("performer", "intermediate", "target")
 
@@ -122,6 +124,8 @@ class Source:
             ``path``).
         units, scale, up_axis, position_mode: the reader overrides used (``None``: detected);
             see :func:`engine.formats.bvh.record_to_motion`.
+        take: the take of an FBX file (``None``: its first take for a performer, its bind
+            pose for a target); a file with one motion (BVH, glTF) has none to choose.
     """
 
     path: str | None = None
@@ -130,6 +134,7 @@ class Source:
     scale: float | None = None
     up_axis: str | None = None
     position_mode: str | dict | None = None
+    take: str | None = None
 
     def __post_init__(self):
         if self.path is not None:
@@ -138,9 +143,10 @@ class Source:
             object.__setattr__(self, "position_mode", dict(self.position_mode))
 
     def reader_options(self) -> dict:
-        """The keyword arguments for :func:`engine.formats.bvh.read_bvh`."""
+        """The keyword arguments for :func:`engine.formats.read_motion` (the BVH reader's
+        overrides, and an FBX file's take)."""
         options = {"units": self.units, "scale": self.scale, "up_axis": self.up_axis,
-                   "position_mode": self.position_mode}
+                   "position_mode": self.position_mode, "take": self.take}
         return {k: v for k, v in options.items() if v is not None}
 
     def name(self, role: str) -> str:
@@ -209,6 +215,12 @@ class Project:
     """A whole retargeting session (see the module doc). Plain data: change it with
     :func:`dataclasses.replace`.
 
+    ``displacement`` is the solved layer: the IK correction as keys, which a solve
+    replaces. ``layers`` are the animator's layers (:class:`~engine.correction.displacement.
+    Layer`), applied in order on top of the composed motion; a solve starts from the composed
+    motion with them applied and never changes them. The final motion is the solved layer
+    applied on top of that.
+
     ``ik_options`` are the settings its correction is solved with; their ``scale`` stays
     ``None`` (each run takes the character's stature), so it is not part of a project.
     """
@@ -224,10 +236,16 @@ class Project:
     ik_options: IKOptions = field(default_factory=IKOptions)
     constraints: tuple = ()
     displacement: DisplacementMap = field(default_factory=DisplacementMap)
+    layers: tuple = (Layer(),)
     viewer: ViewerState = field(default_factory=ViewerState)
 
     def __post_init__(self):
         object.__setattr__(self, "constraints", tuple(self.constraints))
+        object.__setattr__(self, "layers", tuple(self.layers))
+        names = [layer.name for layer in self.layers]
+        if len(set(names)) != len(names) or SOLVED_LAYER in names:
+            raise MotionComposerError(f"animator layers need distinct names other than "
+                                      f"{SOLVED_LAYER!r}, not {names}")
         if self.floor is not None and limits.problem(self.floor) is not None:
             raise MotionComposerError(f"floor: expected a finite height in metres of magnitude "
                                       f"at most {limits.MAX_MAGNITUDE:g}, not {self.floor!r}")

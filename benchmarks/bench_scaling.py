@@ -1,0 +1,167 @@
+"""Linear in frames: every stage timed on 10,000 and 40,000 frames in one process.
+
+    python benchmarks/bench_scaling.py [--repeat N] [--stage NAME ...]
+
+The jumps clip (``cmu_mb_01_01_jumps.bvh``, 2752 frames, 31 joints) is tiled to each length.
+Each stage is timed on both lengths taking turns (medians of ``--repeat`` runs, 3, after a
+warm-up); its 40k/10k ratio is judged against 4, within 10 % (3.6 to 4.4). Stages:
+
+* read: ``read_bvh`` of the tiled clip written to a temporary folder;
+* conversion: ``transfer`` (convert + compose) onto the Bandai skeleton (the bind is done
+  once per length, outside the timing);
+* write: ``write_bvh`` of the converted motion (atomic, fsynced).
+
+The stages other engineers are changing now (contacts, IK, key reduction, save, export) have
+their slots in ``STAGES`` below: adding one is one entry, a name and a function that prepares
+the work for a number of frames and returns the call to time. A slot without one prints a
+line with no figure. With a load average over 1 the targets read LOADED. This is a report,
+not a test.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import prepare  # noqa: E402
+
+ALLOCATOR = prepare(one_core=True)    # as motion-composer sets itself up
+
+import argparse  # noqa: E402
+import tempfile  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from typing import Callable  # noqa: E402
+
+from _common import (Row, SHARED_DATA, environment, fmt_seconds, print_table,  # noqa: E402
+                     time_interleaved)
+
+CLIP = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
+TARGET = SHARED_DATA / "bandai1_walk_normal_001.bvh"
+FRAMES = (10_000, 40_000)
+RATIO = 4.0                   # 40k / 10k, linear
+TOLERANCE = 0.10              # within 10 % of it
+
+
+class Job:
+    """What the stages share at one length: the tiled clip and, made when first asked for,
+    its file, its binding onto the target and its conversion (the later stages' input)."""
+
+    def __init__(self, frames: int, folder: Path):
+        import numpy as np
+
+        from motion_composer.engine import read_bvh
+        from motion_composer.engine.conversion.automap import automap
+        self.frames = frames
+        self.folder = folder
+        clip = read_bvh(CLIP)
+        self.performer = clip.frames(np.resize(np.arange(clip.num_frames), frames))
+        self.target = read_bvh(TARGET)
+        self.correspondence = automap(self.target.skeleton, self.performer.skeleton)
+        self._cache: dict = {}
+
+    def cached(self, key: str, make: Callable[[], object]):
+        if key not in self._cache:
+            self._cache[key] = make()
+        return self._cache[key]
+
+    @property
+    def path(self) -> Path:
+        """The tiled clip written as a BVH file."""
+        from motion_composer.engine.formats.bvh import write_bvh
+        out = self.folder / f"tiled_{self.frames}.bvh"
+        return self.cached("path", lambda: (write_bvh(self.performer, out), out)[1])
+
+    @property
+    def binding(self):
+        from motion_composer.engine.conversion import bind
+        return self.cached("binding", lambda: bind(self.performer, self.target,
+                                                   self.correspondence))
+
+    @property
+    def composed(self):
+        """The direct conversion onto the target."""
+        from motion_composer.engine.conversion import transfer
+        return self.cached("composed", lambda: transfer(self.binding, self.performer))
+
+
+def read_stage(job: Job):
+    from motion_composer.engine import read_bvh
+    path = job.path
+    return lambda: read_bvh(path)
+
+
+def conversion_stage(job: Job):
+    from motion_composer.engine.conversion import transfer
+    binding, performer = job.binding, job.performer
+    return lambda: transfer(binding, performer)
+
+
+def write_stage(job: Job):
+    from motion_composer.engine.formats.bvh import write_bvh
+    motion, out = job.composed, job.folder / f"written_{job.frames}.bvh"
+    return lambda: write_bvh(motion, out)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One line of the report: ``prepare(job)`` returns the call to time on ``job``'s frames,
+    or the stage is a slot still to be filled (None)."""
+
+    name: str
+    prepare: Callable[[Job], Callable[[], object]] | None
+
+
+STAGES = [
+    Stage("read (read_bvh)", read_stage),
+    Stage("conversion (transfer onto Bandai)", conversion_stage),
+    Stage("contacts (detection and constraints)", None),
+    Stage("IK (automatic contacts, both passes)", None),
+    Stage("key reduction", None),
+    Stage("save (project with the motion)", None),
+    Stage("export", None),
+    Stage("write (write_bvh)", write_stage),
+]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3, help="timed runs per length (3)")
+    parser.add_argument("--stage", action="append", metavar="NAME",
+                        help="only the stages whose name starts with NAME (repeatable)")
+    args = parser.parse_args()
+    missing = [p for p in (CLIP, TARGET) if not p.is_file()]
+    if missing:
+        sys.exit(f"error: this benchmark needs {', '.join(map(str, missing))} "
+                 "(set MC_SHARED_DATA)")
+    stages = [s for s in STAGES if not args.stage or any(s.name.startswith(n)
+                                                         for n in args.stage)]
+    rows: list[Row] = []
+    low, high = RATIO * (1 - TOLERANCE), RATIO * (1 + TOLERANCE)
+    with tempfile.TemporaryDirectory(prefix="mc_scaling_") as folder:
+        jobs = [Job(n, Path(folder)) for n in FRAMES]
+        for stage in stages:
+            if stage.prepare is None:
+                rows.append(Row(stage.name, "-", f"{low:.1f}..{high:.1f}",
+                                note="slot: not measured here yet"))
+                continue
+            calls = [stage.prepare(job) for job in jobs]
+            for call in calls:                                         # warm-up
+                call()
+            timed = time_interleaved({n: (call, args.repeat) for n, call in zip(FRAMES, calls)},
+                                     rounds=args.repeat)
+            short, long = timed[FRAMES[0]], timed[FRAMES[1]]
+            ratio = long.median / short.median
+            rows.append(Row(stage.name, f"{ratio:.2f}", f"{low:.1f}..{high:.1f}",
+                            low <= ratio <= high,
+                            note=f"{fmt_seconds(short.median)} / {fmt_seconds(long.median)} "
+                                 f"({short.spread()} / {long.spread()})"))
+    print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; "
+          f"BLAS threads pinned to 1")
+    print(f"{CLIP.name} tiled to {FRAMES[0]:,} and {FRAMES[1]:,} frames; medians of "
+          f"{args.repeat} runs per length, taking turns\n")
+    print_table(f"Scaling: time at {FRAMES[1] // 1000}k frames / at {FRAMES[0] // 1000}k",
+                rows)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,215 @@
+"""How good a correction is, in the figures both ``retarget --report`` and the window's quality
+panel show: one function, :func:`quality`.
+
+* ``constraints``: each enabled constraint's residual over its active range (the largest, the
+  mean and the frame of the largest; metres, radians for orientation kinds).
+* ``contacts``: each automatic foot contact (heel or toe): how far the target's joint drifts
+  horizontally over the contact, in the direct conversion and corrected.
+* ``pops``: per joint, its worst ratio of angular speed to the no-pop limit around the ramps
+  (:func:`pop_limits`): 1 or less means no pop.
+* ``bone_directions``: per mapped target bone, the largest angle between the performer's bone
+  (the virtual bone it follows) and the corrected target bone, and where.
+* ``per_frame``: the foot slide (the largest horizontal distance of a planted joint from where
+  its contact started) and the largest metric residual, per frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kinematics import fk_arrays
+from ..motion import Motion
+from ..quaternions import qconj, qmul
+
+__all__ = ["quality", "angular_speed", "ramps", "pop_limits", "POP_WINDOW", "POP_FACTOR",
+           "SMOOTHSTEP_PEAK"]
+
+#: [s] around a ramp, the direct conversion's fastest turn within this is the reference
+POP_WINDOW = 0.25
+#: a joint may turn this many times faster than the direct conversion's fastest turn near a ramp
+POP_FACTOR = 1.2
+#: the steepest slope of a smoothstep 3u^2 - 2u^3 over [0, 1] (at u = 1/2)
+SMOOTHSTEP_PEAK = 1.5
+#: [rad/s] no limit is lower (a joint still in the capture and not corrected may shiver)
+_SPEED_FLOOR = np.radians(1.0)
+
+
+def _angle(q: np.ndarray) -> np.ndarray:
+    """[rad] the rotation angle of quaternions ``(..., 4)``, in [0, pi]."""
+    return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+def angular_speed(motion: Motion) -> np.ndarray:
+    """``(F, J)`` [rad/s] how fast each joint's local rotation turns into each frame (from the
+    frame before; 0 at frame 0)."""
+    q = motion.rotations
+    out = np.zeros(q.shape[:2])
+    if len(q) > 1:
+        out[1:] = _angle(qmul(q[1:], qconj(q[:-1]))) * motion.fps
+    return out
+
+
+def ramps(constraints, num_frames: int) -> list[tuple[int, int]]:
+    """``(a, b)`` frame spans (``a < b``) over which constraints ease in or out: ``[smooth_in,
+    start]`` and ``[end, smooth_out]``; a constraint that switches on or off within the clip
+    without a ramp gives the one-frame span around that switch."""
+    out = set()
+    last = num_frames - 1
+    for c in constraints:
+        if not c.enabled:
+            continue
+        if c.smooth_in < c.start:
+            out.add((c.smooth_in, c.start))
+        elif c.start > 0:
+            out.add((c.start - 1, c.start))
+        if c.end < c.smooth_out:
+            out.add((c.end, c.smooth_out))
+        elif c.end < last:
+            out.add((c.end, c.end + 1))
+    return sorted(out)
+
+
+def pop_limits(direct: Motion, corrected: Motion, spans) -> list[tuple[slice, np.ndarray]]:
+    """Per ramp span ``(a, b)``: the frames the no-pop rule checks (those turned into from
+    ``a - 1`` to ``b + 1``) and ``(J,)`` [rad/s] each joint's limit there.
+
+    The limit (issue 14 point 2) is the larger of :data:`POP_FACTOR` times the direct
+    conversion's fastest turn at the joint within :data:`POP_WINDOW` of the ramp, and that turn
+    plus what a smoothstep over the ramp needs for the correction's size there (the largest
+    turn of the joint's correction from its value at either end of the ramp).
+    """
+    F = direct.num_frames
+    fps = direct.fps
+    speed = angular_speed(direct)
+    offset = qmul(corrected.rotations, qconj(direct.rotations))          # (F, J, 4)
+    w = int(round(POP_WINDOW * fps))
+    out = []
+    for a, b in spans:
+        base = speed[max(0, a - w):min(F, b + w + 1)].max(axis=0)
+        part = offset[a:b + 1]
+        size = np.maximum(_angle(qmul(part, qconj(part[:1]))),
+                          _angle(qmul(part, qconj(part[-1:])))).max(axis=0)
+        need = base + SMOOTHSTEP_PEAK * size * fps / (b - a)
+        limit = np.maximum(np.maximum(POP_FACTOR * base, need), _SPEED_FLOOR)
+        out.append((slice(max(1, a), min(F, b + 2)), limit))
+    return out
+
+
+def _residuals(constraints, residual) -> list[dict]:
+    out = []
+    for i, c in enumerate(constraints):
+        res = residual[i][c.start:c.end + 1] if residual is not None else np.array([np.nan])
+        solved = np.isfinite(res)
+        if solved.any():
+            k = int(np.nanargmax(res))
+            entry = {"max_residual": float(res[k]), "mean_residual": float(np.nanmean(res)),
+                     "frame": c.start + k}
+        else:
+            entry = {"max_residual": None, "mean_residual": None, "frame": None}
+        out.append({"name": c.name or c.joint, "joint": c.joint, "kind": c.kind,
+                    "residual_unit": c.kind_object.residual_unit, **entry})
+    return out
+
+
+def _contacts(constraints, direct_pos, corrected_pos, index) -> tuple[list[dict], np.ndarray]:
+    """The contacts' drift, and per frame the largest slide of a planted joint."""
+    slide = np.zeros(len(direct_pos))
+    out = []
+    seen = set()
+    for c in constraints:
+        if not (c.auto and c.meta.get("source") == "contact" and "part" in c.meta):
+            continue
+        key = (c.joint, c.start, c.end)
+        if key in seen:                     # a contact held by two constraints counts once
+            continue
+        seen.add(key)
+        j = index[c.joint]
+        span = slice(c.start, c.end + 1)
+        drifts = []
+        for pos in (direct_pos, corrected_pos):
+            p = pos[span, j][:, [0, 2]]
+            drifts.append(np.linalg.norm(p - p[0], axis=1))
+        slide[span] = np.maximum(slide[span], drifts[1])
+        out.append({"joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
+                    "drift_direct_m": float(drifts[0].max()),
+                    "drift_corrected_m": float(drifts[1].max())})
+    return out, slide
+
+
+def _pops(direct: Motion, corrected: Motion, constraints) -> list[dict]:
+    names = corrected.skeleton.names
+    speed = angular_speed(corrected)
+    J = len(names)
+    worst = np.zeros(J)
+    where = np.zeros(J, dtype=np.intp)
+    at_speed = np.zeros(J)
+    at_limit = np.full(J, np.nan)
+    for frames, limit in pop_limits(direct, corrected, ramps(constraints, direct.num_frames)):
+        s = speed[frames]
+        if not len(s):
+            continue
+        ratio = s / limit
+        k = ratio.argmax(axis=0)
+        r = ratio[k, np.arange(J)]
+        better = r > worst
+        worst[better] = r[better]
+        where[better] = frames.start + k[better]
+        at_speed[better] = s[k, np.arange(J)][better]
+        at_limit[better] = limit[better]
+    order = np.argsort(-worst, kind="stable")
+    return [{"joint": names[j], "ratio": float(worst[j]), "frame": int(where[j]),
+             "speed_deg_s": float(np.degrees(at_speed[j])),
+             "limit_deg_s": float(np.degrees(at_limit[j]))}
+            for j in order if np.isfinite(at_limit[j])]
+
+
+def _bone_directions(binding, performer: Motion, corrected_pos) -> list[dict]:
+    """Per mapped target bone (named by its child joint): the largest angle between the
+    performer's (virtual) bone and the corrected target bone."""
+    if binding is None:
+        return []
+    p_pos = fk_arrays(performer.skeleton, performer.rotations, performer.translations,
+                      end_sites=False).positions
+    names = binding.target.names
+    out = []
+    for j, bones in binding.bones.items():
+        p = int(binding.mapped[j])
+        for c, pc in zip(bones.children, bones.performer):
+            a = p_pos[:, pc] - p_pos[:, p]
+            b = corrected_pos[:, c] - corrected_pos[:, j]
+            cos = np.sum(a * b, axis=1) / np.maximum(
+                np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12)
+            angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            k = int(angle.argmax())
+            out.append({"joint": names[c], "max_error_deg": float(angle[k]), "frame": k})
+    return out
+
+
+def quality(performer: Motion, direct: Motion, corrected: Motion, constraints, residual,
+            binding=None) -> dict:
+    """The quality figures of a correction (see the module doc), JSON-ready.
+
+    Args:
+        performer: the performer's motion (the capture).
+        direct: the direct conversion (composed motion), ``F`` frames.
+        corrected: the corrected motion (the direct conversion when nothing was solved).
+        constraints: the enabled constraints, in the order ``residual`` indexes them.
+        residual: constraint index -> ``(F,)`` residual (NaN where not solved), or ``None``.
+        binding: the :class:`~engine.conversion.binding.Binding` (for bone directions), or
+            ``None`` to leave them out.
+    """
+    constraints = [c for c in constraints if c.enabled]
+    sk = direct.skeleton
+    direct_pos = fk_arrays(sk, direct.rotations, direct.translations, end_sites=False).positions
+    corrected_pos = fk_arrays(sk, corrected.rotations, corrected.translations,
+                              end_sites=False).positions
+    contacts, slide = _contacts(constraints, direct_pos, corrected_pos, sk.index)
+    worst = np.zeros(direct.num_frames)
+    if residual is not None:
+        for i, c in enumerate(constraints):
+            if not c.kind_object.angular:
+                worst = np.fmax(worst, residual[i])
+    return {"constraints": _residuals(constraints, residual),
+            "contacts": contacts,
+            "pops": _pops(direct, corrected, constraints),
+            "bone_directions": _bone_directions(binding, performer, corrected_pos),
+            "per_frame": {"foot_slide_m": slide.tolist(), "max_residual_m": worst.tolist()}}

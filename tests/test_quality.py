@@ -1,0 +1,138 @@
+"""The quality figures (``engine.correction.quality``) that ``retarget --report`` writes under
+``"quality"`` and the window's quality panel shows: their schema, and what they say on real
+clips."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import clip_path
+from motion_composer.app.cli import main
+from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.correction.quality import angular_speed, quality, ramps
+from motion_composer.engine.formats import read_motion
+from motion_composer.engine.project import Project, Source
+from motion_composer.engine.scene import Scene
+from ik_fixtures import MAX_TO_HOLDEN
+
+WALK = clip_path("cmu_131_01_walk.bvh")
+TPOSE = clip_path("cmu_rest_tpose.bvh")
+
+
+@pytest.fixture(scope="module")
+def walk_solution():
+    performer, target = read_motion(WALK), read_motion(TPOSE)
+    project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
+                      correspondence=Correspondence(MAX_TO_HOLDEN), auto_contacts=True)
+    return Scene(project, performer, target).solve(regenerate=True)
+
+
+def _check_schema(q: dict, frames: int) -> None:
+    assert set(q) >= {"constraints", "contacts", "pops", "bone_directions", "per_frame"}
+    for c in q["constraints"]:
+        assert isinstance(c["name"], str) and isinstance(c["joint"], str)
+        for key in ("max_residual", "mean_residual"):
+            assert c[key] is None or isinstance(c[key], float)
+        assert c["frame"] is None or isinstance(c["frame"], int)
+    for c in q["contacts"]:
+        assert c["part"] in ("heel", "toe") and isinstance(c["joint"], str)
+        assert isinstance(c["start"], int) and isinstance(c["end"], int)
+        assert isinstance(c["drift_direct_m"], float)
+        assert isinstance(c["drift_corrected_m"], float)
+    for p in q["pops"]:
+        assert isinstance(p["joint"], str) and isinstance(p["frame"], int)
+        for key in ("ratio", "speed_deg_s", "limit_deg_s"):
+            assert isinstance(p[key], float)
+    for b in q["bone_directions"]:
+        assert isinstance(b["joint"], str) and isinstance(b["frame"], int)
+        assert isinstance(b["max_error_deg"], float)
+    for key in ("foot_slide_m", "max_residual_m"):
+        values = q["per_frame"][key]
+        assert len(values) == frames and all(isinstance(v, float) for v in values)
+
+
+def test_the_report_holds_the_quality_figures(walk_solution):
+    q = walk_solution.report["quality"]
+    F = walk_solution.motion.num_frames
+    _check_schema(q, F)
+    json.dumps(q, allow_nan=False)
+    enabled = [c for c in walk_solution.constraints if c.enabled]
+    assert [c["name"] for c in q["constraints"]] == [c.name or c.joint for c in enabled]
+    # the residuals are those of the correction, the frame is where the largest is
+    for i, (c, entry) in enumerate(zip(enabled, q["constraints"])):
+        res = walk_solution.correction.residual[i]
+        assert entry["max_residual"] == pytest.approx(np.nanmax(res[c.start:c.end + 1]))
+        assert res[entry["frame"]] == entry["max_residual"]
+    # every contact is held: the corrected drift is below the direct conversion's
+    assert q["contacts"]
+    for c in q["contacts"]:
+        assert c["drift_corrected_m"] <= c["drift_direct_m"] + 1e-9
+    # the per-frame slide is the contacts' drift
+    slide = np.array(q["per_frame"]["foot_slide_m"])
+    assert slide.max() == pytest.approx(max(c["drift_corrected_m"] for c in q["contacts"]))
+    # the worst pop comes first, and a mapped bone follows its performer bone
+    ratios = [p["ratio"] for p in q["pops"]]
+    assert ratios == sorted(ratios, reverse=True)
+    assert {b["joint"] for b in q["bone_directions"]} >= {"LeftLeg", "RightFoot"}
+
+
+def test_without_constraints_the_direct_conversion_is_measured():
+    performer, target = read_motion(WALK), read_motion(TPOSE)
+    project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
+                      correspondence=Correspondence(MAX_TO_HOLDEN))
+    solution = Scene(project, performer, target).solve(regenerate=True)
+    q = solution.report["quality"]
+    _check_schema(q, performer.num_frames)
+    assert q["constraints"] == [] and q["contacts"] == [] and q["pops"] == []
+    assert q["per_frame"]["foot_slide_m"] == [0.0] * performer.num_frames
+    # the direct conversion orients each bone along its performer bone
+    primary = {b["joint"]: b["max_error_deg"] for b in q["bone_directions"]}
+    assert primary["LeftLeg"] < 1.0 and primary["RightFoot"] < 1.0
+
+
+def test_a_hard_switch_is_a_one_frame_ramp_and_the_frames_around_it_are_measured(
+        walk_solution):
+    performer, target = read_motion(WALK), read_motion(TPOSE)
+    composed = walk_solution.scene.composed
+    hand = Constraint("LeftHand", "position", {"point": [0.3, 0.0, 0.3]}, 100, 100, 120, 120)
+    assert ramps([hand], composed.num_frames) == [(99, 100), (120, 121)]
+    from motion_composer.engine.correction.enforcement import enforce
+    result = enforce(composed, [hand])
+    q = quality(performer, composed, result.motion, [hand], result.residual)
+    worst = q["pops"][0]
+    assert 99 <= worst["frame"] <= 122          # turned into from 98 .. 121
+    speed = angular_speed(result.motion)
+    joint = composed.skeleton.index[worst["joint"]]
+    assert np.degrees(speed[worst["frame"], joint]) == pytest.approx(worst["speed_deg_s"])
+
+
+def test_retarget_report_writes_the_quality_figures(tmp_path, capsys):
+    report = tmp_path / "report.json"
+    code = main(["retarget", str(WALK), "--target", str(TPOSE), "-o", str(tmp_path / "o.bvh"),
+                 "--auto-contacts", "--report", str(report)])
+    assert code == 0, capsys.readouterr().err
+    data = json.loads(report.read_text())
+    _check_schema(data["quality"], data["frames"])
+    assert data["quality"]["contacts"]
+
+
+def test_contradicting_goals_at_one_priority_give_a_continuous_compromise(walk_solution):
+    """Two goals 80 cm apart for one hand at one priority: neither is met, and the hand
+    settles between them without a flip (no joint turns faster than the no-pop limit)."""
+    from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.kinematics import fk_arrays
+    performer = read_motion(WALK)
+    composed = walk_solution.scene.composed
+    sk = composed.skeleton
+    here = fk_arrays(sk, composed.rotations, composed.translations,
+                     end_sites=False).positions[400, sk.index["LeftHand"]]
+    there = [Constraint("LeftHand", "position", {"point": here + offset}, 300, 320, 480, 500,
+                        name=name)
+             for name, offset in (("up", [0.4, 0.3, 0.0]), ("down", [-0.4, -0.2, 0.3]))]
+    result = enforce(composed, there)
+    q = quality(performer, composed, result.motion, there, result.residual)
+    assert all(c["max_residual"] > 0.1 for c in q["constraints"])       # a compromise
+    assert max(p["ratio"] for p in q["pops"]) <= 1.0
