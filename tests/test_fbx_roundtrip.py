@@ -1,23 +1,17 @@
 """FBX written and read: the Mixamo round trip (a BVH capture retargeted onto a Mixamo FBX
 character and written as FBX opens in Blender 3.4 on that character: its skinned meshes with
 their vertex groups, the joints where the written motion puts them on every frame), and our
-FBX reader reading what our writer writes.
-
-These need the FBX reader (``engine/formats/fbx/scene.py``, issue 17's reading side): until
-it is merged they skip.
-"""
+FBX reader reading what our writer writes."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-pytest.importorskip("motion_composer.engine.formats.fbx.scene",
-                    reason="FBX reading (engine/formats/fbx/scene.py) is not merged yet")
-
 from blender_util import run_blender_fbx
 from conftest import clip_path, shared_path
 from motion_composer.app.cli import main
 from motion_composer.engine.formats import read_character, read_motion
+from motion_composer.engine.formats.fbx.write import write_fbx
 from motion_composer.engine.kinematics import forward_kinematics
 
 #: frames of the walk retargeted (2 s at 120 fps)
@@ -69,11 +63,9 @@ def test_blender_puts_the_joints_where_the_motion_does(round_trip):
 def test_our_reader_reads_what_we_write(source, tmp_path):
     """Written and read back by the FBX reader: the same joints, bind pose, meshes and, on
     every frame, joint world positions (float32 keys: within 1e-6 of the stature)."""
-    from motion_composer.engine.formats import read_motion as read_any
-    from motion_composer.engine.formats.fbx.write import write_fbx
     path = clip_path(source) if source.endswith(".bvh") else shared_path(source)
     character = read_character(path)
-    motion = (read_any(path).frames(slice(0, 240)) if character is None else
+    motion = (read_motion(path).frames(slice(0, 240)) if character is None else
               character.motions[0] if character.motions else character.rest_motion())
     out = tmp_path / "out.fbx"
     write_fbx(motion, out, character=character)
