@@ -8,7 +8,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .quaternions import from_euler
 
@@ -49,6 +48,7 @@ def quat_to_euler(quats: np.ndarray, order: str, *, unwrap: bool = True) -> np.n
     the remaining axes are decomposed and dropped; the caller checks they were zero with
     :func:`euler_residual` if that matters.
     """
+    from scipy.spatial.transform import Rotation
     quats = np.asarray(quats, dtype=float)
     if not order:
         return np.zeros((quats.shape[0], 0))

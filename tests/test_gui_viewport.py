@@ -13,9 +13,9 @@ def view(qtbot):
     from motion_composer.app.gui.viewport import Viewport
     doc = demo_document()
     v = Viewport(doc)
-    qtbot.addWidget(v)
-    v.resize(800, 600)
-    v.show()
+    qtbot.addWidget(v.widget)
+    v.widget.resize(800, 600)
+    v.widget.show()
     qtbot.waitExposed(v, timeout=WAIT_MS)
     doc.set_frame(300)
     v.frame_all()

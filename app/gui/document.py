@@ -90,6 +90,9 @@ class Document(QtCore.QObject):
         self._solving: Scene | None = None
         #: [s] how long the last solve that landed took (None before one did)
         self.solve_seconds: float | None = None
+        #: the quality figures (``report["quality"]`` of :func:`engine.correction.quality`)
+        #: of the solve that landed last (None before one did)
+        self.last_quality: dict | None = None
         #: names this session's autosave while the project was never saved
         self.session = new_session()
         #: autosave files that hold the current work: the ones this document wrote and the
@@ -239,13 +242,14 @@ class Document(QtCore.QObject):
         def work(progress, cancel):
             t0 = time.perf_counter()
             solution = scene.solve(progress=progress, cancel=cancel, **kwargs)
-            return solution.scene, time.perf_counter() - t0, solution.report["warnings"]
+            return (solution.scene, time.perf_counter() - t0, solution.report["warnings"],
+                    solution.report["quality"])
 
         self.jobs.run("Solving", work, lambda result: self._solved(scene, result),
                       on_end=lambda outcome: self._solve_ended(scene, outcome))
 
     def _solved(self, scene: Scene, outcome: tuple) -> None:
-        result, self.solve_seconds, warnings = outcome
+        result, self.solve_seconds, warnings, quality = outcome
         self._pending.pop(scene, None)
         from motion_composer.app.gui.commands import replace_scene
         replace_scene(self, scene, result)
@@ -256,6 +260,7 @@ class Document(QtCore.QObject):
             self.motionChanged.emit()
         for line in warnings:
             self.noted.emit(f"Warning: {line}")
+        self.last_quality = quality
         self.solved.emit()
 
     def _solve_ended(self, scene: Scene, outcome: str) -> None:
@@ -288,6 +293,15 @@ class Document(QtCore.QObject):
         """Change what the viewer shows (not undoable): ``show_performer=False``,
         ``side_by_side=True``, ``camera={...}``, ``play_range=(a, b)``."""
         viewer = self._scene.viewer.with_(**changes)
+        if viewer != self._scene.viewer:
+            self._scene = _with_viewer(self._scene, viewer)
+            self.viewerChanged.emit()
+
+    def set_viewer_options(self, **options) -> None:
+        """Change display settings kept in the viewer's ``options`` (not undoable), e.g.
+        ``follow_root=True``; the others stay as they are."""
+        viewer = dataclasses.replace(self._scene.viewer,
+                                     options={**self._scene.viewer.options, **options})
         if viewer != self._scene.viewer:
             self._scene = _with_viewer(self._scene, viewer)
             self.viewerChanged.emit()

@@ -131,7 +131,7 @@ def run(project: str | None = None, *, demo: bool = False, screenshot: str | Non
         def shoot():
             window.viewport.frame_all()
             app.processEvents()
-            window.grab().save(screenshot)
+            window.screenshot().save(screenshot)
             app.quit()
         QtCore.QTimer.singleShot(1500, shoot)
     elif quit_after_ms is not None:
@@ -324,7 +324,8 @@ def _run_self_test() -> int:
                 window.doc.undo_stack.setClean()
                 window.hide()
                 window.deleteLater()
-                app.processEvents()
+                # deleted now, while the application (and its OpenGL contexts) still exist
+                QtCore.QCoreApplication.sendPostedEvents(None, QtCore.QEvent.Type.DeferredDelete)
         except SelfTestFailure as exc:
             report(False, str(exc))
             return 1

@@ -10,10 +10,19 @@ from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
 
+#: panels whose docks start behind another tab -> their dock's name (see MainWindow._panel)
+_LAZY_PANELS = {"curve_editor": "curves", "binding_panel": "binding", "ik_panel": "ik",
+                "inspector": "inspector"}
+
 MAX_RECENT = 8
 #: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
 #: a crash loses at most this much work
 AUTOSAVE_MS = 60_000
+#: the window's default size and its side and bottom docks' [px]: the viewport gets more than
+#: half of the window
+WINDOW_SIZE = (1600, 1000)
+SIDE_DOCK_PX = 380
+BOTTOM_DOCK_PX = 210
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -24,7 +33,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.doc = document or Document(self)
         self.settings = QtCore.QSettings()
         self.setWindowTitle(self.doc.title)
-        self.resize(1400, 900)
+        self.setAcceptDrops(True)
 
         self.viewport = Viewport(self.doc)
         self._build_docks()
@@ -35,6 +44,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.doc.errorRaised.connect(self.show_error)
         self.doc.motionChanged.connect(self._motion_changed)
         self.doc.viewerChanged.connect(self.viewport.refresh)
+        self.viewport.filesDropped.connect(self.import_dropped)
         self.doc.noted.connect(lambda text: self.statusBar().showMessage(text, 5000))
         self.doc.jobs.started.connect(self._job_started)
         self.doc.jobs.progressed.connect(lambda f: self.progress.setValue(int(f * 1000)))
@@ -48,42 +58,35 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ building
     def _build_docks(self) -> None:
-        from motion_composer.app.gui.binding_panel import BindingPanel
         from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
-        from motion_composer.app.gui.curve_editor import CurveEditor
         from motion_composer.app.gui.playback import PlaybackBar
+        from motion_composer.app.gui.quality_panel import QualityPanel
 
         self.correspondence_panel = CorrespondencePanel(self.doc)
-        self.binding_panel = BindingPanel(self.doc)
+        self.quality_panel = QualityPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
-        self.curve_editor = CurveEditor(self.doc)
-        from motion_composer.app.gui.ik_panel import IKPanel
-        self.ik_panel = IKPanel(self.doc)
-        ik_page = QtWidgets.QWidget()
-        ik_box = QtWidgets.QVBoxLayout(ik_page)
-        ik_box.addWidget(self.ik_panel)
-        ik_box.addStretch(1)
+        self._panels: dict = {}                     # the panels built so far (see _panel)
         docks = [
             ("Correspondence", self.correspondence_panel,
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
-            ("Binding", self.binding_panel, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea,
+            ("Binding", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
-            ("IK", ik_page, QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, "ik"),
-            ("Curves", self.curve_editor, QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
+            ("IK", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "ik"),
+            ("Quality", self.quality_panel, QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
+             "quality"),
+            ("Curves", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
-            from motion_composer.app.gui.inspector import ConstraintInspector
             from motion_composer.app.gui.timeline import ConstraintTimeline
             self.timeline = ConstraintTimeline(self.doc)
-            self.inspector = ConstraintInspector(self.doc, self.timeline)
             self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
-            docks += [("Constraints", self.timeline,
+            docks += [("Constraints", self._timeline_page(),
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
-                      ("Constraint", self.inspector,
-                       QtCore.Qt.DockWidgetArea.LeftDockWidgetArea, "inspector")]
+                      ("Constraint", QtWidgets.QWidget(),
+                       QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "inspector")]
         except ImportError:
-            self.timeline = self.inspector = None
+            self.timeline = None
         for title, widget, area, name in docks:
             dock = QtWidgets.QDockWidget(title, self)
             dock.setObjectName(name)
@@ -93,19 +96,103 @@ class MainWindow(QtWidgets.QMainWindow):
         if getattr(self, "timeline_dock", None) is not None:
             self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
             self.timeline_dock.raise_()
+        for name, dock in _LAZY_PANELS.items():
+            if getattr(self, f"{dock}_dock", None) is not None:
+                getattr(self, f"{dock}_dock").visibilityChanged.connect(
+                    lambda shown, name=name: shown and self._panel(name))
+        # the bottom docks' titles and tabs run down their left side: their height goes to
+        # the viewport
+        self.setTabPosition(QtCore.Qt.DockWidgetArea.BottomDockWidgetArea,
+                            QtWidgets.QTabWidget.TabPosition.West)
+        for dock in (self.curves_dock, getattr(self, "timeline_dock", None)):
+            if dock is not None:
+                dock.setFeatures(dock.features() |
+                                 QtWidgets.QDockWidget.DockWidgetFeature.DockWidgetVerticalTitleBar)
         # the transport sits under the viewport it drives
         central = QtWidgets.QWidget()
         box = QtWidgets.QVBoxLayout(central)
         box.setContentsMargins(0, 0, 0, 0)
         box.setSpacing(2)
-        box.addWidget(self.viewport, 1)
+        box.addWidget(self.viewport.widget, 1)
         box.addWidget(self.playback)
         self.setCentralWidget(central)
+        # the side panels share one column of tabs, so the viewport keeps most of the width
+        self.tabifyDockWidget(self.correspondence_dock, self.binding_dock)
         self.tabifyDockWidget(self.binding_dock, self.ik_dock)
+        self.tabifyDockWidget(self.ik_dock, self.quality_dock)
         if getattr(self, "inspector_dock", None) is not None:
             self.tabifyDockWidget(self.binding_dock, self.inspector_dock)
-        self.binding_dock.raise_()
+        self.correspondence_dock.raise_()
+        # the minimum the layout set while the docks were still stacked, before the tabs
+        self.setMinimumSize(0, 0)
+        self.resize(*WINDOW_SIZE)
+        self.resizeDocks([self.correspondence_dock], [SIDE_DOCK_PX],
+                         QtCore.Qt.Orientation.Horizontal)
+        self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
+
+    def _timeline_page(self) -> QtWidgets.QWidget:
+        """The constraint timeline with the quality strip under it, on the same frames (the
+        strip shows while there are quality figures)."""
+        from motion_composer.app.gui.quality_panel import QualityStrip
+        self.quality_strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+        page = QtWidgets.QWidget()
+        box = QtWidgets.QVBoxLayout(page)
+        box.setContentsMargins(0, 0, 0, 0)
+        box.setSpacing(0)
+        box.addWidget(self.timeline, 1)
+        box.addWidget(self.quality_strip)
+        left = self.quality_strip.getAxis("left")
+        self.timeline.view.sigResized.connect(
+            lambda *_: left.setWidth(self.timeline.row_axis.width()))
+        return page
+
+    # ------------------------------------------------------------------ panels built when shown
+    def _panel(self, name: str):
+        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time its dock shows or
+        it is asked for (its attribute): they all start behind another tab, and the window's
+        first frame waits for none of them. None without the constraint timeline."""
+        if name not in self._panels:
+            dock = getattr(self, f"{_LAZY_PANELS[name]}_dock", None)
+            if dock is None:
+                return None
+            panel, page = self._make_panel(name)
+            self._panels[name] = panel
+            old = dock.widget()
+            dock.setWidget(page)
+            if old is not None:
+                old.deleteLater()
+        return self._panels[name]
+
+    def _make_panel(self, name: str):
+        """A new panel and the page its dock holds."""
+        if name == "curve_editor":
+            from motion_composer.app.gui.curve_editor import CurveEditor
+            panel = CurveEditor(self.doc)
+        elif name == "binding_panel":
+            from motion_composer.app.gui.binding_panel import BindingPanel
+            panel = BindingPanel(self.doc)
+        elif name == "inspector":
+            from motion_composer.app.gui.inspector import ConstraintInspector
+            panel = ConstraintInspector(self.doc, self.timeline)
+        else:
+            from motion_composer.app.gui.ik_panel import IKPanel
+            panel = IKPanel(self.doc)
+            page = QtWidgets.QWidget()
+            box = QtWidgets.QVBoxLayout(page)
+            box.addWidget(panel)
+            box.addStretch(1)
+            return panel, page
+        return panel, panel
+
+    curve_editor = property(lambda self: self._panel("curve_editor"),
+                            doc="The curve editor (built when first shown or asked for).")
+    binding_panel = property(lambda self: self._panel("binding_panel"),
+                             doc="The binding panel (built when first shown or asked for).")
+    ik_panel = property(lambda self: self._panel("ik_panel"),
+                        doc="The IK panel (built when first shown or asked for).")
+    inspector = property(lambda self: self._panel("inspector"),
+                         doc="The constraint inspector (built when first shown or asked for).")
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
         action = QtGui.QAction(text, self)
@@ -156,6 +243,17 @@ class MainWindow(QtWidgets.QMainWindow):
                      checkable=True, checked=v.side_by_side)
         view.addSeparator()
         self._action(view, "&Frame All", self.viewport.frame_all, "F")
+        self._action(view, "F&ront View", lambda: self.viewport.set_view("front"), "1")
+        self._action(view, "Si&de View", lambda: self.viewport.set_view("side"), "3")
+        self._action(view, "T&op View", lambda: self.viewport.set_view("top"), "7")
+        view.addSeparator()
+        self.view_actions = {
+            name: self._action(view, text, lambda on, n=name: self.viewport.set_option(n, on),
+                               shortcut, checkable=True, checked=self.viewport.option(name))
+            for name, text, shortcut in (("follow_root", "Follow &Root", "Shift+F"),
+                                         ("onion_skin", "&Onion Skin", "O"),
+                                         ("foot_trails", "Foot Trai&ls", "T"))}
+        self.doc.viewerChanged.connect(self._show_view_options)
 
         tools = bar.addMenu("&Tools")
         self._action(tools, "Add &Foot Contacts and Solve", self.solve_contacts)
@@ -182,6 +280,24 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _show(self, key: str, on: bool) -> None:
         self.doc.set_viewer(**{key: on})
+
+    def _show_view_options(self) -> None:
+        """The View menu's toggles follow the viewer options (an opened project's)."""
+        for name, action in self.view_actions.items():
+            with QtCore.QSignalBlocker(action):
+                action.setChecked(self.viewport.option(name))
+
+    def screenshot(self) -> QtGui.QImage:
+        """The window as drawn, the 3D view included (a native GL window, which
+        ``QWidget.grab`` leaves black, is painted in from its framebuffer)."""
+        image = self.grab().toImage()
+        host = self.viewport.widget
+        if self.viewport.isExposed():
+            painter = QtGui.QPainter(image)
+            painter.drawImage(host.mapTo(self, QtCore.QPoint(0, 0)),
+                              self.viewport.grabFramebuffer())
+            painter.end()
+        return image
 
     # ------------------------------------------------------------------ dialogs (tests replace)
     def show_error(self, message: str) -> None:
@@ -351,6 +467,67 @@ class MainWindow(QtWidgets.QMainWindow):
                 self.statusBar().showMessage(f"{Path(path).name}: {doubt}; if that is wrong, "
                                              f"import it again and set it in the options", 0)
         return self._guard(load)
+
+    # ------------------------------------------------------------------ drag and drop
+    def dragEnterEvent(self, event) -> None:   # noqa: N802 - Qt's name
+        if self._dropped_paths(event.mimeData()):
+            event.acceptProposedAction()
+
+    def dragMoveEvent(self, event) -> None:    # noqa: N802 - Qt's name
+        if self._dropped_paths(event.mimeData()):
+            event.acceptProposedAction()
+
+    def dropEvent(self, event) -> None:        # noqa: N802 - Qt's name
+        paths = self._dropped_paths(event.mimeData())
+        if paths:
+            event.acceptProposedAction()
+            self.import_dropped(paths)
+
+    @staticmethod
+    def _dropped_paths(mime) -> list[str]:
+        return [u.toLocalFile() for u in mime.urls() if u.isLocalFile()]
+
+    def import_dropped(self, paths) -> None:
+        """Import files dropped on the window, each as :meth:`dropped_role` says (its content
+        says its format: a file of none shows why, as File > Import does)."""
+        for path in paths:
+            role = self._guard_value(self.dropped_role, path)
+            if role is not None:
+                self.import_file(role, path)
+
+    def dropped_role(self, path) -> str | None:
+        """What a dropped file becomes: a character (a glTF mesh, or a skeleton of one frame)
+        the target; a motion the performer while there is none; a motion dropped when a
+        performer is loaded could be either (a new performer, or the target to retarget
+        onto), so the user is asked (:meth:`ask_role`). None: cancelled."""
+        from motion_composer.engine.formats import read_motion, sniff
+        if sniff(path).mesh:
+            return "target"
+        if read_motion(path).num_frames <= 1:
+            return "target"
+        if self.doc.scene.performer is None:
+            return "performer"
+        return self.ask_role(Path(path).name)
+
+    def ask_role(self, name: str) -> str | None:
+        """'performer' or 'target' for a dropped motion that could be either, or None."""
+        box = QtWidgets.QMessageBox(self)
+        box.setWindowTitle("Motion Composer")
+        box.setText(f"Import {name} as the performer (the motion to retarget) or as the "
+                    f"target (the skeleton to retarget onto)?")
+        performer = box.addButton("Performer", QtWidgets.QMessageBox.ButtonRole.AcceptRole)
+        target = box.addButton("Target", QtWidgets.QMessageBox.ButtonRole.AcceptRole)
+        box.addButton(QtWidgets.QMessageBox.StandardButton.Cancel)
+        box.exec()
+        return {performer: "performer", target: "target"}.get(box.clickedButton())
+
+    def _guard_value(self, fn, *args):
+        """``fn(*args)``, or None after showing a user error it raised."""
+        try:
+            return fn(*args)
+        except MotionComposerError as exc:
+            self.show_error(str(exc))
+            return None
 
     def export_dialog(self) -> None:
         if not self.doc.scene.ready:

@@ -25,6 +25,40 @@ SPEEDS = ((0.25, "0.25x"), (0.5, "0.5x"), (1.0, "1x"), (2.0, "2x"))
 _MIN_TICK_MS = 1000.0 / 60.0
 
 
+class _FrameText(QtWidgets.QWidget):
+    """A line of text that only repaints itself when it changes. (A ``QLabel`` asks for a new
+    layout on every ``setText``, and the main window then repaints everything around the
+    viewport: on every frame while playing.) Its width is set for the widest text
+    (:meth:`fit`)."""
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self._text = ""
+        self.setSizePolicy(QtWidgets.QSizePolicy.Policy.Fixed,
+                           QtWidgets.QSizePolicy.Policy.Preferred)
+
+    def text(self) -> str:
+        return self._text
+
+    def setText(self, text: str) -> None:       # noqa: N802 - as QLabel's
+        if text != self._text:
+            self._text = text
+            self.update()
+
+    def fit(self, widest: str) -> None:
+        """As wide as ``widest`` (a layout change, once per clip, not per frame)."""
+        self.setFixedWidth(self.fontMetrics().horizontalAdvance(widest) + 8)
+
+    def sizeHint(self) -> QtCore.QSize:         # noqa: N802 - Qt's name
+        return QtCore.QSize(self.width(), self.fontMetrics().height() + 4)
+
+    def paintEvent(self, _event) -> None:       # noqa: N802 - Qt's name
+        painter = QtGui.QPainter(self)
+        painter.setPen(self.palette().color(QtGui.QPalette.ColorRole.WindowText))
+        painter.drawText(self.rect().adjusted(4, 0, 0, 0),
+                         QtCore.Qt.AlignmentFlag.AlignVCenter, self._text)
+
+
 class PlaybackBar(QtWidgets.QWidget):
     """Transport controls of one document."""
 
@@ -94,7 +128,7 @@ class PlaybackBar(QtWidgets.QWidget):
         self.spin.setKeyboardTracking(False)
         self.spin.setToolTip("Current frame")
         self.spin.valueChanged.connect(self._widget_frame)
-        self.label = QtWidgets.QLabel()
+        self.label = _FrameText()
         self.label.setFont(QtGui.QFontDatabase.systemFont(
             QtGui.QFontDatabase.SystemFont.FixedFont))
         self.label.setToolTip("Frame / last frame, and time from the clip's frame time")
@@ -294,4 +328,13 @@ class PlaybackBar(QtWidgets.QWidget):
             self.pause()
         if self.doc.scene.viewer.current_frame > last:
             self.doc.set_frame(last)
+        self._fix_label_width(last)
         self._show_frame(self.doc.scene.viewer.current_frame)
+
+    def _fix_label_width(self, last: int) -> None:
+        """The frame label as wide as its widest text: a label whose size hint changes with
+        each frame's text makes Qt lay out and repaint the whole window on every frame."""
+        ft = self.frame_time or 0.0
+        width = len(f"{last * ft:.3f}")
+        widest = f"{last} / {last}  {last * ft:>{width}.3f} s" if ft else "no clip"
+        self.label.fit(widest)

@@ -1,13 +1,24 @@
-"""The 3D viewport: performer, intermediate and target skeletons, floor, goals, picking.
+"""The 3D viewport: performer, intermediate and target skeletons, the target's skinned mesh,
+floor, goals, picking, and the judging tools (labels, onion skin, foot trails).
 
 pyqtgraph's GL view is Z-up; the engine is Y-up. Everything shown goes through
 :func:`to_view` ((x, y, z) -> (x, -z, y)), a rotation, so nothing is mirrored.
 
+The view is a ``QOpenGLWindow`` (pyqtgraph's ``GLViewMixin``) in a window container
+(:attr:`Viewport.widget`), not a ``QOpenGLWidget``: a ``QOpenGLWidget`` makes Qt compose the
+whole main window through OpenGL on every frame, which under software GL (Mesa llvmpipe) costs
+more than drawing the scene; a native child window swaps its own pixels only. Per frame only
+what changed is sent: bone and joint positions, the skinned vertices and their normals
+(numpy, from the document's cached world pose).
+
 Mouse, as in Blender and Maya: left click selects a joint; left drag (or Alt + left, or middle
-drag) orbits; Shift + drag or middle + Shift pans; the wheel or right drag zooms; F frames all.
+drag) orbits; Shift + drag or middle + Shift pans; the wheel or right drag zooms. Keys: F frames
+all (from a sensible height), 1 / 3 / 7 front, side and top views.
 """
 from __future__ import annotations
 
+import atexit
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,8 +27,11 @@ from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
 from motion_composer.engine.quaternions import to_matrix
 
 import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
+from pyqtgraph.opengl import shaders  # noqa: E402
+from pyqtgraph.opengl.GLViewWidget import GLViewMixin  # noqa: E402
+from PySide6 import QtOpenGL  # noqa: E402
 
-__all__ = ["Viewport", "to_view", "bone_mesh"]
+__all__ = ["Viewport", "to_view", "bone_mesh", "gl_possible", "GHOST_OFFSETS"]
 
 COLORS = {
     "performer": (0.45, 0.62, 0.85, 1.0),
@@ -26,6 +40,93 @@ COLORS = {
 }
 SELECTED = (1.0, 1.0, 0.2, 1.0)
 VIRTUAL = (0.2, 1.0, 0.5, 1.0)
+#: the skinned mesh: a light neutral material, opaque
+SKIN = (0.80, 0.79, 0.76, 1.0)
+#: onion skin: frames before and after the current one, and their colours (past blue, future
+#: red, fainter further away)
+GHOST_OFFSETS = (-20, -10, 10, 20)
+GHOST_PAST, GHOST_FUTURE = (0.45, 0.7, 1.0), (1.0, 0.55, 0.45)
+#: foot trails: the path, planted frames on it, and contacts active now on the floor
+TRAIL = (0.95, 0.85, 0.35, 0.9)
+PLANTED = (1.0, 0.25, 0.25, 1.0)
+CONTACT_FLOOR = (1.0, 0.3, 0.3, 0.45)
+#: camera elevations [deg] F keeps (outside them it goes back to FRAME_ELEVATION): a view from
+#: below the floor or from straight above is no view of a motion
+SENSIBLE_ELEVATION = (-5.0, 60.0)
+FRAME_ELEVATION = 12.0
+#: the named views (azimuth, elevation) [deg]: front looks along -Z (engine), side along -X
+VIEWS = {"front": (-90.0, 5.0), "side": (0.0, 5.0), "top": (-90.0, 89.9)}
+#: the fraction of the view's smaller field of view the framed figure fills
+FILL = 0.8
+
+#: two-sided lighting, from the camera (eye space): a face seen from behind is lit as its front,
+#: so thin or inverted parts of a character's mesh are never black
+TWO_SIDED = shaders.ShaderProgram("two_sided", [
+    shaders.VertexShader("""
+        uniform mat4 u_mvp;
+        uniform mat3 u_normal;
+        attribute vec4 a_position;
+        attribute vec3 a_normal;
+        attribute vec4 a_color;
+        varying vec4 v_color;
+        varying vec3 v_normal;
+        void main() {
+            v_normal = u_normal * a_normal;
+            v_color = a_color;
+            gl_Position = u_mvp * a_position;
+        }
+    """),
+    shaders.FragmentShader("""
+        #ifdef GL_ES
+        precision mediump float;
+        #endif
+        varying vec4 v_color;
+        varying vec3 v_normal;
+        void main() {
+            float n = length(v_normal);
+            vec3 normal = n > 0.0 ? v_normal / n : vec3(0.0, 0.0, 1.0);
+            float key = abs(dot(normal, normalize(vec3(0.35, 0.6, 1.0))));
+            float fill = abs(dot(normal, normalize(vec3(-0.6, -0.2, 0.6))));
+            vec3 rgb = v_color.rgb * (0.28 + 0.62 * key + 0.18 * fill);
+            gl_FragColor = vec4(min(rgb, vec3(1.0)), v_color.a);
+        }
+    """)])
+
+
+#: the views alive, deleted at exit while Qt still runs (see _delete_live_views)
+_LIVE: "weakref.WeakSet[Viewport]" = weakref.WeakSet()
+
+
+@atexit.register
+def _delete_live_views() -> None:
+    """Delete the GL windows still alive at exit while the application and their OpenGL
+    contexts exist (a test session's application lives to the end): left to Python's
+    teardown, a GL window goes after the application and the process dies in a segmentation
+    fault on its way out."""
+    import shiboken6
+    if QtCore.QCoreApplication.instance() is None:       # gone first: nothing may be deleted
+        return
+    for view in list(_LIVE):
+        if shiboken6.isValid(view) and shiboken6.isValid(view.widget):
+            shiboken6.delete(view.widget.window())       # the window it is in, whole
+
+
+def gl_possible() -> bool:
+    """Whether this process can make an OpenGL context (not on Qt's 'offscreen' and 'minimal'
+    platforms): where it cannot, the viewport is not embedded (a GL window without a context
+    crashes on its first paint) and a note takes its place."""
+    from PySide6.QtGui import QGuiApplication, QOffscreenSurface, QOpenGLContext
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        return False
+    ctx = QOpenGLContext()
+    if not ctx.create():
+        return False
+    surface = QOffscreenSurface()
+    surface.create()
+    ok = ctx.makeCurrent(surface)
+    if ok:
+        ctx.doneCurrent()
+    return ok
 #: an orientation goal's x, y, z axes (two vertices each)
 AXES = np.array([(1.0, 0.25, 0.25, 1.0)] * 2 + [(0.3, 1.0, 0.3, 1.0)] * 2 +
                 [(0.35, 0.5, 1.0, 1.0)] * 2)
@@ -45,9 +146,10 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     normal rather than NaN."""
     v = vertices[faces]                                           # (T, 3 corners, 3)
     face_normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])  # length: twice the area
-    summed = np.zeros((len(vertices), 3))
-    for corner in range(3):
-        np.add.at(summed, faces[:, corner], face_normals)
+    flat = faces.reshape(-1)
+    per_corner = np.repeat(face_normals, 3, axis=0)                # (3T, 3)
+    summed = np.stack([np.bincount(flat, per_corner[:, k], minlength=len(vertices))
+                       for k in range(3)], axis=1)
     length = np.linalg.norm(summed, axis=1, keepdims=True)
     return np.divide(summed, length, out=np.zeros_like(summed),
                      where=length > 0).astype(np.float32)
@@ -107,9 +209,9 @@ class _Shapes:
 
 
 class _Figure:
-    """One skeleton's items: bones as a shaded mesh, joints as spheres."""
+    """One skeleton's items: bones as a shaded mesh, joints as spheres, a name label."""
 
-    def __init__(self, view: gl.GLViewWidget, color):
+    def __init__(self, view: "Viewport", color):
         self.color = color
         self.mesh = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
                                   color=color, shader="shaded", smooth=False,
@@ -117,15 +219,28 @@ class _Figure:
         self.joints = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), color=color, size=0.02,
                                            pxMode=False)
         self.joints.setGLOptions("opaque")
+        font = QtGui.QFont()
+        font.setPointSizeF(10.5)
+        font.setBold(True)
+        self.label = gl.GLTextItem(pos=(0.0, 0.0, 0.0), text="", font=font,
+                                   color=QtGui.QColor.fromRgbF(*[min(1.0, c * 1.15 + 0.1)
+                                                                 for c in color[:3]]))
+        self.label.setData(alignment=QtCore.Qt.AlignmentFlag.AlignHCenter)
+        self.label.setDepthValue(100)                 # drawn last: over a skinned mesh
         view.addItem(self.mesh)
         view.addItem(self.joints)
+        view.addItem(self.label)
 
     def set_visible(self, on: bool) -> None:
         self.mesh.setVisible(on)
         self.joints.setVisible(on)
+        self.label.setVisible(on)
 
     def update(self, positions: np.ndarray, parents: np.ndarray, offset: np.ndarray,
-               width: float, selected: int = -1) -> None:
+               width: float, joint_size: float, selected: int = -1, label: str = "") -> None:
+        """Draw the joints ``positions`` ``(J, 3)`` [m] (engine axes) moved by ``offset`` (view
+        axes): bones at most ``width`` thick, joints ``joint_size`` across (the ``selected``
+        one twice that, in the selection colour), ``label`` above the head."""
         pts = to_view(positions) + offset
         child = np.flatnonzero(parents >= 0)
         verts, faces = bone_mesh(pts[parents[child]], pts[child], width)
@@ -133,29 +248,84 @@ class _Figure:
             self.mesh.setMeshData(vertexes=verts, faces=faces, color=self.color,
                                   shader="shaded", smooth=False)
         colors = np.tile(self.color, (len(pts), 1))
-        sizes = np.full(len(pts), width * 1.2)
+        sizes = np.full(len(pts), joint_size)
         if 0 <= selected < len(pts):
             colors[selected] = SELECTED
-            sizes[selected] = width * 2.5
+            sizes[selected] = joint_size * 2.2
         self.joints.setData(pos=pts, color=colors, size=sizes)
+        top = pts[np.argmax(pts[:, 2])]
+        self.label.setData(pos=(float(pts[0, 0]), float(pts[0, 1]),
+                                float(top[2] + 6 * joint_size)), text=label)
         self.points = pts
 
     def remove(self, view) -> None:
         view.removeItem(self.mesh)
         view.removeItem(self.joints)
+        view.removeItem(self.label)
 
 
-class Viewport(gl.GLViewWidget):
-    """The document's skeletons at its current frame."""
+class _SkinBuffers:
+    """A character's meshes as one: bind vertices ``(V, 3)``, influences ``(V, K)`` (meshes
+    with fewer padded with zero weights) and triangles ``(T, 3)``, built once per character."""
+
+    def __init__(self, character):
+        self.character = character
+        meshes = character.meshes
+        K = max(m.joints.shape[1] for m in meshes)
+
+        def pad(a, value):
+            a = np.asarray(a)
+            return np.pad(a, ((0, 0), (0, K - a.shape[1])), constant_values=value)
+        self.positions = np.concatenate([np.asarray(m.positions, dtype=float) for m in meshes])
+        self.joints = np.concatenate([pad(m.joints, 0) for m in meshes])
+        self.weights = np.concatenate([pad(m.weights, 0.0) for m in meshes])
+        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+        self.faces = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+
+    def at(self, pose, frame: int) -> np.ndarray:
+        """``(V, 3)`` [m] the vertices skinned by ``pose`` (the character's world pose over
+        frames) at ``frame``."""
+        from motion_composer.engine.skinning import joint_matrices, skin_vertices
+        mats = joint_matrices(pose.rotations[frame:frame + 1], pose.positions[frame:frame + 1],
+                              self.character.bind_positions)
+        return skin_vertices(self.positions, self.joints, self.weights, mats)[0]
+
+
+@dataclass
+class FootTrails:
+    """The target's feet over the play range (engine axes): per foot joint (ankles and toes)
+    its path, the frames it is planted (contacts detected on the motion shown) and the floor
+    under them."""
+
+    motion: object
+    frames: tuple[int, int]
+    joints: list[str]
+    paths: np.ndarray            # (n, F', 3) [m] frames first..last of the range
+    planted: np.ndarray          # (n, F') bool
+    floor: float                 # [m]
+
+
+class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
+    """The document's skeletons at its current frame. Put :attr:`widget` in a layout."""
 
     #: a joint was clicked: side ("performer", "target") and name
     jointPicked = QtCore.Signal(str, str)
+    #: files were dropped on the view: their local paths
+    filesDropped = QtCore.Signal(list)
 
     def __init__(self, document, parent=None):
-        super().__init__(parent)
+        super().__init__()
         self.doc = document
+        if gl_possible():
+            self.widget = QtWidgets.QWidget.createWindowContainer(self, parent)
+            self.widget.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
+        else:
+            self.widget = QtWidgets.QLabel("No OpenGL here: the 3D viewport is not drawn.",
+                                           parent)
+            self.widget.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        self.widget.setMinimumSize(320, 240)
+        _LIVE.add(self)
         self.setBackgroundColor((38, 40, 44))
-        self.setMinimumSize(320, 240)
         self.grid = gl.GLGridItem()
         self.grid.setSpacing(0.5, 0.5)
         self.grid.setSize(20, 20)
@@ -182,11 +352,27 @@ class Viewport(gl.GLViewWidget):
         self.axes = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=3, mode="lines")
         self.axes.setVisible(False)
         self.addItem(self.axes)
+        # the judging tools: foot trails (path, planted frames, contacts on the floor), ghosts
+        self.trail = gl.GLLinePlotItem(pos=np.zeros((2, 3)), color=TRAIL, width=2,
+                                       mode="lines", antialias=True)
+        self.planted = gl.GLScatterPlotItem(pos=np.zeros((1, 3)), color=PLANTED, size=6,
+                                            pxMode=True)
+        self.planted.setGLOptions("translucent")       # not added to the trail under it
+        self.contacts = gl.GLMeshItem(vertexes=np.zeros((3, 3)), faces=np.array([[0, 1, 2]]),
+                                      color=CONTACT_FLOOR, glOptions="translucent",
+                                      smooth=False)
+        for item in (self.trail, self.planted, self.contacts):
+            item.setVisible(False)
+            self.addItem(item)
+        self.ghosts: list[gl.GLMeshItem] = []
+        self.ghost_offsets: tuple[int, ...] = GHOST_OFFSETS
         self.skin = None                  # the target character's skinned mesh, when it has one
+        self._skin_buffers: _SkinBuffers | None = None
+        self._trails: FootTrails | None = None
         self.active_constraint: int | None = None   # the constraint whose goal can be dragged
         self._goal_drag = None
-        self._skin_key = None
         self._press = None
+        self.mousePos = QtCore.QPointF()
         self._framed = False
         #: the camera state last set (as the project held it) and the view it made
         self._camera_set: tuple[dict, dict] | None = None
@@ -196,6 +382,26 @@ class Viewport(gl.GLViewWidget):
         document.selectionChanged.connect(lambda *_: self.refresh())
         document.constraintsChanged.connect(self.refresh)
         self._motion_changed()
+
+    def rect(self) -> QtCore.QRect:
+        """The view's rectangle in its own pixels (pyqtgraph's text items ask a widget's)."""
+        return QtCore.QRect(0, 0, self.width(), self.height())
+
+    # ------------------------------------------------------------------ display options
+    def option(self, name: str) -> bool:
+        """A display toggle kept in the project's viewer options: ``"follow_root"``,
+        ``"onion_skin"``, ``"foot_trails"`` (all off by default)."""
+        return bool(self.doc.scene.viewer.options.get(name, False))
+
+    def set_option(self, name: str, on: bool) -> None:
+        """Turn a display toggle (:meth:`option`) on or off and redraw."""
+        self.doc.set_viewer_options(**{name: bool(on)})
+        self.refresh()
+
+    def set_ghost_offsets(self, offsets) -> None:
+        """The onion skin's frame offsets from the current frame (e.g. ``(-10, -5, 5, 10)``)."""
+        self.ghost_offsets = tuple(int(o) for o in offsets if int(o) != 0)
+        self.refresh()
 
     # ------------------------------------------------------------------ content
     def _motion_changed(self) -> None:
@@ -223,46 +429,60 @@ class Viewport(gl.GLViewWidget):
         return out
 
     def _root_start(self, which: str):
-        pose = {"performer": self.doc.pose("performer"),
-                "intermediate": self.doc.pose("composed"),
-                "target": self.doc.pose("target") or self.doc.pose("character")}.get(which)
+        pose = self._pose(which)
         return None if pose is None else to_view(pose.positions[0, 0])
 
-    def _size(self) -> float:
+    def _pose(self, which: str):
+        """The world pose over frames drawn for ``which`` skeleton, or None."""
+        return {"performer": lambda: self.doc.pose("performer"),
+                "intermediate": lambda: self.doc.pose("composed"),
+                "target": lambda: self.doc.pose("target") or self.doc.pose("character")
+                }[which]()
+
+    def _size(self, motion=None) -> float:
+        """[m] the stature of ``motion`` (by default the target, or else the performer),
+        computed once per motion: joints, bones and goals are drawn in proportion to it."""
         from motion_composer.engine.describe import stature
-        m = self.doc.scene.target if self.doc.scene.target is not None else self.doc.scene.performer
+        m = motion or (self.doc.scene.target if self.doc.scene.target is not None
+                       else self.doc.scene.performer)
         if m is None:
             return 1.7
-        if not hasattr(self, "_size_cache") or self._size_cache[0] is not m:
-            self._size_cache = (m, max(stature(m), 0.2))
-        return self._size_cache[1]
+        cache = self.__dict__.setdefault("_statures", {})
+        if cache.get(id(m), (None,))[0] is not m:
+            cache[id(m)] = (m, max(stature(m), 0.2))
+        return cache[id(m)][1]
+
+    def _frame_of(self, which: str, pose) -> int:
+        """The frame of ``pose`` shown for ``which`` (a target without motion: its rest)."""
+        f = self.doc.scene.viewer.current_frame
+        if which == "target" and self.doc.motion is None:
+            f = 0
+        return min(f, pose.positions.shape[0] - 1)
 
     def skeleton_points(self, which: str) -> tuple[np.ndarray, np.ndarray] | None:
         """World positions (engine axes) of a skeleton at the current frame, and parents."""
         doc = self.doc
-        f = doc.scene.viewer.current_frame
-        if which == "performer":
-            pose = doc.pose("performer")
-            sk = doc.scene.performer.skeleton if doc.scene.performer is not None else None
-        elif which == "target":
-            pose = doc.pose("target") or doc.pose("character")
-            sk = doc.scene.target.skeleton if doc.scene.target is not None else None
-            if doc.motion is None and pose is not None:
-                f = 0
-        else:                                                     # intermediate
-            pose = doc.pose("composed")
-            sk = doc.scene.target.skeleton if doc.scene.target is not None else None
-        if pose is None or sk is None:
+        source = doc.scene.performer if which == "performer" else doc.scene.target
+        pose = self._pose(which)
+        if pose is None or source is None:
             return None
-        f = min(f, pose.positions.shape[0] - 1)
-        return pose.positions[f], sk.parents
+        return pose.positions[self._frame_of(which, pose)], source.skeleton.parents
+
+    def _label(self, which: str) -> str:
+        scene = self.doc.scene
+        if which == "performer":
+            return f"performer: {scene.performer.name}"
+        if which == "target":
+            return f"target: {scene.target.name}"
+        return "intermediate"
 
     def refresh(self) -> None:
         doc = self.doc
         layout = self._layout()
-        width = 0.04 * self._size()
         side, joint = doc.selection
         for which in ("performer", "intermediate", "target"):
+            size = self._size(doc.scene.performer if which == "performer" else None)
+            width, joint_size = 0.03 * size, 0.022 * size
             data = self.skeleton_points(which) if which in layout else None
             if data is None:
                 if which in self.figures:
@@ -275,37 +495,189 @@ class Viewport(gl.GLViewWidget):
             sk = (doc.scene.performer if which == "performer" else doc.scene.target).skeleton
             sel = sk.index.get(joint, -1) if side == (
                 "performer" if which == "performer" else "target") else -1
-            fig.update(data[0], data[1], layout[which], width, sel)
+            fig.update(data[0], data[1], layout[which], width, joint_size, sel,
+                       self._label(which))
             fig.offset = layout[which]
         self._refresh_skin(layout)
+        if self.skin is not None and self.skin.visible():
+            # the mesh stands for the target's bones (its joints stay, to pick); the label
+            # goes over the mesh
+            self.figures["target"].mesh.setVisible(False)
+            label = self.figures["target"].label
+            top = float(self.skin.opts["meshdata"].vertexes()[:, 2].max())
+            label.setData(pos=(*label.pos[:2], top + 0.06 * self._size()))
         self._refresh_virtual(layout)
         self._refresh_goals(layout)
+        self._refresh_ghosts(layout)
+        self._refresh_trails(layout)
+        if self.option("follow_root"):
+            self._follow(layout)
+        self.update()
 
     def _refresh_skin(self, layout) -> None:
-        """The target character's mesh, deformed by the motion at the current frame."""
+        """The target character's mesh, deformed by the motion at the current frame: the
+        vertices skinned with numpy from the document's cached world pose, smooth normals
+        from those positions (:func:`vertex_normals`)."""
         doc = self.doc
         character = doc.scene.character if "target" in layout else None
-        motion = doc.motion if doc.motion is not None else doc.scene.target
-        if character is None or motion is None or not character.meshes:
+        pose = self._pose("target") if character is not None else None
+        if character is None or pose is None or not character.meshes:
             if self.skin is not None:
                 self.skin.setVisible(False)
             return
-        from motion_composer.engine.skinning import skin_character
-        f = min(doc.scene.viewer.current_frame, motion.num_frames - 1)
-        parts = skin_character(character, motion, frames=[f])
-        verts = np.concatenate([p[0] for p in parts])
-        offsets = np.cumsum([0] + [len(m.positions) for m in character.meshes[:-1]])
-        faces = np.concatenate([m.triangles + o for m, o in zip(character.meshes, offsets)])
-        verts = to_view(verts) + layout["target"]
+        if self._skin_buffers is None or self._skin_buffers.character is not character:
+            self._skin_buffers = _SkinBuffers(character)
+        buffers = self._skin_buffers
+        verts = to_view(buffers.at(pose, self._frame_of("target", pose))) + layout["target"]
+        meshdata = SkinMeshData(verts, buffers.faces)
         if self.skin is None:
-            self.skin = gl.GLMeshItem(meshdata=SkinMeshData(verts, faces),
-                                      color=(0.85, 0.80, 0.72, 0.55), shader="shaded",
-                                      smooth=True, glOptions="translucent")
+            self.skin = gl.GLMeshItem(meshdata=meshdata, color=SKIN, shader=TWO_SIDED,
+                                      smooth=True, glOptions="opaque")
             self.addItem(self.skin)
         else:
-            self.skin.setMeshData(meshdata=SkinMeshData(verts, faces),
-                                  color=(0.85, 0.80, 0.72, 0.55), shader="shaded", smooth=True)
+            self.skin.setMeshData(meshdata=meshdata, color=SKIN, shader=TWO_SIDED, smooth=True)
         self.skin.setVisible(True)
+
+    def _refresh_ghosts(self, layout) -> None:
+        """Onion skin: the target's skeleton as lines at :attr:`ghost_offsets` frames from the
+        current one (past blue, future red, fainter further away), while ``onion_skin`` is
+        on. Lines, not shaded bones: light to draw, and legible beside a skinned mesh."""
+        pose = self._pose("target") if "target" in layout and self.doc.motion is not None \
+            else None
+        on = self.option("onion_skin") and pose is not None
+        offsets = self.ghost_offsets if on else ()
+        while len(self.ghosts) < len(offsets):
+            ghost = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=2, mode="lines",
+                                      antialias=True, glOptions="translucent")
+            self.ghosts.append(ghost)
+            self.addItem(ghost)
+        for ghost in self.ghosts[len(offsets):]:
+            ghost.setVisible(False)
+        if not offsets:
+            return
+        f = self.doc.scene.viewer.current_frame
+        F = pose.positions.shape[0]
+        parents = self.doc.scene.target.skeleton.parents
+        child = np.flatnonzero(parents >= 0)
+        reach = max(abs(o) for o in offsets)
+        for ghost, offset in zip(self.ghosts, offsets):
+            g = f + offset
+            if not 0 <= g < F:
+                ghost.setVisible(False)
+                continue
+            pts = to_view(pose.positions[g]) + layout["target"]
+            segments = np.stack([pts[parents[child]], pts[child]], axis=1).reshape(-1, 3)
+            rgb = GHOST_PAST if offset < 0 else GHOST_FUTURE
+            ghost.setData(pos=segments, color=(*rgb, 0.9 - 0.5 * abs(offset) / reach))
+            ghost.setVisible(True)
+
+    def foot_trails(self) -> FootTrails | None:
+        """The target's foot trails over the play range (computed once per motion and range),
+        or None where the target has no motion or no legs that can be found.
+
+        The feet are the ankle and toe joints :func:`~engine.correction.contacts.find_feet`
+        names; a leg that ends without a foot joint (a game rig whose feet are IK controls
+        beside the legs, as the robot's) is followed at its shin's End Site, the ankle, with
+        the planted frames the engine's contact detection finds for the shin."""
+        motion = self.doc.motion
+        if motion is None or self.doc.scene.target is None:
+            return None
+        lo, hi = self._play_range()
+        cached = self._trails
+        if cached is not None and cached.motion is motion and cached.frames == (lo, hi):
+            return cached
+        from motion_composer.engine.correction.contacts import (detect_contacts,
+                                                                estimate_floor, find_feet)
+        sk = motion.skeleton
+        pose = self.doc.pose("target")
+        feet = [(a, t) for a, t in find_feet(sk) if a in sk.index]
+        if feet:
+            joints = [name for pair in feet for name in pair if name is not None]
+            tracks = pose.positions[:, [sk.index[name] for name in joints]]
+            detects = joints
+        else:
+            feet, joints, columns = self._shin_ends(sk)
+            tracks = pose.end_positions[:, columns]
+            detects = [a for a, _t in feet]
+        if not joints:
+            self._trails = None
+            return None
+        paths = tracks[lo:hi + 1].transpose(1, 0, 2)
+        planted = np.zeros(paths.shape[:2], dtype=bool)
+        for c in detect_contacts(motion, feet):
+            for name in (c.joint, c.toe):
+                a, b = max(c.start, lo), min(c.end, hi)
+                if name in detects and a <= b:
+                    planted[detects.index(name), a - lo:b - lo + 1] = True
+        floor = estimate_floor(tracks[..., 1])
+        self._trails = FootTrails(motion, (lo, hi), joints, paths, planted, floor)
+        return self._trails
+
+    @staticmethod
+    def _shin_ends(sk):
+        """For a skeleton whose legs end without feet: ``(feet, names, columns)``, the shins
+        as ``(ankle, None)`` pairs for contact detection, and their End Sites' names and
+        columns in the pose's ``end_positions``."""
+        from motion_composer.engine.conversion.automap import identify
+        from motion_composer.engine.errors import MappingError
+        try:
+            roles = identify(sk)
+        except MappingError:
+            return [], [], []
+        feet, names, columns = [], [], []
+        for side in ("l", "r"):
+            shin = roles.get(f"shin_{side}")
+            ends = [k for k, e in enumerate(sk.end_sites) if shin and e.parent == sk.index[shin]]
+            if ends:
+                feet.append((shin, None))
+                names.append(sk.end_sites[ends[0]].name)
+                columns.append(ends[0])
+        return feet, names, columns
+
+    def _play_range(self) -> tuple[int, int]:
+        last = max(self.doc.scene.num_frames - 1, 0)
+        rng = self.doc.scene.viewer.play_range
+        if rng is None:
+            return 0, last
+        lo, hi = sorted(min(max(int(v), 0), last) for v in rng)
+        return lo, hi
+
+    def _refresh_trails(self, layout) -> None:
+        """Foot trails while ``foot_trails`` is on: each ankle's and toe's path over the play
+        range, its planted frames marked on it, and the contacts active at the current frame
+        drawn on the floor (a square under the planted joint)."""
+        trails = self.foot_trails() if self.option("foot_trails") and "target" in layout \
+            else None
+        for item in (self.trail, self.planted, self.contacts):
+            item.setVisible(trails is not None)
+        if trails is None:
+            return
+        off = layout["target"]
+        paths = to_view(trails.paths) + off                          # (n, F', 3)
+        segments = np.stack([paths[:, :-1], paths[:, 1:]], axis=2).reshape(-1, 3)
+        if len(segments):
+            self.trail.setData(pos=segments, color=TRAIL, mode="lines")
+        else:
+            self.trail.setVisible(False)
+        marks = paths[trails.planted]
+        self.planted.setData(pos=marks if len(marks) else np.zeros((1, 3)), color=PLANTED,
+                             size=6)
+        self.planted.setVisible(bool(len(marks)))
+        f = self.doc.scene.viewer.current_frame - trails.frames[0]
+        quads = []
+        if 0 <= f < paths.shape[1]:
+            r = 0.035 * self._size()
+            floor = to_view(np.array([0.0, trails.floor, 0.0]))[2] + off[2]
+            for k in np.flatnonzero(trails.planted[:, f]):
+                x, y = paths[k, f, 0], paths[k, f, 1]
+                quads.append(np.array([[x - r, y - r, floor], [x + r, y - r, floor],
+                                       [x + r, y + r, floor], [x - r, y + r, floor]]))
+        if quads:
+            v = np.concatenate(quads)
+            faces = np.concatenate([[[4 * i, 4 * i + 1, 4 * i + 2], [4 * i, 4 * i + 2, 4 * i + 3]]
+                                    for i in range(len(quads))])
+            self.contacts.setMeshData(vertexes=v, faces=faces, color=CONTACT_FLOOR)
+        self.contacts.setVisible(bool(quads))
 
     def _refresh_virtual(self, layout) -> None:
         """Highlight the virtual bones of the selected mapping on the performer."""
@@ -347,7 +719,8 @@ class Viewport(gl.GLViewWidget):
 
     def _refresh_goals(self, layout) -> None:
         """The goals of the constraints acting at the current frame, each drawn as its kind
-        says (:attr:`~engine.correction.constraints.ConstraintKind.draw`)."""
+        says (:attr:`~engine.correction.constraints.ConstraintKind.draw`), and those of the
+        selected constraint (:attr:`active_constraint`) at every frame."""
         doc = self.doc
         if "target" not in layout or not doc.scene.constraints:
             for item in (self.goals, self.paths, self.planes, self.axes):
@@ -357,10 +730,12 @@ class Viewport(gl.GLViewWidget):
         f = doc.scene.viewer.current_frame
         shapes = _Shapes()
         size = self._size()
-        for c in doc.scene.constraints:
-            if not c.enabled or not c.smooth_in <= f <= c.smooth_out:
-                continue                      # only what acts at this frame
-            self._DRAW[c.kind_object.draw](self, c, shapes, off, f, size)
+        for i, c in enumerate(doc.scene.constraints):
+            acting = c.enabled and c.smooth_in <= f <= c.smooth_out
+            if not acting and i != self.active_constraint:
+                continue                      # only what acts at this frame, or is selected
+            self._DRAW[c.kind_object.draw](self, c, shapes, off,
+                                           int(np.clip(f, c.smooth_in, c.smooth_out)), size)
         points, lines, quads, axes = shapes.points, shapes.lines, shapes.quads, shapes.axes
         active = self._active_goal()
         if active is not None:
@@ -385,7 +760,6 @@ class Viewport(gl.GLViewWidget):
             self.axes.setData(pos=np.concatenate(axes), color=np.tile(AXES, (len(axes), 1)),
                               mode="lines")
         self.axes.setVisible(bool(axes))
-
     def _draw_point(self, c, shapes, off, f, size) -> None:
         shapes.points.append(to_view(c.goal_point(np.array([f]))[0]) + off)
 
@@ -425,9 +799,11 @@ class Viewport(gl.GLViewWidget):
         corners = [p + r * (a * u + b * w) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         return to_view(np.array(corners)) + off
 
+
     # ------------------------------------------------------------------ camera
-    def frame_all(self) -> None:
-        """Fit every shown skeleton, as it stands at the current frame, in the view."""
+    def _shown_box(self) -> np.ndarray | None:
+        """``(2, 3)`` lowest and highest view-space corner of everything shown at the current
+        frame (skeletons, their End Sites' parents, the skinned mesh), or None."""
         layout = self._layout()
         boxes = []
         for which, off in layout.items():
@@ -435,15 +811,69 @@ class Viewport(gl.GLViewWidget):
             if data is not None:
                 pts = to_view(data[0]) + off
                 boxes.append(np.array([pts.min(axis=0), pts.max(axis=0)]))
+        if self.skin is not None and self.skin.visible():
+            verts = self.skin.opts["meshdata"].vertexes()
+            boxes.append(np.array([verts.min(axis=0), verts.max(axis=0)]))
         if not boxes:
-            return
-        lo = np.min([b[0] for b in boxes], axis=0)
-        hi = np.max([b[1] for b in boxes], axis=0)
+            return None
+        return np.array([np.min([b[0] for b in boxes], axis=0),
+                         np.max([b[1] for b in boxes], axis=0)])
+
+    def _fit(self, box: np.ndarray) -> None:
+        """Centre the camera on ``box`` and back off, along the current view direction, until
+        each of its corners lies within :data:`FILL` of the view's width and height (so
+        nothing is cropped: not the head, not the feet). pyqtgraph's ``fov`` is horizontal."""
+        lo, hi = box
         center = (lo + hi) / 2
-        radius = max(float(np.linalg.norm(hi - lo)) / 2, 0.5)
-        self.setCameraPosition(pos=QtGui.QVector3D(*center), distance=radius * 2.6)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])]) - center
+        az, el = np.radians(self.opts["azimuth"]), np.radians(self.opts["elevation"])
+        back = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        right = np.array([-np.sin(az), np.cos(az), 0.0])
+        up = np.cross(back, right)
+        # not shown yet (no size): as a viewport of the default window's shape
+        aspect = self.height() / self.width() if self.width() and self.height() else 0.6
+        tan_x = np.tan(np.radians(self.opts["fov"]) / 2) * FILL
+        tan_y = tan_x * aspect
+        depth = corners @ back                       # towards the camera
+        need = np.maximum(np.abs(corners @ right) / tan_x, np.abs(corners @ up) / tan_y)
+        distance = max(float(np.max(depth + need)), 0.5)
+        self.setCameraPosition(pos=QtGui.QVector3D(*center), distance=distance)
         self._framed = True
         self.update()
+
+    def frame_all(self) -> None:
+        """Fit everything shown, as it stands at the current frame, in the view, seen from a
+        sensible height: an elevation outside :data:`SENSIBLE_ELEVATION` (grazing the floor
+        from below, or from straight above after an orbit) goes back to
+        :data:`FRAME_ELEVATION`; the azimuth is kept."""
+        box = self._shown_box()
+        if box is None:
+            return
+        lo, hi = SENSIBLE_ELEVATION
+        if not lo <= self.opts["elevation"] <= hi:
+            self.opts["elevation"] = FRAME_ELEVATION
+        self._fit(box)
+
+    def set_view(self, name: str) -> None:
+        """Look from the ``"front"`` (along -Z), the ``"side"`` (along -X) or the ``"top"``,
+        everything shown framed."""
+        azimuth, elevation = VIEWS[name]
+        self.setCameraPosition(azimuth=azimuth, elevation=elevation)
+        box = self._shown_box()
+        if box is not None:
+            self._fit(box)
+
+    def _follow(self, layout) -> None:
+        """Keep the camera's centre over the root of the target (or else of the first figure
+        shown), at the height it has: the follow camera."""
+        for which in ("target", "performer", "intermediate"):
+            data = self.skeleton_points(which) if which in layout else None
+            if data is not None:
+                root = to_view(data[0][0]) + layout[which]
+                c = self.opts["center"]
+                self.opts["center"] = QtGui.QVector3D(float(root[0]), float(root[1]), c.z())
+                return
 
     def camera_state(self) -> dict:
         """The camera for the project's viewer state: the state last set, as it was given,
@@ -487,7 +917,7 @@ class Viewport(gl.GLViewWidget):
         best = None
         for which in ("target", "performer"):
             fig = self.figures.get(which)
-            if fig is None or not fig.mesh.visible() or not hasattr(fig, "points"):
+            if fig is None or not fig.joints.visible() or not hasattr(fig, "points"):
                 continue
             px = self.project(fig.points)
             d = np.hypot(px[:, 0] - x, px[:, 1] - y)
@@ -566,6 +996,8 @@ class Viewport(gl.GLViewWidget):
         diff = pos - self.mousePos
         self.mousePos = pos
         buttons = ev.buttons()
+        if not buttons:                   # a window sees the pointer hover: nothing to do
+            return
         mods = ev.modifiers()
         shift = bool(mods & QtCore.Qt.KeyboardModifier.ShiftModifier)
         if buttons & QtCore.Qt.MouseButton.RightButton:
@@ -597,8 +1029,31 @@ class Viewport(gl.GLViewWidget):
                     self.doc.select("", "")
         self._press = None
 
+    #: keys of the named views (as Blender's numpad: 1 front, 3 side, 7 top)
+    _VIEW_KEYS = {QtCore.Qt.Key.Key_1: "front", QtCore.Qt.Key.Key_3: "side",
+                  QtCore.Qt.Key.Key_7: "top"}
+
     def keyPressEvent(self, ev):
         if ev.key() == QtCore.Qt.Key.Key_F:
             self.frame_all()
             return
+        if ev.key() in self._VIEW_KEYS:
+            self.set_view(self._VIEW_KEYS[ev.key()])
+            return
         super().keyPressEvent(ev)
+
+    # ------------------------------------------------------------------ files dropped
+    def event(self, ev):
+        """Files dragged onto the view are offered to the window (:attr:`filesDropped`): a
+        native window gets its own drag events, which the main window never sees."""
+        kind = ev.type()
+        if kind in (QtCore.QEvent.Type.DragEnter, QtCore.QEvent.Type.DragMove):
+            if ev.mimeData().hasUrls():
+                ev.acceptProposedAction()
+                return True
+        elif kind == QtCore.QEvent.Type.Drop and ev.mimeData().hasUrls():
+            paths = [u.toLocalFile() for u in ev.mimeData().urls() if u.isLocalFile()]
+            ev.acceptProposedAction()
+            self.filesDropped.emit(paths)
+            return True
+        return super().event(ev)

@@ -21,7 +21,6 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..errors import MotionComposerError
 from ..motion import Motion
@@ -293,6 +292,7 @@ class DisplacementMap:
         moved = np.flatnonzero(np.any(rot != 0, axis=(0, 2)))
         rotations = motion.rotations.copy()
         if len(moved):
+            from scipy.spatial.transform import Rotation
             exp = Rotation.from_rotvec(rot[:, moved].reshape(-1, 3)).as_quat()
             rotations[:, moved] = qmul(exp.reshape(len(rot), len(moved), 4),
                                        rotations[:, moved])

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
 from ..errors import BVHError, ExportError
@@ -858,6 +857,7 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                         source=source)
     translations = translations * scale
     if up_axis != "+Y":
+        from scipy.spatial.transform import Rotation
         translations[:, 0] = translations[:, 0] @ C.T
         rotations[:, 0] = (Rotation.from_matrix(C) * Rotation.from_quat(rotations[:, 0])).as_quat()
     # computed here, unit quaternions (Euler angles or scipy's output) and finite numbers:
@@ -968,6 +968,7 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     rotations = motion.rotations
     translations = motion.translations / s
     if src.up_axis != "+Y":
+        from scipy.spatial.transform import Rotation
         translations = translations.copy()
         translations[:, 0] = translations[:, 0] @ C
         rotations = rotations.copy()

@@ -60,7 +60,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .. import limits
 from ..errors import ExportError, GLTFError
@@ -253,6 +252,7 @@ def _polar(m: np.ndarray):
 
 
 def _matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
     shape = m.shape[:-2]
     if not int(np.prod(shape)):
         return np.zeros(shape + (4,))
