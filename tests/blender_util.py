@@ -98,3 +98,101 @@ def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) ->
         raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
                              f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return json.loads(out.read_text())
+
+
+# ------------------------------------------------------------------------------------- FBX
+FBX_SCRIPT = textwrap.dedent(r'''
+    import json, math, sys
+    import numpy
+    import bpy
+
+    numpy.bool = bool       # Blender 3.4's glTF importer still names numpy.bool (gone in 1.24)
+
+    job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
+    results = {"imports": {}, "exports": {}}
+    for item in job.get("exports", []):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        if item["source"].endswith(".bvh"):
+            import builtins
+            import io_anim_bvh.import_bvh as import_bvh
+            import_bvh.open = lambda f, mode="r", *a, **k: builtins.open(
+                f, mode.replace("U", ""), *a, **k)
+            bpy.ops.import_anim.bvh(filepath=item["source"], global_scale=1.0)
+        else:
+            bpy.ops.import_scene.gltf(filepath=item["source"])
+        bpy.ops.export_scene.fbx(filepath=item["out"], bake_anim=True, add_leaf_bones=False)
+        results["exports"][item["key"]] = item["out"]
+    for item in job.get("imports", []):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.import_scene.fbx(filepath=item["path"])
+        scene = bpy.context.scene
+        armatures = [o for o in scene.objects if o.type == "ARMATURE"]
+        arm = armatures[0]
+        # the importer connects bones, which drops their translation: undo that
+        bpy.context.view_layer.objects.active = arm
+        bpy.ops.object.mode_set(mode="EDIT")
+        for bone in arm.data.edit_bones:
+            bone.use_connect = False
+        bpy.ops.object.mode_set(mode="OBJECT")
+        meshes = [o for o in scene.objects if o.type == "MESH"]
+        out = {"armatures": len(armatures), "fps": scene.render.fps / scene.render.fps_base,
+               "scene_fps": scene.render.fps, "positions": [], "meshes": {}}
+        for o in meshes:
+            sizes = [0] * len(o.vertex_groups)
+            for v in o.data.vertices:
+                for e in v.groups:
+                    sizes[e.group] += e.weight > 0
+            out["meshes"][o.name] = {"groups": sorted(g.name for g in o.vertex_groups),
+                                     "group_sizes": {g.name: sizes[g.index]
+                                                     for g in o.vertex_groups},
+                                     "vertices": len(o.data.vertices), "skinned": {}}
+        for k, f in enumerate(item["frames"]):
+            scene.frame_set(math.floor(f), subframe=f - math.floor(f))
+            out["positions"].append({pb.name: list(arm.matrix_world @ pb.head)
+                                     for pb in arm.pose.bones})
+            if k in item.get("skin_at", []):
+                depsgraph = bpy.context.evaluated_depsgraph_get()
+                for o in meshes:
+                    evaluated = o.evaluated_get(depsgraph)
+                    mesh = evaluated.to_mesh()
+                    out["meshes"][o.name]["skinned"][k] = [list(o.matrix_world @ v.co)
+                                                           for v in mesh.vertices]
+                    evaluated.to_mesh_clear()
+        results["imports"][item["key"]] = out
+    json.dump(results, open(job["out"], "w"))
+''')
+
+
+def run_blender_fbx(job: dict, folder: Path, timeout: float = 300) -> dict:
+    """One headless Blender process that exports FBX with Blender's own exporter and imports
+    FBX files with its importer (``io_scene_fbx``, default settings).
+
+    Args:
+        job: ``{"exports": [{"key", "source": a .bvh or .glb, "out": an .fbx path}],
+            "imports": [{"key", "path": an .fbx, "frames": [scene frame (may be fractional),
+            ...], "skin_at": [indices into frames where the skinned vertices are reported]}]}``.
+        folder: where the script, the job and the result are written.
+
+    Returns:
+        ``{"exports": {key: path}, "imports": {key: {"armatures": count, "fps": the file's
+        rate, "scene_fps": the scene's (whole) rate, "positions": [{bone: [x, y, z]} per
+        frame], "meshes": {name: {"groups": [vertex group names], "group_sizes": {group:
+        vertex count}, "vertices": count, "skinned": {str(index): [[x, y, z], ...]}}}}}}``,
+        positions in Blender's world (metres, +Z up) with the bones' ``use_connect`` switched
+        off after import. Blender puts FBX time ``t`` at scene frame ``t * scene_fps + 1``.
+    """
+    blender = blender_or_skip()
+    folder = Path(folder)
+    script = folder / "fbx_in_blender.py"
+    script.write_text(FBX_SCRIPT)
+    out = folder / "result.json"
+    job_file = folder / "job.json"
+    job_file.write_text(json.dumps(dict(job, out=str(out))))
+    env = dict(os.environ, PYTHONNOUSERSITE="1")
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                           "--python", str(script), "--", str(job_file)],
+                          capture_output=True, text=True, timeout=timeout, env=env)
+    if proc.returncode != 0 or not out.is_file():
+        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
+                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return json.loads(out.read_text())

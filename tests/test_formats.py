@@ -302,7 +302,7 @@ def test_a_gltf_output_carries_the_character(tmp_path):
     assert read_motion(bvh).skeleton.names == robot.skeleton.names
 
 
-@pytest.mark.parametrize("name", ["out.txt", "out", "out.fbx", "out.vrm", "out.bvh.tmp"])
+@pytest.mark.parametrize("name", ["out.txt", "out", "out.vrm", "out.bvh.tmp"])
 def test_an_unknown_output_suffix_is_refused_and_nothing_written(tmp_path, name):
     path = tmp_path / name
     for call in (lambda: output_format(path), lambda: write_motion(read_bvh(TPOSE), path)):
@@ -313,7 +313,7 @@ def test_an_unknown_output_suffix_is_refused_and_nothing_written(tmp_path, name)
 
 
 def test_output_suffixes_and_a_default_suffix():
-    assert output_suffixes() == (".bvh", ".glb", ".gltf")
+    assert output_suffixes() == (".bvh", ".glb", ".gltf", ".fbx")
     assert with_output_suffix("take") == "take.bvh"
     assert with_output_suffix("take.txt") == "take.txt.bvh"
     assert with_output_suffix(Path("a/take.GLB")) == os.path.join("a", "take.GLB")

@@ -15,9 +15,9 @@ package reads and writes through the functions here and never looks at a suffix 
 * an FBX file is a character (its bind pose is :func:`read_motion`'s target) that may hold
   takes: :func:`read_performer` (and ``take=NAME`` anywhere) picks one, by default the first
   that moves a joint.
-* writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``); any other suffix
-  raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format` raises
-  before any work is done.
+* writing goes by the **output's suffix** (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``); any other
+  suffix raises :class:`~engine.errors.UnsupportedFormatError`, which :func:`output_format`
+  raises before any work is done.
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from ..errors import (ExportError, FBXError, FileFormatError, GLTFError, Unknown
 from ..motion import Motion
 from .bvh import read_bvh, write_bvh
 from .fbx.scene import read_fbx, take_motion
+from .fbx.write import write_fbx
 from .gltf import Character, read_gltf, write_gltf
 
 __all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff", "read_motion",
@@ -139,6 +140,13 @@ def _write_gltf(motion: Motion, path, character: Character | None, channels: str
     write_gltf(motion, character, path)
 
 
+def _write_fbx(motion: Motion, path, character: Character | None, channels: str) -> None:
+    if channels != "all":
+        raise ExportError(f"rotation-only channels are a BVH option; an FBX file "
+                          f"({Path(path).name}) animates every joint's translation and rotation")
+    write_fbx(motion, path, character=character)
+
+
 def _fbx_options(path, bvh_overrides: dict) -> None:
     if bvh_overrides:
         raise FBXError(f"{', '.join(sorted(bvh_overrides))} apply to BVH files only; an FBX "
@@ -164,8 +172,8 @@ GLTF = Format("glTF", "glTF JSON", (".gltf",), (), _is_gltf_json, _gltf_rest_mot
               read_gltf, _write_gltf, motion=True, mesh=True)
 GLB = Format("GLB", "GLB, binary glTF", (".glb",), (".vrm",), _is_glb, _gltf_rest_motion,
              read_gltf, _write_gltf, motion=True, mesh=True)
-FBX = Format("FBX", "FBX scene", (), (".fbx",), _is_fbx, _fbx_rest_motion, read_fbx, None,
-             motion=True, mesh=True, read_take=_fbx_take)
+FBX = Format("FBX", "FBX scene", (".fbx",), (), _is_fbx, _fbx_rest_motion, read_fbx,
+             _write_fbx, motion=True, mesh=True, read_take=_fbx_take)
 
 #: every format read and written, in the order dialogs list them
 FORMATS: tuple[Format, ...] = (BVH, GLB, GLTF, FBX)
@@ -284,7 +292,7 @@ def read_character(path: str | os.PathLike) -> Character | None:
 
 # --------------------------------------------------------------------------- writing
 def output_suffixes() -> tuple[str, ...]:
-    """Every suffix a writer writes (``.bvh``, ``.glb``, ``.gltf``)."""
+    """Every suffix a writer writes (``.bvh``, ``.glb``, ``.gltf``, ``.fbx``)."""
     return tuple(s for fmt in FORMATS if fmt.write is not None for s in fmt.suffixes)
 
 
@@ -309,10 +317,10 @@ def write_motion(motion: Motion, path: str | os.PathLike,
                  character: Character | None = None, *, channels: str = "all") -> None:
     """Write ``motion`` to ``path`` in the format its suffix names, atomically.
 
-    ``character`` gives a glTF output the character's meshes and skin (``None``: a
+    ``character`` gives a glTF or FBX output the character's meshes and skin (``None``: a
     skeleton-only file); BVH ignores it. ``channels="rotation"`` writes a BVH file with
     rotation channels only on every joint but the root (see
-    :func:`~engine.formats.bvh.format_bvh`); glTF refuses it.
+    :func:`~engine.formats.bvh.format_bvh`); glTF and FBX refuse it.
 
     Raises:
         UnsupportedFormatError: for a suffix no format writes (nothing is written).
