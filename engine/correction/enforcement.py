@@ -215,10 +215,53 @@ def _still_joints(composed: Motion) -> frozenset:
     return frozenset() if still.all() else frozenset(np.flatnonzero(still).tolist())
 
 
+def _one_sided(c) -> bool:
+    """Whether ``c`` only ever pushes (a plane on one side, no ramps): on a frame whose
+    attraction posture is on its side and where no other task is solved it changes nothing."""
+    return (c.kind == "plane" and c.goal["side"] != "on" and c.smooth_in == c.start
+            and c.end == c.smooth_out)
+
+
+def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) -> list:
+    """``entries`` with each one-sided plane (:func:`_one_sided`, such as a whole-clip floor)
+    kept only on the frames where the attraction posture puts its joint on the wrong side or
+    another entry is solved: elsewhere the solve would return the attraction posture, so those
+    frames stay the attraction posture bit for bit and cost nothing."""
+    lone = [k for k, (i, _, _) in enumerate(entries) if _one_sided(problem.cons[i])]
+    if not lone:
+        return entries
+    F = problem.num_frames
+    solved = np.zeros(F, dtype=bool)
+    for k, (_, frames, _) in enumerate(entries):
+        if k not in lone:
+            solved[frames] = True
+    sk = problem.skeleton
+    joints = sorted({sk.index[problem.cons[entries[k][0]].joint] for k in lone})
+    # the effectors' positions on the frames solved for nothing else
+    frames = np.flatnonzero(~solved)
+    pose = fk_arrays(sk, attraction_rot[frames], attraction_tra[frames], end_sites=False)
+    column = {j: pose.positions[:, j] for j in joints}
+    where = np.full(F, -1)
+    where[frames] = np.arange(len(frames))
+    out = list(entries)
+    for k in lone:
+        i, frames, goals = entries[k]
+        c = problem.cons[i]
+        free = ~solved[frames]
+        p = column[sk.index[c.joint]][where[frames[free]]]
+        g = goals[free]
+        distance = np.sum((p - g[:, 0:3]) * g[:, 3:6], axis=1)
+        keep = ~free
+        keep[free] = distance * g[:, 6] < 0.0             # on the wrong side
+        out[k] = (i, frames[keep], goals[keep])
+    return out
+
+
 def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
     """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
-    task goals). Entries share task slots where they do not overlap in time, so all frames
-    form one batch. Returns rot, tra, residual per constraint, iterations."""
+    task goals), as :func:`_where_needed` leaves them. Entries share task slots where they do
+    not overlap in time, so all frames form one batch. Returns rot, tra, residual per
+    constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
     rot = attraction_rot.copy()
     tra = attraction_tra.copy()
@@ -306,8 +349,9 @@ def _active_entries(cons) -> list:
 def _pass_one(problem: _Problem):
     """The key postures: every frame inside an active range, with no smoothing."""
     composed = problem.composed
-    rot1, tra1, _, _ = _solve(problem, _active_entries(problem.cons), composed.rotations,
-                              composed.translations)
+    entries = _where_needed(problem, _active_entries(problem.cons), composed.rotations,
+                            composed.translations)
+    rot1, tra1, _, _ = _solve(problem, entries, composed.rotations, composed.translations)
     return rot1, tra1
 
 
@@ -403,6 +447,7 @@ def _pass_two(problem: _Problem, rot1, tra1, released):
     for active, ramp in zip(_active_entries(problem.cons), _input_ramps(problem, rot1, tra1)):
         entries += [active] if ramp is None else [active, ramp]
     attraction_rot, attraction_tra, touched = _output_ramps(problem, *released)
+    entries = _where_needed(problem, entries, attraction_rot, attraction_tra)
     rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
     changed = touched.copy()
     for _, frames, _ in entries:
