@@ -111,6 +111,21 @@ class Residuals(Mapping):
         """Record constraint ``index``'s residual ``values`` at ``frames`` (both ``(n,)``)."""
         self._parts[index].append((frames, values))
 
+    def outside(self, frames: np.ndarray) -> "Residuals":
+        """A copy without the values at ``frames`` (a boolean mask ``(F,)``)."""
+        out = Residuals(self._num_frames, len(self._parts))
+        for i, parts in self._parts.items():
+            for f, values in parts:
+                keep = ~frames[f]
+                if keep.any():
+                    out.add(i, f[keep], values[keep])
+        return out
+
+    def extend(self, other: "Residuals") -> None:
+        """Add ``other``'s values (at frames this one does not hold)."""
+        for i, parts in other._parts.items():
+            self._parts[i].extend(parts)
+
     def __getitem__(self, index: int) -> np.ndarray:
         parts = self._parts[index]
         out = np.full(self._num_frames, np.nan)
@@ -438,21 +453,32 @@ def _overlapping_releases(cons) -> bool:
                for e in ends for d in cons)
 
 
-def _pass_two(problem: _Problem, rot1, tra1, released):
+def _pass_two(problem: _Problem, rot1, tra1, released, previous=None):
     """The result: the active ranges and the input ramps solved against the attraction
     posture that the output ramps shape, each fading out from the posture ``released``
-    (``(rot, tra)``) has at its ``end``. Returns rot, tra, residuals, iterations and the
-    frames it changed."""
+    (``(rot, tra)``) has at its ``end``. ``previous``: the result of an earlier pass two,
+    whose frames are kept where their attraction posture is the same (every frame is solved
+    on its own, so solving them again would give them again). Returns rot, tra, residuals,
+    iterations, the frames it changed and the attraction posture ``(rot, tra)``."""
     entries = []
     for active, ramp in zip(_active_entries(problem.cons), _input_ramps(problem, rot1, tra1)):
         entries += [active] if ramp is None else [active, ramp]
     attraction_rot, attraction_tra, touched = _output_ramps(problem, *released)
     entries = _where_needed(problem, entries, attraction_rot, attraction_tra)
-    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
     changed = touched.copy()
     for _, frames, _ in entries:
         changed[frames] = True
-    return rot2, tra2, residual, iters, changed
+    if previous is None:
+        rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+        return rot2, tra2, residual, iters, changed, (attraction_rot, attraction_tra)
+    p_rot, p_tra, p_residual, p_iters, _, (p_att_rot, p_att_tra) = previous
+    again = (np.any(attraction_rot != p_att_rot, axis=(1, 2))
+             | np.any(attraction_tra != p_att_tra, axis=(1, 2)))
+    entries = [(i, frames[again[frames]], goals[again[frames]]) for i, frames, goals in entries]
+    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+    rot2[~again], tra2[~again], iters[~again] = p_rot[~again], p_tra[~again], p_iters[~again]
+    residual.extend(p_residual.outside(again))
+    return rot2, tra2, residual, iters, changed, (attraction_rot, attraction_tra)
 
 
 def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings) -> Correction:
@@ -509,11 +535,13 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot1, tra1))
+    first = _pass_two(problem, rot1, tra1, (rot1, tra1))
     if _overlapping_releases(problem.cons):
         # a constraint released while another one's output ramp is still fading lets go of
-        # the posture pass two solved there, not of pass one's: solved again from it
-        rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot2, tra2))
+        # the posture pass two solved there, not of pass one's: solved again from it (the
+        # frames whose attraction posture that changes)
+        first = _pass_two(problem, rot1, tra1, first[:2], previous=first)
+    rot2, tra2, residual, iters, changed, _ = first
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
