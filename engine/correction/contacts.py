@@ -103,6 +103,29 @@ def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
             if roles.get(f"foot_{side}")]
 
 
+#: frames of forward kinematics at a time for the feet (a bounded working set: the cost stays
+#: linear in the clip's length)
+FK_CHUNK = 4096
+
+
+def _foot_poses(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                joints) -> tuple[dict, dict]:
+    """World positions ``{joint index: (F, 3)}`` [m] and rotations ``{joint index: (F, 4)}``
+    of ``joints`` (indices) over a clip's local ``rotations`` and ``translations``, by forward
+    kinematics in chunks of :data:`FK_CHUNK` frames."""
+    joints = sorted(set(joints))
+    F = len(rotations)
+    pos = {j: np.empty((F, 3)) for j in joints}
+    rot = {j: np.empty((F, 4)) for j in joints}
+    for lo in range(0, F, FK_CHUNK):
+        hi = min(F, lo + FK_CHUNK)
+        pose = fk_arrays(skeleton, rotations[lo:hi], translations[lo:hi], end_sites=False)
+        for j in joints:
+            pos[j][lo:hi] = pose.positions[:, j]
+            rot[j][lo:hi] = pose.rotations[:, j]
+    return pos, rot
+
+
 def estimate_floor(heights: np.ndarray) -> float:
     """The floor under a set of low points ``(F, n)``: the 2nd percentile of the lowest."""
     return float(np.percentile(np.min(heights, axis=1), 2.0))
@@ -147,15 +170,15 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     feet = feet if feet is not None else find_feet(sk)
     if not feet or motion.num_frames < 2:        # a contact lasts two frames or more
         return []
-    pose = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False)
-    pos = pose.positions
     size = max(stature(motion), 0.1)
     fps = motion.fps
     points = []
     for ankle, toe in feet:
         idx = [sk.index[ankle]] + ([sk.index[toe]] if toe else [])
         points.append(idx)
-    low_all = np.concatenate([pos[:, idx, 1] for idx in points], axis=1)
+    pos, _ = _foot_poses(sk, motion.rotations, motion.translations,
+                         [j for idx in points for j in idx])
+    low_all = np.stack([pos[j][:, 1] for idx in points for j in idx], axis=1)
     floor = estimate_floor(low_all)
     gap = max(1, int(round(options.max_gap * fps)))
     shortest = max(2, int(round(options.min_duration * fps)))
@@ -163,9 +186,9 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     for (ankle, toe), idx in zip(feet, points):
         parts, held = [], []
         for j in idx:
-            y = pos[:, j, 1] - floor
+            y = pos[j][:, 1] - floor
             rest = np.percentile(y, 5.0)                        # its height when planted
-            vel = np.gradient(pos[:, j][:, [0, 2]], axis=0) * fps
+            vel = np.gradient(pos[j][:, [0, 2]], axis=0) * fps
             slow = np.linalg.norm(vel, axis=1) < options.speed * size
             parts.append((y < rest + options.height * size) & slow)
             held.append((y < rest + PART_HEIGHT * options.height * size) & slow)
@@ -232,19 +255,19 @@ def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
     rest pose: each foot flat as on the frame where it is lowest, on the floor under the lowest
     of them (or on ``floor``)."""
     sk = composed.skeleton
-    pose = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
-    pos = pose.positions
+    pos, wrot = _foot_poses(sk, composed.rotations, composed.translations,
+                            [sk.index[n] for foot in feet for n in foot if n])
     chosen = []
     for ankle, toe in feet:
         idx = [sk.index[n] for n in (ankle, toe) if n]
-        chosen.append((idx, int(np.argmin(pos[:, idx, 1].sum(axis=1)))))
-    ground = min(float(pos[f, idx, 1].min()) for idx, f in chosen)
+        chosen.append((idx, int(np.argmin(sum(pos[j][:, 1] for j in idx)))))
+    ground = min(min(float(pos[j][f, 1]) for j in idx) for idx, f in chosen)
     heights, flat = {}, {}
     for (ankle, toe), (idx, f) in zip(feet, chosen):
         for j in idx:
-            heights[sk.names[j]] = float(pos[f, j, 1]) - ground
+            heights[sk.names[j]] = float(pos[j][f, 1]) - ground
         a = sk.index[ankle]
-        flat[ankle] = (pose.rotations[f, a], pos[f, sk.index[toe]] - pos[f, a] if toe else None)
+        flat[ankle] = (wrot[a][f], pos[sk.index[toe]][f] - pos[a][f] if toe else None)
     return Ground(ground if floor is None else float(floor), heights, flat)
 
 
@@ -304,9 +327,10 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     used = [c for c in contacts if c.joint in by_performer]
     if not used:
         return []
-    t_pos = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
     feet_t = sorted({(by_performer[c.joint], by_performer.get(c.toe) if c.toe else None)
                      for c in used}, key=lambda f: f[0])
+    t_pos, t_rot = _foot_poses(sk, composed.rotations, composed.translations,
+                               [sk.index[n] for foot in feet_t for n in foot if n])
     if ground is None:
         ground = converted_ground(composed, feet_t, floor=floor)
     runs = []          # (target joint, what, start, end, smooth_in, part, contact, goal)
@@ -317,9 +341,9 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         frames = slice(c.start, c.end + 1)
         if toe is None:
             # without a toe the ankle holds the whole contact, its orientation too
-            goal = np.median(t_pos.positions[frames, a], axis=0)
+            goal = np.median(t_pos[a][frames], axis=0)
             goal[1] = ground.floor + ground.heights[ankle]
-            turn = t_pos.rotations[(c.start + c.end) // 2, a]
+            turn = t_rot[a][(c.start + c.end) // 2]
             runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal),
                      (ankle, "turn", c.start, c.end, None, None, c, turn)]
             continue
@@ -328,17 +352,17 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         # the flat foot's placement: the ankle at its planted height where the converted heel
         # stands, turned from the rest pose's flat foot to the converted foot's heading; the
         # toe where that puts it (a tiptoe contact: where the converted toe stands)
-        turn = qmul(_heading(t_pos.positions[frames, t] - t_pos.positions[frames, a],
+        turn = qmul(_heading(t_pos[t][frames] - t_pos[a][frames],
                              rest_toe), rest_turn)
         offset = qrot(qmul(turn, qconj(rest_turn)), rest_toe)
         heel_frames = np.concatenate([np.arange(s, e + 1) for s, e in c.heel]) if c.heel \
             else np.arange(c.start, c.end + 1)
         if c.heel:
-            ankle_at = np.median(t_pos.positions[heel_frames, a], axis=0)
+            ankle_at = np.median(t_pos[a][heel_frames], axis=0)
             ankle_at[1] = ground.floor + ground.heights[ankle]
             toe_at = ankle_at + offset
         else:
-            toe_at = np.median(t_pos.positions[frames, t], axis=0)
+            toe_at = np.median(t_pos[t][frames], axis=0)
             toe_at[1] = ground.floor + ground.heights[toe]
         for s, e in c.heel:
             runs.append((ankle, "pin", s, e, None, "heel", c, ankle_at))
