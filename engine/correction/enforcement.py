@@ -252,18 +252,21 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
             solved[frames] = True
     sk = problem.skeleton
     joints = sorted({sk.index[problem.cons[entries[k][0]].joint] for k in lone})
-    # the effectors' positions on the frames solved for nothing else
-    frames = np.flatnonzero(~solved)
-    pose = fk_arrays(sk, attraction_rot[frames], attraction_tra[frames], end_sites=False)
-    column = {j: pose.positions[:, j] for j in joints}
-    where = np.full(F, -1)
-    where[frames] = np.arange(len(frames))
+    # the effectors' positions on the frames solved for nothing else (in chunks: bounded
+    # memory on a long clip)
+    position = {j: np.zeros((F, 3)) for j in joints}
+    free_frames = np.flatnonzero(~solved)
+    for lo in range(0, len(free_frames), problem.chunk_frames):
+        f = free_frames[lo:lo + problem.chunk_frames]
+        pose = fk_arrays(sk, attraction_rot[f], attraction_tra[f], end_sites=False)
+        for j in joints:
+            position[j][f] = pose.positions[:, j]
     out = list(entries)
     for k in lone:
         i, frames, goals = entries[k]
         c = problem.cons[i]
         free = ~solved[frames]
-        p = column[sk.index[c.joint]][where[frames[free]]]
+        p = position[sk.index[c.joint]][frames[free]]
         g = goals[free]
         distance = np.sum((p - g[:, 0:3]) * g[:, 3:6], axis=1)
         keep = ~free
