@@ -182,19 +182,11 @@ def _drift_excess(solved, part: str):
     return max(worst)
 
 
-@pytest.mark.xfail(strict=False, reason="open (issue 14 point 1): the engine holds a heel only "
-                   "within 1 % of the stature of its planted height, so a heel the performer "
-                   "keeps planted a little higher (or a frame longer) drifts with the direct "
-                   "conversion (the run and the CMU jumps pass)")
 def test_planted_heels_drift_no_more_than_the_performers(solved):
     excess, where = _drift_excess(solved, "heel")
     assert excess <= 1e-3, where            # 0.1 % of the stature: the solver's tolerance
 
 
-@pytest.mark.xfail(strict=False, reason="open (issue 14 point 1): where the performer's toe is "
-                   "planted before or after the engine's toe run (toe-first landings, the end of "
-                   "a push-off) the target's toe is not held and drifts up to 4 % of the stature "
-                   "(the run passes)")
 def test_planted_toes_drift_no_more_than_the_performers(solved):
     excess, where = _drift_excess(solved, "toe")
     assert excess <= 1e-3, where
