@@ -60,6 +60,10 @@ __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FR
 #: same as the whole batch's: every frame is solved on its own).
 CHUNK_FRAMES = 2048
 
+#: pass two is solved again at most this many times where releases follow one another inside
+#: each other's output ramps (each time from the postures the one before solved)
+RELEASE_PASSES = 8
+
 #: a joint whose rotation (quaternion components) never moves further than this from its
 #: first frame's is held still by the conversion (rounding aside)
 STILL = 1e-12
@@ -538,13 +542,18 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    first = _pass_two(problem, rot1, tra1, (rot1, tra1))
+    result = _pass_two(problem, rot1, tra1, (rot1, tra1))
     if _overlapping_releases(problem.cons):
         # a constraint released while another one's output ramp is still fading lets go of
         # the posture pass two solved there, not of pass one's: solved again from it (the
-        # frames whose attraction posture that changes)
-        first = _pass_two(problem, rot1, tra1, first[:2], previous=first)
-    rot2, tra2, residual, iters, changed, _ = first
+        # frames whose attraction posture that changes), until the postures the releases
+        # start from are the result's own (a chain of releases, one after another)
+        for _ in range(RELEASE_PASSES):
+            previous = result
+            result = _pass_two(problem, rot1, tra1, previous[:2], previous=previous)
+            if all(np.array_equal(a, b) for a, b in zip(result[5], previous[5])):
+                break
+    rot2, tra2, residual, iters, changed, _ = result
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
