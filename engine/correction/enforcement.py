@@ -239,7 +239,7 @@ def _still_joints(composed: Motion) -> frozenset:
 def _one_sided(c) -> bool:
     """Whether ``c`` only ever pushes (a plane on one side, no ramps): on a frame whose
     attraction posture is on its side and where no other task is solved it changes nothing."""
-    return (c.kind == "plane" and c.goal["side"] != "on" and c.smooth_in == c.start
+    return (c.kind_object.one_sided(c.goal) and c.smooth_in == c.start
             and c.end == c.smooth_out)
 
 
@@ -272,11 +272,9 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
         i, frames, goals = entries[k]
         c = problem.cons[i]
         free = ~solved[frames]
-        p = position[sk.index[c.joint]][frames[free]]
-        g = goals[free]
-        distance = np.sum((p - g[:, 0:3]) * g[:, 3:6], axis=1)
         keep = ~free
-        keep[free] = distance * g[:, 6] < 0.0             # on the wrong side
+        at = position[sk.index[c.joint]][frames[free]]
+        keep[free] = c.kind_object.violated(goals[free], at)
         out[k] = (i, frames[keep], goals[keep])
     return out
 
