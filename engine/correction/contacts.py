@@ -29,9 +29,9 @@ __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_co
 #: a part's planted run is this many frames or more (a heel strike lasts a few frames)
 PART_MIN_FRAMES = 3
 #: within a contact a part is held where it is within this share of ``ContactOptions.height``
-#: above its planted height: a heel rising off the floor is let go (heel-off) while the foot
-#: as a whole is still on the ground
-PART_HEIGHT = 1.0 / 3.0
+#: above its lowest height in the contact: a heel rising off the floor is let go (heel-off)
+#: while the foot as a whole is still on the ground
+PART_HEIGHT = 2.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -103,6 +103,29 @@ def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
             if roles.get(f"foot_{side}")]
 
 
+#: frames of forward kinematics at a time for the feet (a bounded working set: the cost stays
+#: linear in the clip's length)
+FK_CHUNK = 4096
+
+
+def _foot_poses(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                joints) -> tuple[dict, dict]:
+    """World positions ``{joint index: (F, 3)}`` [m] and rotations ``{joint index: (F, 4)}``
+    of ``joints`` (indices) over a clip's local ``rotations`` and ``translations``, by forward
+    kinematics in chunks of :data:`FK_CHUNK` frames."""
+    joints = sorted(set(joints))
+    F = len(rotations)
+    pos = {j: np.empty((F, 3)) for j in joints}
+    rot = {j: np.empty((F, 4)) for j in joints}
+    for lo in range(0, F, FK_CHUNK):
+        hi = min(F, lo + FK_CHUNK)
+        pose = fk_arrays(skeleton, rotations[lo:hi], translations[lo:hi], end_sites=False)
+        for j in joints:
+            pos[j][lo:hi] = pose.positions[:, j]
+            rot[j][lo:hi] = pose.rotations[:, j]
+    return pos, rot
+
+
 def estimate_floor(heights: np.ndarray) -> float:
     """The floor under a set of low points ``(F, n)``: the 2nd percentile of the lowest."""
     return float(np.percentile(np.min(heights, axis=1), 2.0))
@@ -124,10 +147,10 @@ def _close_gaps(mask: np.ndarray, gap: int) -> np.ndarray:
     return mask
 
 
-def _part_runs(mask: np.ndarray, start: int, end: int, gap: int) -> tuple:
-    """The runs ``(first, last)`` of a part's planted ``mask`` within ``[start, end]`` (gaps
+def _part_runs(mask: np.ndarray, start: int, gap: int) -> tuple:
+    """The runs ``(first, last)`` of a part's held ``mask`` over a contact from ``start`` (gaps
     closed, runs of :data:`PART_MIN_FRAMES` frames or more)."""
-    inner = _close_gaps(mask[start:end + 1], gap)
+    inner = _close_gaps(mask, gap)
     return tuple((start + a, start + b) for a, b in _runs(inner) if b - a + 1 >= PART_MIN_FRAMES)
 
 
@@ -140,40 +163,49 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     its height above the floor) and slow (horizontally under ``options.speed`` statures per
     second). A foot is on the ground where either part is planted, gaps under
     ``options.max_gap`` closed and contacts under ``options.min_duration`` dropped; each
-    contact keeps the runs where each part is held: lower still (:data:`PART_HEIGHT`)."""
+    contact keeps the runs where each part is held: slow, and within :data:`PART_HEIGHT` of
+    ``options.height`` above its lowest height in the contact."""
     from ..describe import stature
     options = options or ContactOptions()
     sk = motion.skeleton
     feet = feet if feet is not None else find_feet(sk)
     if not feet or motion.num_frames < 2:        # a contact lasts two frames or more
         return []
-    pose = fk_arrays(sk, motion.rotations, motion.translations, end_sites=False)
-    pos = pose.positions
     size = max(stature(motion), 0.1)
     fps = motion.fps
     points = []
     for ankle, toe in feet:
         idx = [sk.index[ankle]] + ([sk.index[toe]] if toe else [])
         points.append(idx)
-    low_all = np.concatenate([pos[:, idx, 1] for idx in points], axis=1)
+    pos, _ = _foot_poses(sk, motion.rotations, motion.translations,
+                         [j for idx in points for j in idx])
+    low_all = np.stack([pos[j][:, 1] for idx in points for j in idx], axis=1)
     floor = estimate_floor(low_all)
     gap = max(1, int(round(options.max_gap * fps)))
     shortest = max(2, int(round(options.min_duration * fps)))
     contacts = []
     for (ankle, toe), idx in zip(feet, points):
-        parts, held = [], []
+        parts, heights, slows = [], [], []
         for j in idx:
-            y = pos[:, j, 1] - floor
+            y = pos[j][:, 1] - floor
             rest = np.percentile(y, 5.0)                        # its height when planted
-            vel = np.gradient(pos[:, j][:, [0, 2]], axis=0) * fps
+            vel = np.gradient(pos[j][:, [0, 2]], axis=0) * fps
             slow = np.linalg.norm(vel, axis=1) < options.speed * size
             parts.append((y < rest + options.height * size) & slow)
-            held.append((y < rest + PART_HEIGHT * options.height * size) & slow)
+            heights.append(y)
+            # a part is held while it has not moved off since the frame before
+            step = np.zeros(len(y))
+            step[1:] = np.linalg.norm(np.diff(pos[j][:, [0, 2]], axis=0), axis=1) * fps
+            slows.append(step < options.speed * size)
         planted = _close_gaps(np.logical_or.reduce(parts), gap)
         for s, e in _runs(planted):
             if e - s + 1 >= shortest:
-                heel = _part_runs(held[0], s, e, gap)
-                ball = _part_runs(held[1], s, e, gap) if toe else ()
+                # within the contact a part is held near its lowest there
+                held = [slow[s:e + 1] & (y[s:e + 1] < y[s:e + 1].min() +
+                                         PART_HEIGHT * options.height * size)
+                        for y, slow in zip(heights, slows)]
+                heel = _part_runs(held[0], s, gap)
+                ball = _part_runs(held[1], s, gap) if toe else ()
                 contacts.append(Contact(ankle, toe, s, e, heel, ball))
     contacts.sort(key=lambda c: (c.start, c.joint))
     return contacts
@@ -232,19 +264,19 @@ def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
     rest pose: each foot flat as on the frame where it is lowest, on the floor under the lowest
     of them (or on ``floor``)."""
     sk = composed.skeleton
-    pose = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
-    pos = pose.positions
+    pos, wrot = _foot_poses(sk, composed.rotations, composed.translations,
+                            [sk.index[n] for foot in feet for n in foot if n])
     chosen = []
     for ankle, toe in feet:
         idx = [sk.index[n] for n in (ankle, toe) if n]
-        chosen.append((idx, int(np.argmin(pos[:, idx, 1].sum(axis=1)))))
-    ground = min(float(pos[f, idx, 1].min()) for idx, f in chosen)
+        chosen.append((idx, int(np.argmin(sum(pos[j][:, 1] for j in idx)))))
+    ground = min(min(float(pos[j][f, 1]) for j in idx) for idx, f in chosen)
     heights, flat = {}, {}
     for (ankle, toe), (idx, f) in zip(feet, chosen):
         for j in idx:
-            heights[sk.names[j]] = float(pos[f, j, 1]) - ground
+            heights[sk.names[j]] = float(pos[j][f, 1]) - ground
         a = sk.index[ankle]
-        flat[ankle] = (pose.rotations[f, a], pos[f, sk.index[toe]] - pos[f, a] if toe else None)
+        flat[ankle] = (wrot[a][f], pos[sk.index[toe]][f] - pos[a][f] if toe else None)
     return Ground(ground if floor is None else float(floor), heights, flat)
 
 
@@ -304,12 +336,14 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     used = [c for c in contacts if c.joint in by_performer]
     if not used:
         return []
-    t_pos = fk_arrays(sk, composed.rotations, composed.translations, end_sites=False)
     feet_t = sorted({(by_performer[c.joint], by_performer.get(c.toe) if c.toe else None)
                      for c in used}, key=lambda f: f[0])
+    t_pos, t_rot = _foot_poses(sk, composed.rotations, composed.translations,
+                               [sk.index[n] for foot in feet_t for n in foot if n])
     if ground is None:
         ground = converted_ground(composed, feet_t, floor=floor)
-    runs = []          # (target joint, what, start, end, smooth_in, part, contact, goal)
+    # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
+    runs = []
     for c in used:
         ankle = by_performer[c.joint]
         toe = by_performer.get(c.toe) if c.toe else None
@@ -317,56 +351,78 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         frames = slice(c.start, c.end + 1)
         if toe is None:
             # without a toe the ankle holds the whole contact, its orientation too
-            goal = np.median(t_pos.positions[frames, a], axis=0)
+            goal = np.median(t_pos[a][frames], axis=0)
             goal[1] = ground.floor + ground.heights[ankle]
-            turn = t_pos.rotations[(c.start + c.end) // 2, a]
-            runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal),
-                     (ankle, "turn", c.start, c.end, None, None, c, turn)]
+            turn = t_rot[a][(c.start + c.end) // 2]
+            runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal, 0),
+                     (ankle, "turn", c.start, c.end, None, None, c, turn, 1)]
             continue
         t = sk.index[toe]
         rest_turn, rest_toe = ground.flat[ankle]
         # the flat foot's placement: the ankle at its planted height where the converted heel
         # stands, turned from the rest pose's flat foot to the converted foot's heading; the
         # toe where that puts it (a tiptoe contact: where the converted toe stands)
-        turn = qmul(_heading(t_pos.positions[frames, t] - t_pos.positions[frames, a],
+        turn = qmul(_heading(t_pos[t][frames] - t_pos[a][frames],
                              rest_toe), rest_turn)
         offset = qrot(qmul(turn, qconj(rest_turn)), rest_toe)
         heel_frames = np.concatenate([np.arange(s, e + 1) for s, e in c.heel]) if c.heel \
             else np.arange(c.start, c.end + 1)
         if c.heel:
-            ankle_at = np.median(t_pos.positions[heel_frames, a], axis=0)
+            ankle_at = np.median(t_pos[a][heel_frames], axis=0)
             ankle_at[1] = ground.floor + ground.heights[ankle]
             toe_at = ankle_at + offset
         else:
-            toe_at = np.median(t_pos.positions[frames, t], axis=0)
+            toe_at = np.median(t_pos[t][frames], axis=0)
             toe_at[1] = ground.floor + ground.heights[toe]
-        for s, e in c.heel:
-            runs.append((ankle, "pin", s, e, None, "heel", c, ankle_at))
+        toe_first = False
+        pins = []
+        # a heel that comes down within a ramp after the toe is taken as down with it: the
+        # flat foot is held from the toe's landing on
+        heel_runs = [(min(hs, next((bs for bs, be in c.ball if 0 < hs - bs < ramp and
+                                    hs <= be), hs)), he) for hs, he in c.heel]
         for s, e in c.ball:
-            flats = [(max(s, hs), min(e, he)) for hs, he in c.heel if hs <= e and s <= he]
+            flats = [(max(s, hs), min(e, he)) for hs, he in heel_runs if hs <= e and s <= he]
             for fs, fe in flats:
-                runs.append((ankle, "turn", fs, fe, None, None, c, turn))
-            # from the flat foot on, the toe is where the flat foot puts it: held from there,
-            # it needs no ramp in (a ramp in would pull it against the flat foot's)
+                runs.append((ankle, "turn", fs, fe, None, None, c, turn, 1))
             first = flats[0][0] if flats else None
-            runs.append((toe, "pin", s if first is None else first, e, first, "toe", c,
-                         toe_at))
+            if first is not None and first - s >= ramp:
+                # the toe lands first: it is held from then on, and the heel comes down
+                # about it (the heel's pin one level lower, so that it yields while it eases
+                # in)
+                toe_first = True
+                first = None
+            # else from the flat foot on, the toe is where the flat foot puts it: held from
+            # there, it needs no ramp in (a ramp in would pull it against the flat foot's)
+            pins.append((toe, "pin", s if first is None else first, e, first, "toe", c,
+                         toe_at, 0))
+        for s, e in heel_runs:
+            # a heel coming down after the toe took off eases in once the toe is let go
+            # (easing in against the held toe would pull the foot apart)
+            after = max((be for bs, be in c.ball if be < s), default=None)
+            if any(bs < s <= be for bs, be in c.ball):
+                # a heel coming down while the toe is held needs no ramp in: the flat foot's
+                # turn easing in brings it down about the toe, onto its goal at ``s`` (a
+                # straight ramp would pull the ankle off the circle the held toe allows)
+                after = s
+            runs.append((ankle, "pin", s, e, after, "heel", c, ankle_at, int(toe_first)))
+        runs += pins
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
     out = []
-    for (joint, _, s, e, first, part, c, goal), (lo, hi) in zip(runs, spans):
-        lo = lo if first is None else first
+    for (joint, _, s, e, first, part, c, goal, below), (lo, hi) in zip(runs, spans):
+        lo = lo if first is None else min(max(lo, first), s)
         performer_joint = c.toe if part == "toe" else c.joint
         if part is not None:
             out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
-                                  priority=priority, name=f"contact {joint} {s}-{e}", auto=True,
+                                  priority=priority + below, name=f"contact {joint} {s}-{e}",
+                                  auto=True,
                                   meta={"source": "contact", "part": part,
                                         "performer_joint": performer_joint}))
         else:
             # one level lower: while it eases in or out it yields to the pins and the floor
             out.append(Constraint(joint=joint, kind="orientation", goal={"quaternion": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
-                                  priority=priority + 1, name=f"foot flat {joint} {s}-{e}",
+                                  priority=priority + below, name=f"foot flat {joint} {s}-{e}",
                                   auto=True, meta={"source": "contact",
                                                    "performer_joint": performer_joint}))
     # the floor rule: each held foot joint at or above its planted height over the floor,

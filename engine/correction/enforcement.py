@@ -10,7 +10,8 @@ Pass one solves every frame inside an active range ``[start, end]`` with no smoo
 the key postures. Pass two, as section 3.3 says:
 
 * input ramp ``[smooth_in, start)``: the effector's goal moves along the line from where the
-  effector was at ``smooth_in`` (pass one) to the goal at ``start`` (Cartesian smoothing; a
+  effector was at ``smooth_in`` (pass one; where it lies in another constraint's ramp, the
+  pass-two posture there, see below) to the goal at ``start`` (Cartesian smoothing; a
   plane slides along its normal, an orientation turns along the shortest arc: each kind's
   ``ramp_goal``);
 * active range: the goal itself;
@@ -32,9 +33,10 @@ the tasks (a test checks it), and the batch is many times faster.
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
 
 The steps, in order: :func:`_check` (the constraints that apply), :func:`_pass_one` (key
-postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two` (once more where
-a constraint is released inside another one's ramp, its fade starting from the pass-two
-posture), and :func:`_correction` (the displacement and the corrected motion).
+postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two` (again where a
+constraint is released or eases in inside another one's ramp, its fade or its ramp starting
+from the pass-two posture, until those postures are the result's own), and
+:func:`_correction` (the displacement and the corrected motion).
 """
 from __future__ import annotations
 
@@ -59,6 +61,10 @@ __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FR
 #: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
 #: same as the whole batch's: every frame is solved on its own).
 CHUNK_FRAMES = 2048
+
+#: pass two is solved again at most this many times where ramps lie inside each other's
+#: (each time from the postures the one before solved)
+RELEASE_PASSES = 8
 
 #: a joint whose rotation (quaternion components) never moves further than this from its
 #: first frame's is held still by the conversion (rounding aside)
@@ -110,6 +116,21 @@ class Residuals(Mapping):
     def add(self, index: int, frames: np.ndarray, values: np.ndarray) -> None:
         """Record constraint ``index``'s residual ``values`` at ``frames`` (both ``(n,)``)."""
         self._parts[index].append((frames, values))
+
+    def outside(self, frames: np.ndarray) -> "Residuals":
+        """A copy without the values at ``frames`` (a boolean mask ``(F,)``)."""
+        out = Residuals(self._num_frames, len(self._parts))
+        for i, parts in self._parts.items():
+            for f, values in parts:
+                keep = ~frames[f]
+                if keep.any():
+                    out.add(i, f[keep], values[keep])
+        return out
+
+    def extend(self, other: "Residuals") -> None:
+        """Add ``other``'s values (at frames this one does not hold)."""
+        for i, parts in other._parts.items():
+            self._parts[i].extend(parts)
 
     def __getitem__(self, index: int) -> np.ndarray:
         parts = self._parts[index]
@@ -215,10 +236,54 @@ def _still_joints(composed: Motion) -> frozenset:
     return frozenset() if still.all() else frozenset(np.flatnonzero(still).tolist())
 
 
+def _one_sided(c) -> bool:
+    """Whether ``c`` only ever pushes (a plane on one side, no ramps): on a frame whose
+    attraction posture is on its side and where no other task is solved it changes nothing."""
+    return (c.kind_object.one_sided(c.goal) and c.smooth_in == c.start
+            and c.end == c.smooth_out)
+
+
+def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) -> list:
+    """``entries`` with each one-sided plane (:func:`_one_sided`, such as a whole-clip floor)
+    kept only on the frames where the attraction posture puts its joint on the wrong side or
+    another entry is solved: elsewhere the solve would return the attraction posture, so those
+    frames stay the attraction posture bit for bit and cost nothing."""
+    lone = [k for k, (i, _, _) in enumerate(entries) if _one_sided(problem.cons[i])]
+    if not lone:
+        return entries
+    F = problem.num_frames
+    solved = np.zeros(F, dtype=bool)
+    for k, (_, frames, _) in enumerate(entries):
+        if k not in lone:
+            solved[frames] = True
+    sk = problem.skeleton
+    joints = sorted({sk.index[problem.cons[entries[k][0]].joint] for k in lone})
+    # the effectors' positions on the frames solved for nothing else (in chunks: bounded
+    # memory on a long clip)
+    position = {j: np.zeros((F, 3)) for j in joints}
+    free_frames = np.flatnonzero(~solved)
+    for lo in range(0, len(free_frames), problem.chunk_frames):
+        f = free_frames[lo:lo + problem.chunk_frames]
+        pose = fk_arrays(sk, attraction_rot[f], attraction_tra[f], end_sites=False)
+        for j in joints:
+            position[j][f] = pose.positions[:, j]
+    out = list(entries)
+    for k in lone:
+        i, frames, goals = entries[k]
+        c = problem.cons[i]
+        free = ~solved[frames]
+        keep = ~free
+        at = position[sk.index[c.joint]][frames[free]]
+        keep[free] = c.kind_object.violated(goals[free], at)
+        out[k] = (i, frames[keep], goals[keep])
+    return out
+
+
 def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
     """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
-    task goals). Entries share task slots where they do not overlap in time, so all frames
-    form one batch. Returns rot, tra, residual per constraint, iterations."""
+    task goals), as :func:`_where_needed` leaves them. Entries share task slots where they do
+    not overlap in time, so all frames form one batch. Returns rot, tra, residual per
+    constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
     rot = attraction_rot.copy()
     tra = attraction_tra.copy()
@@ -306,14 +371,16 @@ def _active_entries(cons) -> list:
 def _pass_one(problem: _Problem):
     """The key postures: every frame inside an active range, with no smoothing."""
     composed = problem.composed
-    rot1, tra1, _, _ = _solve(problem, _active_entries(problem.cons), composed.rotations,
-                              composed.translations)
+    entries = _where_needed(problem, _active_entries(problem.cons), composed.rotations,
+                            composed.translations)
+    rot1, tra1, _, _ = _solve(problem, entries, composed.rotations, composed.translations)
     return rot1, tra1
 
 
 def _input_ramps(problem: _Problem, rot1, tra1) -> list:
     """Per constraint, the entry of its input ramp ``(smooth_in, start)`` (``None`` for none):
-    the goal moves from where the effector was at ``smooth_in`` in pass one to the goal at
+    the goal moves from where the effector is at ``smooth_in`` in the posture ``rot1``,
+    ``tra1`` (pass one's, or an earlier pass two's where ramps overlap) to the goal at
     ``start`` (the kind's :meth:`~engine.correction.constraints.ConstraintKind.ramp_goal`)."""
     sk = problem.skeleton
     need = sorted({c.smooth_in for c in problem.cons if c.smooth_in < c.start})
@@ -386,28 +453,73 @@ def _output_ramps(problem: _Problem, rot1, tra1):
     return attraction_rot, attraction_tra, touched
 
 
-def _overlapping_releases(cons) -> bool:
-    """Whether a constraint ends inside another one's output ramp (or input ramp or active
-    range: where pass two's posture differs from pass one's)."""
+def _overlapping_ramps(cons) -> bool:
+    """Whether a constraint ends, or starts its input ramp, inside another one's ramps (where
+    pass two's posture differs from pass one's)."""
     ends = [c.end for c in cons if c.smooth_out > c.end + 1]
+    ends += [c.smooth_in for c in cons if c.smooth_in < c.start - 1]
     return any(d.smooth_in <= e <= d.smooth_out and not d.start <= e <= d.end
                for e in ends for d in cons)
 
 
-def _pass_two(problem: _Problem, rot1, tra1, released):
+@dataclass(frozen=True, eq=False)
+class _PassTwo:
+    """A result of :func:`_pass_two`: the posture ``rot``, ``tra``, the residuals and
+    iterations, the frames it ``changed``; what it was solved against (``attraction_rot``,
+    ``attraction_tra`` and the input ramps' entries ``ramps``) and how many frames it solved
+    ``again`` (all of them the first time)."""
+
+    rot: np.ndarray
+    tra: np.ndarray
+    residual: Residuals
+    iterations: np.ndarray
+    changed: np.ndarray
+    attraction_rot: np.ndarray
+    attraction_tra: np.ndarray
+    ramps: list
+    again: int
+
+
+def _moved(result: _PassTwo, attraction_rot, attraction_tra, ramps) -> np.ndarray:
+    """``(F,)`` the frames whose attraction posture or input-ramp goal differs from what
+    ``result`` was solved against."""
+    moved = (np.any(attraction_rot != result.attraction_rot, axis=(1, 2))
+             | np.any(attraction_tra != result.attraction_tra, axis=(1, 2)))
+    for now, then in zip(ramps, result.ramps):
+        if now is not None:
+            moved[now[1][np.any(now[2] != then[2], axis=1)]] = True
+    return moved
+
+
+def _pass_two(problem: _Problem, released, previous: _PassTwo | None = None) -> _PassTwo:
     """The result: the active ranges and the input ramps solved against the attraction
     posture that the output ramps shape, each fading out from the posture ``released``
-    (``(rot, tra)``) has at its ``end``. Returns rot, tra, residuals, iterations and the
-    frames it changed."""
+    (``(rot, tra)``) has at its ``end``, each input ramp starting from where ``released``
+    puts the effector at ``smooth_in``. ``previous``: an earlier pass two, whose frames are
+    kept where their attraction posture and goals are the same (every frame is solved on its
+    own, so solving them again would give them again)."""
+    ramps = _input_ramps(problem, *released)
     entries = []
-    for active, ramp in zip(_active_entries(problem.cons), _input_ramps(problem, rot1, tra1)):
+    for active, ramp in zip(_active_entries(problem.cons), ramps):
         entries += [active] if ramp is None else [active, ramp]
     attraction_rot, attraction_tra, touched = _output_ramps(problem, *released)
-    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+    entries = _where_needed(problem, entries, attraction_rot, attraction_tra)
     changed = touched.copy()
     for _, frames, _ in entries:
         changed[frames] = True
-    return rot2, tra2, residual, iters, changed
+    if previous is None:
+        rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+        return _PassTwo(rot2, tra2, residual, iters, changed, attraction_rot, attraction_tra,
+                        ramps, problem.num_frames)
+    again = _moved(previous, attraction_rot, attraction_tra, ramps)
+    entries = [(i, frames[again[frames]], goals[again[frames]]) for i, frames, goals in entries]
+    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
+    keep = ~again
+    rot2[keep], tra2[keep] = previous.rot[keep], previous.tra[keep]
+    iters[keep] = previous.iterations[keep]
+    residual.extend(previous.residual.outside(again))
+    return _PassTwo(rot2, tra2, residual, iters, changed, attraction_rot, attraction_tra, ramps,
+                    int(again.sum()))
 
 
 def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings) -> Correction:
@@ -464,11 +576,18 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot1, tra1))
-    if _overlapping_releases(problem.cons):
-        # a constraint released while another one's output ramp is still fading lets go of
-        # the posture pass two solved there, not of pass one's: solved again from it
-        rot2, tra2, residual, iters, changed = _pass_two(problem, rot1, tra1, (rot2, tra2))
+    result = _pass_two(problem, (rot1, tra1))
+    if _overlapping_ramps(problem.cons):
+        # a constraint released (or easing in) while another one's ramp is still fading lets
+        # go of (or starts from) the posture pass two solved there, not pass one's: solved
+        # again from it (the frames whose attraction posture or goal that changes), until
+        # the postures the ramps start from are the result's own (ramps one inside another)
+        for _ in range(RELEASE_PASSES):
+            result = _pass_two(problem, (result.rot, result.tra), previous=result)
+            if not result.again:
+                break
+    rot2, tra2, residual, iters, changed = (result.rot, result.tra, result.residual,
+                                            result.iterations, result.changed)
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)

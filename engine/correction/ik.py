@@ -370,10 +370,14 @@ def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float) -> np.ndarray:
     return (a.transpose(0, 2, 1) @ y)[..., 0]
 
 
-def _damped_pinv(a: np.ndarray, lam2: float) -> np.ndarray:
+def _damped_projection(a: np.ndarray, b: np.ndarray, lam2: float) -> np.ndarray:
+    """``(a a^T + lam2 I)^-1 a b`` for batches ``a (B, K, N)``, ``b (B, N, M)``: the
+    coefficients of ``b``'s part in the row space of ``a`` (damped), ``(B, K, M)``; ``a^T``
+    times it is that part. One linear solve with ``M`` right-hand sides instead of the
+    ``(N, K)`` damped pseudo-inverse."""
     k = a.shape[1]
     gram = a @ a.transpose(0, 2, 1) + lam2 * np.eye(k)
-    return a.transpose(0, 2, 1) @ np.linalg.inv(gram)
+    return np.linalg.solve(gram, a @ b)
 
 
 class _Rows:
@@ -491,21 +495,28 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _
     stacked = None
     behind = np.zeros(len(active))          # how far the higher levels are from being met
     for level in rows.levels:
-        jl, el = jac[:, level], err[:, level]
-        if stacked is None:
-            jt = jl
-            gate = 1.0
-        else:
-            jt = jl - (jl @ _damped_pinv(stacked, ns_lam2)) @ stacked
-            # a lower level waits while a higher one is not met: its steps are first-order
-            # invisible to the higher levels, but near their singularities (a stretched
-            # leg) the second-order part would push them off faster than they recover
-            gate = np.clip(2.0 - behind / options.priority_gate, 0.0, 1.0)[:, None]
-            if polishing:
-                gate = 0.0
-        dq += gate * _damped_solve(jt, el - (jl @ dq[..., None])[..., 0], lam2)
+        # the frames where this level has a task: elsewhere its rows are zero and add nothing
+        on = np.flatnonzero(np.any(w[:, level] > 0, axis=1))
+        if stacked is not None and polishing:
+            on = on[:0]
+        if len(on):
+            jl, el = jac[on[:, None], level], err[on[:, None], level]
+            if stacked is None:
+                jt = jl
+                gate = 1.0
+            else:
+                above = stacked[on]
+                jt = jl - _damped_projection(above, jl.transpose(0, 2, 1), ns_lam2
+                                             ).transpose(0, 2, 1) @ above
+                # a lower level waits while a higher one is not met: its steps are
+                # first-order invisible to the higher levels, but near their singularities
+                # (a stretched leg) the second-order part would push them off faster than
+                # they recover
+                gate = np.clip(2.0 - behind[on] / options.priority_gate, 0.0, 1.0)[:, None]
+            dq[on] += gate * _damped_solve(jt, el - (jl @ dq[on][..., None])[..., 0], lam2)
         behind = np.maximum(behind, (np.abs(err_raw[:, level]) / rows.tol[level]).max(axis=1))
-        stacked = jl if stacked is None else np.concatenate([stacked, jl], axis=1)
+        stacked = jac[:, level] if stacked is None else np.concatenate(
+            [stacked, jac[:, level]], axis=1)
     return dq, stacked
 
 
@@ -524,7 +535,8 @@ def _attraction_step(stacked: np.ndarray, root: np.ndarray, cur: np.ndarray,
     dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
     dz *= gain
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
-    return dz - (_damped_pinv(stacked, ns_lam2) @ (stacked @ dz[..., None]))[..., 0]
+    return dz - (stacked.transpose(0, 2, 1)
+                 @ _damped_projection(stacked, dz[..., None], ns_lam2))[..., 0]
 
 
 def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,

@@ -230,6 +230,16 @@ class ConstraintKind(ABC):
         """``(B,)`` where the task acts (a one-sided task does not while satisfied)."""
         return np.ones(state.batch, dtype=bool)
 
+    def one_sided(self, goal: dict) -> bool:
+        """Whether a constraint with the stored ``goal`` only pushes its joint (no pull while
+        satisfied: :meth:`violated` says where it acts)."""
+        return False
+
+    def violated(self, goal: np.ndarray, position: np.ndarray) -> np.ndarray:
+        """``(B,)`` where a one-sided task with task goals ``(B, goal_size)`` acts on its joint
+        at world positions ``(B, 3)`` [m] (everywhere for a kind that is not one-sided)."""
+        return np.ones(len(goal), dtype=bool)
+
     @abstractmethod
     def error(self, goal: np.ndarray, state: "TaskState") -> np.ndarray:
         """``(B, rows)`` the task error (goal minus current) for task goals ``(B, goal_size)``."""

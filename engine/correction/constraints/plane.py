@@ -112,6 +112,13 @@ class PlaneKind(ConstraintKind):
         side = goal[:, 6]
         return (side == 0) | ((side > 0) & (s < 0)) | ((side < 0) & (s > 0))
 
+    def one_sided(self, goal):
+        return SIDES[goal["side"]] != 0.0
+
+    def violated(self, goal, position):
+        distance = np.sum((position - goal[:, 0:3]) * goal[:, 3:6], axis=1)
+        return distance * goal[:, 6] < 0.0             # on the wrong side (never for "on")
+
     def error(self, goal, state):
         return -self._distance(goal, state)[:, None]
 
