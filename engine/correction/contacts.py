@@ -408,13 +408,18 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         runs += pins
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
     out = []
+    # names are labels (the user may rename them): the joint and the hold's number along the
+    # clip, never its frames, which go stale when a handle moves
+    number: dict[tuple, int] = {}
     for (joint, _, s, e, first, part, c, goal, below), (lo, hi) in zip(runs, spans):
+        label = ("contact" if part is not None else "foot flat", joint)
+        number[label] = number.get(label, 0) + 1
         lo = lo if first is None else min(max(lo, first), s)
         performer_joint = c.toe if part == "toe" else c.joint
         if part is not None:
             out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
-                                  priority=priority + below, name=f"contact {joint} {s}-{e}",
+                                  priority=priority + below, name=f"contact {joint} #{number[label]}",
                                   auto=True,
                                   meta={"source": "contact", "part": part,
                                         "performer_joint": performer_joint}))
@@ -422,7 +427,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             # one level lower: while it eases in or out it yields to the pins and the floor
             out.append(Constraint(joint=joint, kind="orientation", goal={"quaternion": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
-                                  priority=priority + below, name=f"foot flat {joint} {s}-{e}",
+                                  priority=priority + below, name=f"foot flat {joint} #{number[label]}",
                                   auto=True, meta={"source": "contact",
                                                    "performer_joint": performer_joint}))
     # the floor rule: each held foot joint at or above its planted height over the floor,
