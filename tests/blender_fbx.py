@@ -15,15 +15,12 @@ into the engine's by :func:`engine_axes` (x, y, z) -> (x, z, -y).
 """
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import textwrap
 from pathlib import Path
 
 import numpy as np
 
-from blender_util import blender_or_skip
+from blender_util import run_blender
 
 BLENDER_SCRIPT = textwrap.dedent(r'''
     import json, math, sys
@@ -98,18 +95,5 @@ def run_blender_fbx(files: list[dict], folder: Path, timeout: float = 900) -> di
         [x, y, z]} per time], str(take) + " meshes": [{mesh object: [[x, y, z] per
         vertex]} per time]}, "actions": [...]}`` in Blender's axes and metres.
     """
-    blender = blender_or_skip()
-    folder = Path(folder)
-    script = folder / "read_fbx_in_blender.py"
-    script.write_text(BLENDER_SCRIPT)
-    job = folder / "job.json"
-    out = folder / "result.json"
-    job.write_text(json.dumps({"files": files, "out": str(out)}))
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(script), "--", str(job)],
-                          capture_output=True, text=True, timeout=timeout, env=env)
-    if proc.returncode != 0 or not out.is_file():
-        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
-                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return json.loads(out.read_text())
+    return run_blender(BLENDER_SCRIPT, "read_fbx_in_blender.py", {"files": files}, folder,
+                       timeout)

@@ -70,6 +70,28 @@ def blender_or_skip() -> str:
     return blender
 
 
+def run_blender(script_text: str, script_name: str, job: dict, folder: Path,
+                timeout: float = 300) -> dict:
+    """Run ``script_text`` in headless Blender with ``job`` (a dict, given ``out``: where the
+    script writes its JSON result) and return that result; raises AssertionError with
+    Blender's output when it fails."""
+    blender = blender_or_skip()
+    folder = Path(folder)
+    script = folder / script_name
+    script.write_text(script_text)
+    out = folder / "result.json"
+    job_file = folder / "job.json"
+    job_file.write_text(json.dumps(dict(job, out=str(out))))
+    env = dict(os.environ, PYTHONNOUSERSITE="1")
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                           "--python", str(script), "--", str(job_file)],
+                          capture_output=True, text=True, timeout=timeout, env=env)
+    if proc.returncode != 0 or not out.is_file():
+        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
+                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return json.loads(out.read_text())
+
+
 def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) -> dict:
     """Import BVH files in one headless Blender process.
 
@@ -83,21 +105,8 @@ def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) ->
         "positions": {str(frame): {bone name: [x, y, z]}}}`` (JSON turns the frame keys into
         strings).
     """
-    blender = blender_or_skip()
-    folder = Path(folder)
-    script = folder / "read_bvh_in_blender.py"
-    script.write_text(BLENDER_SCRIPT)
-    job = folder / "job.json"
-    out = folder / "result.json"
-    job.write_text(json.dumps({"files": files, "out": str(out)}))
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(script), "--", str(job)],
-                          capture_output=True, text=True, timeout=timeout, env=env)
-    if proc.returncode != 0 or not out.is_file():
-        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
-                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return json.loads(out.read_text())
+    return run_blender(BLENDER_SCRIPT, "read_bvh_in_blender.py", {"files": files}, folder,
+                       timeout)
 
 
 # ------------------------------------------------------------------------------------- FBX
@@ -181,18 +190,4 @@ def run_blender_fbx(job: dict, folder: Path, timeout: float = 300) -> dict:
         positions in Blender's world (metres, +Z up) with the bones' ``use_connect`` switched
         off after import. Blender puts FBX time ``t`` at scene frame ``t * scene_fps + 1``.
     """
-    blender = blender_or_skip()
-    folder = Path(folder)
-    script = folder / "fbx_in_blender.py"
-    script.write_text(FBX_SCRIPT)
-    out = folder / "result.json"
-    job_file = folder / "job.json"
-    job_file.write_text(json.dumps(dict(job, out=str(out))))
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(script), "--", str(job_file)],
-                          capture_output=True, text=True, timeout=timeout, env=env)
-    if proc.returncode != 0 or not out.is_file():
-        raise AssertionError(f"Blender failed (exit {proc.returncode}):\n"
-                             f"{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return json.loads(out.read_text())
+    return run_blender(FBX_SCRIPT, "fbx_in_blender.py", job, folder, timeout)

@@ -13,19 +13,9 @@ WAIT_MS = 30_000
 
 def gl_available() -> bool:
     """Whether this process can make an OpenGL context (Xvfb with Mesa can; 'offscreen'
-    cannot)."""
-    from PySide6.QtGui import QGuiApplication, QOffscreenSurface, QOpenGLContext
-    if QGuiApplication.platformName() in ("offscreen", "minimal"):
-        return False
-    ctx = QOpenGLContext()
-    if not ctx.create():
-        return False
-    surface = QOffscreenSurface()
-    surface.create()
-    ok = ctx.makeCurrent(surface)
-    if ok:
-        ctx.doneCurrent()
-    return ok
+    cannot): the viewport's own check."""
+    from motion_composer.app.gui.viewport import gl_possible
+    return gl_possible()
 
 
 def require_gl():
