@@ -17,6 +17,7 @@ import math
 import os
 import re
 from collections.abc import Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,34 +178,27 @@ def _read_bvh_record(path) -> BVHRecord:
     bytes or text beside its values (its peak memory). A file with carriage returns in its
     header, whose header the text reading would find elsewhere, or whose rows the fast
     parser refuses, is read and parsed whole as text, as :func:`parse_bvh_text` does."""
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(_HEAD_BYTES)
-            while True:
-                _, rows_at = _head_lines(data)
-                more = rows_at is None and handle.read(_HEAD_BYTES)
-                if not more:
-                    break
-                data += more
-            if rows_at is not None and b"\r" not in data[:rows_at] \
-                    and b"\0" not in data[:rows_at]:
-                head = _decode(data[:rows_at], path)
-                lines, end = _head_lines(head)
-                if end == len(head):
-                    rest = data[rows_at:]
-                    del data
-                    record = _record(lines, os.fspath(path), lambda n_cols, frames:
-                                     parse_number_pieces(file_pieces(handle, rest), n_cols,
-                                                         rows=frames,
-                                                         limit=limits.MAX_MAGNITUDE))
-                    if record is not None:
-                        return record
-    except FileNotFoundError:
-        raise BVHError("no such file", path, None) from None
-    except IsADirectoryError:
-        raise BVHError("this is a folder, not a BVH file", path, None) from None
-    except OSError as exc:
-        raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
+    with _os_errors(path), open(path, "rb") as handle:
+        data = handle.read(_HEAD_BYTES)
+        while True:
+            _, rows_at = _head_lines(data)
+            more = rows_at is None and handle.read(_HEAD_BYTES)
+            if not more:
+                break
+            data += more
+        if rows_at is not None and b"\r" not in data[:rows_at] \
+                and b"\0" not in data[:rows_at]:
+            head = _decode(data[:rows_at], path)
+            lines, end = _head_lines(head)
+            if end == len(head):
+                rest = data[rows_at:]
+                del data
+                record = _record(lines, os.fspath(path), lambda n_cols, frames:
+                                 parse_number_pieces(file_pieces(handle, rest), n_cols,
+                                                     rows=frames,
+                                                     limit=limits.MAX_MAGNITUDE))
+                if record is not None:
+                    return record
     return parse_bvh_text(_decode(_read_bytes(path), path), path)
 
 
@@ -889,17 +883,24 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
     return record_to_motion(record, **options)
 
 
-def _read_bytes(path) -> bytes:
-    """The bytes of the file at ``path``, or a :class:`BVHError` saying why not."""
+@contextmanager
+def _os_errors(path):
+    """Turn the operating system's errors reading ``path`` into a :class:`BVHError` saying
+    why it cannot be read."""
     try:
-        data = Path(path).read_bytes()
+        yield
     except FileNotFoundError:
         raise BVHError("no such file", path, None) from None
     except IsADirectoryError:
         raise BVHError("this is a folder, not a BVH file", path, None) from None
     except OSError as exc:
         raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
-    return data
+
+
+def _read_bytes(path) -> bytes:
+    """The bytes of the file at ``path``, or a :class:`BVHError` saying why not."""
+    with _os_errors(path):
+        return Path(path).read_bytes()
 
 
 # --------------------------------------------------------------------------- writing
