@@ -16,6 +16,7 @@ import os
 import stat
 import tempfile
 import time
+from contextlib import contextmanager
 
 from .errors import MotionComposerError
 
@@ -223,6 +224,21 @@ def _remove_if_stale(candidate: str, now: float) -> bool:
         return True
     finally:
         os.close(fd)
+
+
+@contextmanager
+def reading(path, error, kind: str, missing: str = "no such file"):
+    """Inside it, the operating system's errors reading ``path`` become ``error(message,
+    path)`` (a typed file error) saying why: ``missing``, "this is a folder, not a ``kind``",
+    or "cannot be read: ..." with the system's reason."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise error(missing, path) from None
+    except IsADirectoryError:
+        raise error(f"this is a folder, not {kind}", path) from None
+    except OSError as exc:
+        raise error(f"cannot be read: {exc.strerror or exc}", path) from None
 
 
 def read_regular_file(path: str | os.PathLike) -> bytes:

@@ -17,7 +17,6 @@ import math
 import os
 import re
 from collections.abc import Mapping
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +25,7 @@ import numpy as np
 from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
 from ..errors import BVHError, ExportError
 from .. import limits
-from ..fileio import atomic_write
+from ..fileio import atomic_write, reading
 from ..kinematics import fk_arrays
 from ..motion import Motion
 from ..quaternions import from_matrix, qmul
@@ -178,7 +177,7 @@ def _read_bvh_record(path) -> BVHRecord:
     bytes or text beside its values (its peak memory). A file with carriage returns in its
     header, whose header the text reading would find elsewhere, or whose rows the fast
     parser refuses, is read and parsed whole as text, as :func:`parse_bvh_text` does."""
-    with _os_errors(path), open(path, "rb") as handle:
+    with reading(path, BVHError, "a BVH file"), open(path, "rb") as handle:
         data = handle.read(_HEAD_BYTES)
         while True:
             _, rows_at = _head_lines(data)
@@ -883,23 +882,9 @@ def read_bvh(path: str | os.PathLike, **options) -> Motion:
     return record_to_motion(record, **options)
 
 
-@contextmanager
-def _os_errors(path):
-    """Turn the operating system's errors reading ``path`` into a :class:`BVHError` saying
-    why it cannot be read."""
-    try:
-        yield
-    except FileNotFoundError:
-        raise BVHError("no such file", path, None) from None
-    except IsADirectoryError:
-        raise BVHError("this is a folder, not a BVH file", path, None) from None
-    except OSError as exc:
-        raise BVHError(f"cannot be read: {exc.strerror or exc}", path, None) from None
-
-
 def _read_bytes(path) -> bytes:
     """The bytes of the file at ``path``, or a :class:`BVHError` saying why not."""
-    with _os_errors(path):
+    with reading(path, BVHError, "a BVH file"):
         return Path(path).read_bytes()
 
 

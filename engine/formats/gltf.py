@@ -63,7 +63,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import ExportError, GLTFError
-from ..fileio import atomic_write
+from ..fileio import atomic_write, reading
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot, to_matrix
 from ..skeleton import EndSite, Skeleton
@@ -288,16 +288,20 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
+
+def check_fits(character: Character, motion: Motion) -> None:
+    """Raise :class:`~engine.errors.ExportError` unless ``motion`` is on ``character``'s
+    skeleton (the same joints and parents), as a writer of the two together needs."""
+    sk, csk = motion.skeleton, character.skeleton
+    if csk.names != sk.names or not np.array_equal(csk.parents, sk.parents):
+        raise ExportError(f"the motion's skeleton ({sk.num_joints} joints) is not the "
+                          f"character {character.name!r}'s ({csk.num_joints} joints); "
+                          "retarget the motion onto the character first")
+
 # =========================================================================== container
 def _read_bytes(path) -> bytes:
-    try:
+    with reading(path, GLTFError, "a glTF file"):
         return Path(path).read_bytes()
-    except FileNotFoundError:
-        raise GLTFError("no such file", path) from None
-    except IsADirectoryError:
-        raise GLTFError("this is a folder, not a glTF file", path) from None
-    except OSError as exc:
-        raise GLTFError(f"cannot be read: {exc.strerror or exc}", path) from None
 
 
 def _parse_json(raw: bytes, path, where: str) -> dict:
@@ -1636,11 +1640,7 @@ def format_gltf(motion: Motion, character: Character | None, *, name: str | None
         raise ExportError(f"{J} joints: glTF joint indices stop at 65535")
     _check_range(motion)
     if character is not None:
-        csk = character.skeleton
-        if csk.names != sk.names or not np.array_equal(csk.parents, sk.parents):
-            raise ExportError(f"the motion's skeleton ({sk.num_joints} joints) is not the "
-                              f"character {character.name!r}'s ({csk.num_joints} joints); "
-                              "retarget the motion onto the character first")
+        check_fits(character, motion)
         bind_q = np.asarray(character.bind_rotations, dtype=float)
         meshes = character.meshes
     else:

@@ -14,7 +14,7 @@ from pathlib import Path
 from ..correction.displacement import ROOT, DisplacementMap
 from ..correction.enforcement import Correction
 from ..errors import BVHError, MappingError
-from ..fileio import (FileWriteError, atomic_write, read_regular_file,
+from ..fileio import (FileWriteError, atomic_write, read_regular_file, reading,
                       resolve_write_target)
 from ..formats.bvh import _decode, parse_bvh
 from ..motion import Motion
@@ -52,14 +52,8 @@ def save_project(project: Project, path, *, backup: bool = True) -> None:
 
 
 def _read_text(path) -> str:
-    try:
+    with reading(path, ProjectError, "a project file", missing="no such project file"):
         data = read_regular_file(path)
-    except FileNotFoundError:
-        raise ProjectError("no such project file", path) from None
-    except IsADirectoryError:
-        raise ProjectError("this is a folder, not a project file", path) from None
-    except OSError as exc:
-        raise ProjectError(f"cannot be read: {exc.strerror or exc}", path) from None
     if not data.strip():
         raise ProjectError("the file is empty (a project is a JSON object)", path)
     try:

@@ -54,6 +54,7 @@ import numpy as np
 
 from ... import limits
 from ...errors import FBXError
+from ...fileio import reading
 from ...motion import Motion
 from ...skeleton import Skeleton
 from ...units import SourceFrame
@@ -1119,14 +1120,8 @@ def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
             (saying what it holds).
     """
     path = os.fspath(path)
-    try:
+    with reading(path, FBXError, "an FBX file"):
         data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise FBXError("no such file", path) from None
-    except IsADirectoryError:
-        raise FBXError("this is a folder, not an FBX file", path) from None
-    except OSError as exc:
-        raise FBXError(f"cannot be read: {exc.strerror or exc}", path) from None
     root = parse_fbx(data, path)
     notes: list[str] = []
     if int(root.props[0]) < 7000:

@@ -55,7 +55,7 @@ from ...fileio import atomic_write
 from ...motion import Motion
 from ...quaternions import qconj, qmul, qrot, to_matrix
 from ...rotations import quat_to_euler
-from ..gltf import Character, _rest_positions
+from ..gltf import Character, _rest_positions, check_fits
 from .encode import CREATION_TIME, FILE_ID, encode_binary
 from .nodes import FBX_TICKS_PER_SECOND, Node
 
@@ -355,11 +355,7 @@ def _check(motion: Motion, character: Character | None) -> None:
     if motion.num_frames == 0:
         raise ExportError("the motion has no frames to write")
     if character is not None:
-        csk = character.skeleton
-        if csk.names != sk.names or not np.array_equal(csk.parents, sk.parents):
-            raise ExportError(f"the motion's skeleton ({sk.num_joints} joints) is not the "
-                              f"character {character.name!r}'s ({csk.num_joints} joints); "
-                              "retarget the motion onto the character first")
+        check_fits(character, motion)
     for j, name in enumerate(sk.names):
         if "\x00" in name or "\x01" in name:
             raise ExportError(f"joint {j} ({name!r}) has a control character in its name, "
