@@ -23,7 +23,8 @@ from pathlib import Path
 
 import pytest
 
-BLENDER_SCRIPT = textwrap.dedent(r'''
+#: what every BVH script starts with: the job, and Blender's BVH importer made to open files
+BVH_PROLOGUE = textwrap.dedent(r'''
     import builtins, json, sys
     import bpy
     import io_anim_bvh.import_bvh as import_bvh
@@ -34,17 +35,23 @@ BLENDER_SCRIPT = textwrap.dedent(r'''
     import_bvh.open = _open
 
     job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
-    results = {}
-    scene = bpy.context.scene
-    for item in job["files"]:
+    def import_file(path):
+        """The armature Blender's importer makes of a BVH file, in its own units and axes."""
         before = set(bpy.data.objects)
-        bpy.ops.import_anim.bvh(filepath=item["path"], target="ARMATURE", global_scale=1.0,
+        bpy.ops.import_anim.bvh(filepath=path, target="ARMATURE", global_scale=1.0,
                                 rotate_mode="NATIVE", axis_forward="Y", axis_up="Z",
                                 frame_start=1, use_fps_scale=False, use_cyclic=False,
                                 update_scene_fps=False, update_scene_duration=False)
         new = [o for o in bpy.data.objects if o not in before]
         assert len(new) == 1 and new[0].type == "ARMATURE", new
-        arm = new[0]
+        return new[0]
+''')
+
+BLENDER_SCRIPT = BVH_PROLOGUE + textwrap.dedent(r'''
+    results = {}
+    scene = bpy.context.scene
+    for item in job["files"]:
+        arm = import_file(item["path"])
         action = arm.animation_data.action
         keys = sorted({len(c.keyframe_points) for c in action.fcurves})
         first = sorted({c.keyframe_points[0].co[0] for c in action.fcurves})
@@ -107,6 +114,29 @@ def run_blender_import(files: list[dict], folder: Path, timeout: float = 300) ->
     """
     return run_blender(BLENDER_SCRIPT, "read_bvh_in_blender.py", {"files": files}, folder,
                        timeout)
+
+
+ROUNDTRIP_SCRIPT = BVH_PROLOGUE + textwrap.dedent(r'''
+    for item in job["files"]:
+        arm = import_file(item["path"])
+        action = arm.animation_data.action
+        bpy.ops.object.select_all(action="DESELECT")
+        arm.select_set(True)
+        bpy.context.view_layer.objects.active = arm
+        bpy.ops.export_anim.bvh(filepath=item["out"], frame_start=1,
+                                frame_end=item["frames"], global_scale=1.0,
+                                rotate_mode="NATIVE", root_transform_only=False)
+        bpy.data.objects.remove(arm, do_unlink=True)
+        bpy.data.actions.remove(action)
+    json.dump({"exported": len(job["files"])}, open(job["out"], "w"))
+''')
+
+
+def run_blender_roundtrip(files: list[dict], folder: Path, timeout: float = 600) -> None:
+    """Import each BVH file with Blender's importer and export it again with its exporter, in
+    one headless Blender process; ``files``: ``{"path": str, "out": str, "frames": int}``."""
+    run_blender(ROUNDTRIP_SCRIPT, "roundtrip_bvh_in_blender.py", {"files": files}, folder,
+                timeout)
 
 
 # ------------------------------------------------------------------------------------- FBX

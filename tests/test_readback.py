@@ -5,14 +5,12 @@ BVH targets in CMU units (+Y) and in inches (+Z), written as BVH and as GLB; the
 after a round trip through Blender's BVH import and export."""
 from __future__ import annotations
 
-import json
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from blender_util import blender_or_skip
+from blender_util import blender_or_skip, run_blender_roundtrip
 from conftest import SHARED_BVH, clip_path, shared_path
 from detect_cases import world_positions
 from motion_composer.engine.conversion.automap import automap
@@ -106,46 +104,12 @@ def test_glb_output_reads_back_in_metres_y_up(outputs, clip, target):
 
 
 # --------------------------------------------------------------------------- Blender
-BLENDER_ROUNDTRIP = textwrap.dedent(r'''
-    import builtins, json, sys
-    import bpy
-    import io_anim_bvh.import_bvh as import_bvh
-
-    # Blender 3.4's importer opens files with mode 'rU', which Python 3.11 refuses
-    def _open(file, mode="r", *args, **kwargs):
-        return builtins.open(file, mode.replace("U", ""), *args, **kwargs)
-    import_bvh.open = _open
-
-    job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
-    scene = bpy.context.scene
-    for item in job["files"]:
-        before = set(bpy.data.objects)
-        bpy.ops.import_anim.bvh(filepath=item["path"], target="ARMATURE", global_scale=1.0,
-                                rotate_mode="NATIVE", axis_forward="Y", axis_up="Z",
-                                frame_start=1, use_fps_scale=False, use_cyclic=False,
-                                update_scene_fps=False, update_scene_duration=False)
-        arm = [o for o in bpy.data.objects if o not in before][0]
-        action = arm.animation_data.action
-        bpy.ops.object.select_all(action="DESELECT")
-        arm.select_set(True)
-        bpy.context.view_layer.objects.active = arm
-        bpy.ops.export_anim.bvh(filepath=item["out"], frame_start=1,
-                                frame_end=item["frames"], global_scale=1.0,
-                                rotate_mode="NATIVE", root_transform_only=False)
-        bpy.data.objects.remove(arm, do_unlink=True)
-        bpy.data.actions.remove(action)
-''')
-
-
 @pytest.mark.blender
 def test_bvh_outputs_read_back_the_same_after_blender(outputs, tmp_path):
     # one Blender process imports and exports every BVH output of two glTF targets (the
     # case that re-read Z-up) and of the inches/Z-up target, 120 frames of each (36 files);
     # Blender exports positions on every joint (the robot's IK bones translate)
-    import subprocess
-    import os
-
-    blender = blender_or_skip()
+    blender_or_skip()
     chosen = [(c, t) for (c, t) in outputs if t in ("target_mixamo_ely.glb",
                                                     "target_robot_expressive.glb",
                                                     "fair1_child8_jumping.bvh")]
@@ -158,14 +122,7 @@ def test_bvh_outputs_read_back_the_same_after_blender(outputs, tmp_path):
         short[clip, target] = part
         files.append({"path": str(source), "out": str(tmp_path / f"{source.stem}.blender.bvh"),
                       "frames": part.num_frames})
-    script = tmp_path / "roundtrip.py"
-    script.write_text(BLENDER_ROUNDTRIP)
-    job = tmp_path / "job.json"
-    job.write_text(json.dumps({"files": files}))
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(script), "--", str(job)], capture_output=True,
-                          text=True, timeout=600, env=dict(os.environ, PYTHONNOUSERSITE="1"))
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    run_blender_roundtrip(files, tmp_path)
     for (clip, target), item in zip(chosen, files):
         part = short[clip, target]
         back = read_motion(item["out"])
