@@ -26,9 +26,9 @@ from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
 from ..errors import BVHError, ExportError
 from .. import limits
 from ..fileio import atomic_write, reading
-from ..kinematics import fk_arrays
+from ..kinematics import WorldPose, fk_components
 from ..motion import Motion
-from ..quaternions import from_matrix, qmul
+from ..quaternions import cfrom_euler, from_matrix, qmul
 from ..rotations import euler_to_quat, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
@@ -607,32 +607,45 @@ def detect_position_modes(record: BVHRecord) -> dict[str, str]:
     return modes
 
 
-#: angles turned into quaternions at a time by :func:`_local_arrays` (3 MB of them)
+#: angles turned into quaternions at a time by :func:`_local_arrays` (2 MB of them)
 _EULER_VALUES = 1 << 18
 
 
 def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
-    """Local rotations (F, J, 4) and translations (F, K, 3) in file units and file axes."""
+    """Local rotations ``(4, J, F)`` and translations ``(3, K, F)`` in file units and file
+    axes, as component arrays (:mod:`engine.quaternions`: one contiguous row of frames per
+    joint and component, what forward kinematics works on; ``.T`` of each is the
+    ``(F, J, 4)`` or ``(F, K, 3)`` view a :class:`Motion` holds).
+
+    The angles go from the rows into per-axis rows and through :func:`cfrom_euler` a block of
+    frames at a time; a joint whose angles never change (bit for bit) is turned once and its
+    rotation copied to every frame: the same values, without the sines and cosines of every
+    frame (a quarter of a CC3 clip's rotation channels are fingers that never move)."""
     values = record.values
     F = values.shape[0]
     J = len(record.names)
     rot_cols, pos_cols = _column_layout(record.channels)
-    rotations = np.empty((F, J, 4))
-    orders: dict[str, list[int]] = {}
+    bits = values.view(np.int64)
+    still = (bits == bits[:1]).all(axis=0)                        # (C,) never changes
+    rotations = np.empty((4, J, F))
+    groups: dict[tuple[str, bool], list[int]] = {}
     for j, chans in enumerate(record.channels):
-        orders.setdefault("".join(c[0] for c in chans if c in ROTATION_CHANNELS), []).append(j)
-    for order, joints in orders.items():
+        order = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
+        groups.setdefault((order, bool(still[rot_cols[j]].all())), []).append(j)
+    for (order, constant), joints in groups.items():
         if not order:
-            rotations[:, joints] = (0.0, 0.0, 0.0, 1.0)
+            rotations[:3, joints] = 0.0
+            rotations[3, joints] = 1.0
             continue
-        cols = np.array([rot_cols[j] for j in joints])               # (Jg, n)
-        step = max(1, _EULER_VALUES // (len(joints) * len(order)))
+        cols = np.array([rot_cols[j] for j in joints]).T            # (n, Jg)
+        if constant:
+            rotations[:, joints] = cfrom_euler(values.T[cols, :1], order)
+            continue
+        step = max(1, _EULER_VALUES // cols.size)
         for lo in range(0, F, step):              # frames at a time: small temporaries
-            angles = values[lo:lo + step, cols]                       # (f, Jg, n)
-            q = euler_to_quat(angles.reshape(-1, len(order)), order)
-            rotations[lo:lo + step, joints] = q.reshape(len(angles), len(joints), 4)
+            rotations[:, joints, lo:lo + step] = cfrom_euler(values.T[cols, lo:lo + step], order)
     translated = [0] + [j for j in range(1, J) if pos_cols[j]]
-    translations = np.empty((F, len(translated), 3))
+    translations = np.empty((3, len(translated), F))
     for k, j in enumerate(translated):
         off = record.offsets[j]
         cols = pos_cols[j]
@@ -640,9 +653,9 @@ def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
         for axis in range(3):
             if axis in cols:
                 v = values[:, cols[axis]]
-                translations[:, k, axis] = v + off[axis] if relative else v
+                translations[axis, k] = v + off[axis] if relative else v
             else:
-                translations[:, k, axis] = off[axis]
+                translations[axis, k] = off[axis]
     return rotations, translations
 
 
@@ -703,7 +716,9 @@ def _body_vertical(roles, skeleton_file: Skeleton, pose) -> np.ndarray:
 
 def _detect_frame(record: BVHRecord, rotations, translations,
                   skeleton_file: Skeleton) -> _Detection:
-    """Detect the up axis and the units from a sample of frames (file units, file axes).
+    """Detect the up axis and the units from a sample of frames (file units, file axes) of
+    the local ``rotations`` ``(4, J, F)`` and ``translations`` ``(3, K, F)`` (component arrays,
+    as :func:`_local_arrays` gives them).
 
     The up axis is the coordinate axis nearest the body's vertical (:func:`_body_vertical`,
     median over the sample) when the skeleton is a humanoid, whatever its joints are called;
@@ -712,9 +727,10 @@ def _detect_frame(record: BVHRecord, rotations, translations,
     body below its hips joint, so that IK targets hanging from a ground root do not count);
     the units follow from it (:func:`engine.units.detect_units`).
     """
-    F = rotations.shape[0]
+    F = rotations.shape[-1]
     sample = np.unique(np.linspace(0, F - 1, min(F, 48)).round().astype(int))
-    pose = fk_arrays(skeleton_file, rotations[sample], translations[sample])
+    pose = WorldPose(*(a.T for a in fk_components(skeleton_file, rotations[..., sample],
+                                                  translations[..., sample])))
     pts = pose.all_positions()                                        # (S, J+E, 3)
     roles = _body(skeleton_file, pose.positions[0])
     lower = [n.lower() for n in record.names]
@@ -851,11 +867,13 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                         source=source)
     translations = translations * scale
     if up_axis != "+Y":
-        translations[:, 0] = translations[:, 0] @ C.T
-        rotations[:, 0] = qmul(from_matrix(C), rotations[:, 0])
+        translations[:, 0] = (np.ascontiguousarray(translations[:, 0].T) @ C.T).T
+        rotations[:, 0] = qmul(from_matrix(C), rotations[:, 0].T).T
     # computed here, unit quaternions (Euler angles or scipy's output) and finite numbers:
-    # the checks and copies of Motion() would only double a large clip's peak memory
-    return Motion._trusted(skeleton, rotations, translations, record.frame_time, name)
+    # the checks and copies of Motion() would only double a large clip's peak memory; the
+    # motion holds the component arrays' transposes, so that forward kinematics of it
+    # (kinematics.joint_major) takes them as they are
+    return Motion._trusted(skeleton, rotations.T, translations.T, record.frame_time, name)
 
 
 def _check_mode(mode, path):
