@@ -1130,7 +1130,8 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     for (f, c), text in exact.items():
         cells[f, c, :-1] = 0
         cells[f, c, width - 1 - len(text):-1] = np.frombuffer(text, dtype=np.uint8)
-    return cells[cells != 0].tobytes()[:-1].decode("ascii")
+    cells = cells.reshape(-1)
+    return np.compress(cells != 0, cells).tobytes()[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
