@@ -1076,6 +1076,25 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     return "\n".join(out) + "\n"
 
 
+def _slots(texts) -> np.ndarray:
+    """Texts of at most 4 ASCII characters as little-endian 4-byte integers, NUL-padded."""
+    return np.frombuffer(b"".join(t.encode("ascii").ljust(4, b"\0") for t in texts),
+                         dtype="<u4")
+
+
+#: 4-byte slots of the rows' text (NULs are dropped at the end, so a slot may hold fewer
+#: characters, padded anywhere): three digits (a group of the fraction, or of the integer part
+#: below its leading group), indexed by their value
+_DIGITS3 = _slots(f"{g:03d}" for g in range(1000))
+#: the leading group of an integer part, right-aligned, without the sign and with it
+_LEAD = np.concatenate([_slots(f"{g}".rjust(4, "\0") for g in range(1000)),
+                        _slots(f"-{g}".rjust(4, "\0") for g in range(1000))])
+#: the first group of a fraction, ``.`` and 1, 2 or 3 digits
+_POINT = {k: _slots(f".{g:0{k}d}" for g in range(10 ** k)) for k in (1, 2, 3)}
+#: the separators after a value, in the last byte of a slot
+_SPACE, _NEWLINE = ord(" ") << 24, ord("\n") << 24
+
+
 def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     """The rows of ``values`` ``(F, C)`` in fixed point with ``decimals[c]`` digits after the
     point in column ``c``, values separated by a space and rows by a newline: the text of
@@ -1083,55 +1102,97 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
 
     ``rint(|v| 10^d)`` of the rounded product is the correctly rounded value of the exact
     product (what ``%`` formatting rounds) unless the product lies within its rounding error of
-    a half (a near tie) or beyond 2^52; those few values are formatted one by one.
+    a half (a near tie) or beyond 2^52; a row holding such a value is formatted with ``%``.
+    The others are written by :func:`_fixed_rows`.
     """
-    F, C = values.shape
     scale = 10.0 ** decimals                                 # exact up to 22 decimals
     with np.errstate(over="ignore", invalid="ignore"):      # huge: infinite, formatted alone
         mag = np.abs(values) * scale
         near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51) | ~(mag < 2.0 ** 52)
                 | (decimals > 22))
-    number = np.where(near, 0.0, np.rint(mag)).astype(np.int64)     # the digits, no point
-    negative = np.signbit(values)
-    # digits written: those of the number, at least one before the point
-    least = int(decimals.min()) + 1
-    length = np.full((F, C), least, dtype=np.uint8)
-    power = 10 ** least
-    top = number.max(initial=0)
-    while power <= top:
-        length += number >= power
-        power *= 10
-    length = np.maximum(length, (decimals + 1).astype(np.uint8))
-    exact = {(int(f), int(c)): f"{values[f, c]:.{decimals[c]}f}".encode("ascii")
-             for f, c in zip(*np.nonzero(near))}
-    chars = int((length + negative).max(initial=0))          # sign and digits
-    width = max([chars + 2] + [len(text) + 1 for text in exact.values()])   # point, separator
-    cells = np.zeros((F, C, width), dtype=np.uint8)          # right-aligned, NUL-padded
-    cells[:, :, -1] = ord(" ")
-    cells[:, -1, -1] = ord("\n")
-    sign = np.where(negative, ord("-"), 0).astype(np.uint8)
-    rest = number
-    for p in range(chars):                                   # digits from the right, then "-"
-        char = (rest % 10).astype(np.uint8)
-        char += ord("0")
-        rest = rest // 10
-        if p >= least:                                       # past some token's last digit
-            char = np.where(p < length, char, np.where(p == length, sign, np.uint8(0)))
-        after = (p >= decimals) & (decimals > 0)             # (C,): left of the point there
-        for at, where in ((width - 2 - p, ~after), (width - 3 - p, after)):
-            if where.all():
-                cells[:, :, at] = char
-            elif where.any():
-                plane = cells[:, :, at]
-                plane[...] = np.where(where, char, plane)
-    for d in np.unique(decimals[decimals > 0]):              # "%.0f" writes no point
-        plane = cells[:, :, width - 2 - d]
-        plane[...] = np.where(decimals == d, ord("."), plane)
-    for (f, c), text in exact.items():
-        cells[f, c, :-1] = 0
-        cells[f, c, width - 1 - len(text):-1] = np.frombuffer(text, dtype=np.uint8)
-    cells = cells.reshape(-1)
-    return np.compress(cells != 0, cells).tobytes()[:-1].decode("ascii")
+    number = np.rint(mag, out=mag)
+    exact = np.flatnonzero(near.any(axis=1))
+    if not len(exact):
+        return _fixed_rows(number, np.signbit(values), decimals)
+    row_format = " ".join(f"%.{d}f" for d in decimals)
+    pieces, start = [], 0
+    for f in [*exact.tolist(), len(values)]:
+        if f > start:
+            pieces.append(_fixed_rows(number[start:f], np.signbit(values[start:f]), decimals))
+        if f < len(values):
+            pieces.append(row_format % tuple(values[f].tolist()))
+        start = f + 1
+    return "\n".join(pieces)
+
+
+def _fixed_rows(number: np.ndarray, negative: np.ndarray, decimals: np.ndarray) -> str:
+    """:func:`_format_rows` of values whose digits are the whole numbers ``number`` ``(F, C)``
+    (``rint(|v| 10^d)``, below 2^52) and signs ``negative``.
+
+    Each value is a few 4-byte slots (its integer part's groups of three digits, the leading
+    one with the sign; the fraction's groups, the first with the point; the separator in the
+    last byte of the last slot), taken from tables for all values at once; the slots' NULs
+    are dropped in one pass. The integer and the fraction's groups are split off in floating
+    point, exactly: for whole numbers below 2^52, ``floor(n / 10^k)`` is the integer quotient.
+    """
+    F, C = number.shape
+    plans = []
+    for d in np.unique(decimals):
+        cols = np.flatnonzero(decimals == d)
+        d = int(d)
+        groups = -(-d // 3)                                  # of the fraction
+        integer = np.floor(number[:, cols] / 10.0 ** d)
+        fraction = number[:, cols] - integer * 10.0 ** d
+        top = float(integer.max(initial=0.0))
+        lead = 1                                             # groups of the integer part
+        while top >= 1000.0 ** lead:
+            lead += 1
+        plans.append((cols, d, groups, integer, fraction, lead))
+    # slots: integer part, fraction, and one for the separator where the last slot is full
+    width = max(lead + groups + (d in (0, 3)) for _, d, groups, _, _, lead in plans)
+    slots = np.zeros((F, C, width), dtype="<u4")
+    for cols, d, groups, integer, fraction, lead in plans:
+        one = len(cols) == C                                 # every column: no gather
+        out = slots if one else np.zeros((F, len(cols), width), dtype="<u4")
+        full = d in (0, 3)                   # the last slot is full: "-123" or ".123"
+        at = width - 1 - full                                # the fraction's last slot
+        for k in range(groups):                              # the fraction, right to left
+            size = min(3, d - 3 * k)
+            if k < groups - 1:
+                rest = np.floor(fraction / 1000.0)
+                digits = fraction - rest * 1000.0
+                fraction = rest
+            else:
+                digits = fraction
+            table = _POINT[size] if k == groups - 1 else _DIGITS3
+            out[:, :, at - k] = table[digits.astype(np.intp)]
+        at -= groups                                         # the integer part's last slot
+        sign = negative[:, cols] if not one else negative
+        for k in range(lead):                                # the integer part, right to left
+            rest = np.floor(integer / 1000.0)
+            digits = integer - rest * 1000.0
+            leading = _LEAD[(digits + 1000.0 * sign).astype(np.intp)]
+            if k == 0:
+                out[:, :, at] = leading
+            else:
+                # the slot leads where nothing is left above it; the group below it was
+                # written as a leading one and is padded to three digits instead
+                here = integer > 0
+                below = np.where(here, _DIGITS3[digits_below], out[:, :, at - k + 1])
+                out[:, :, at - k + 1] = below
+                out[:, :, at - k] = np.where(here, leading, 0)
+            digits_below = digits.astype(np.intp)
+            integer = rest
+        separator = np.full(len(cols), _SPACE, dtype="<u4")
+        separator[cols == C - 1] = _NEWLINE
+        if full:
+            out[:, :, -1] = separator
+        else:
+            out[:, :, -1] |= separator
+        if not one:
+            slots[:, cols] = out
+    flat = slots.view(np.uint8).reshape(-1)
+    return np.compress(flat != 0, flat).tobytes()[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
