@@ -113,23 +113,27 @@ def _parse_piece(data: bytes, columns: int) -> np.ndarray | None:
     return values
 
 
-#: 8 bytes above the space, as a uint64 of the flags ``bytes > 32``
-_SOLID = np.frombuffer(bytes(8 * [1]), dtype=np.uint64)[0]
+#: 4 flags ``bytes > 32``, all set, as one little-endian integer
+_SOLID = 0x01010101
+#: the blocks looked at first: any run of 23 bytes or more covers a whole one
+_BLOCK = 12
 
 
 def _has_long_token(data: bytes) -> bool:
     """Whether ``data`` holds a token longer than :data:`_MAX_WIDTH` characters (a run of
     bytes above the space, white space being the only bytes at or below it that are left).
 
-    A run of 25 bytes or more covers a whole aligned block of 8 (any 15 consecutive bytes
-    do), so the blocks are looked at first, 8 flags as one integer: only where one of them
-    is solid (a token of 15 or more characters) are the runs measured.
+    The blocks of :data:`_BLOCK` bytes (at multiples of it) are looked at first, as integers
+    of 4 flags: a run of 25 bytes or more covers a whole block (any 23 consecutive bytes do;
+    one reaching past the last whole block has 14 or more bytes before its end, which is a
+    block's end). Only where a block is solid (a token of 12 characters or more sits on it)
+    are the runs measured.
     """
     flags = np.frombuffer(data, dtype=np.uint8) > 32
-    whole = len(flags) // 8 * 8
-    if not (flags[:whole].view(np.uint64) == _SOLID).any():
-        return False
-    return _longest_token(data) > _MAX_WIDTH
+    whole = len(flags) // _BLOCK * _BLOCK
+    words = flags[:whole].view("<u4") == _SOLID
+    return bool((words[0::3] & words[1::3] & words[2::3]).any()) and \
+        _longest_token(data) > _MAX_WIDTH
 
 
 def _longest_token(data: bytes) -> int:
