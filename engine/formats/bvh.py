@@ -18,6 +18,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from itertools import count, repeat
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +103,7 @@ class _Tokens:
                 self.motion_line = number
                 break
             self.line_tokens[number] = parts
-            self.toks.extend((t, number, i) for i, t in enumerate(parts))
+            self.toks.extend(zip(parts, repeat(number), count()))
         self.last_line = self.toks[-1][1] if self.toks else 1
 
     def error(self, problem, line=None):
@@ -1168,20 +1169,20 @@ def _fixed_rows(number: np.ndarray, negative: np.ndarray, decimals: np.ndarray) 
             out[:, :, at - k] = table[digits.astype(np.intp)]
         at -= groups                                         # the integer part's last slot
         sign = negative[:, cols] if not one else negative
+        below = None                         # the digits of the group below, as indices
         for k in range(lead):                                # the integer part, right to left
             rest = np.floor(integer / 1000.0)
             digits = integer - rest * 1000.0
             leading = _LEAD[(digits + 1000.0 * sign).astype(np.intp)]
-            if k == 0:
-                out[:, :, at] = leading
-            else:
-                # the slot leads where nothing is left above it; the group below it was
-                # written as a leading one and is padded to three digits instead
+            if k:
+                # the slot leads where something is left at it; the group below it, written
+                # as a leading one, is padded to three digits there instead
                 here = integer > 0
-                below = np.where(here, _DIGITS3[digits_below], out[:, :, at - k + 1])
-                out[:, :, at - k + 1] = below
+                out[:, :, at - k + 1] = np.where(here, _DIGITS3[below], out[:, :, at - k + 1])
                 out[:, :, at - k] = np.where(here, leading, 0)
-            digits_below = digits.astype(np.intp)
+            else:
+                out[:, :, at] = leading
+            below = digits.astype(np.intp)
             integer = rest
         separator = np.full(len(cols), _SPACE, dtype="<u4")
         separator[cols == C - 1] = _NEWLINE
