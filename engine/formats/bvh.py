@@ -1104,7 +1104,7 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     ``rint(|v| 10^d)`` of the rounded product is the correctly rounded value of the exact
     product (what ``%`` formatting rounds) unless the product lies within its rounding error of
     a half (a near tie) or beyond 2^52; a row holding such a value is formatted with ``%``.
-    The others are written by :func:`_fixed_rows`.
+    The others are written by :func:`_fixed_rows`, :data:`_FORMAT_VALUES` values at a time.
     """
     scale = 10.0 ** decimals                                 # exact up to 22 decimals
     with np.errstate(over="ignore", invalid="ignore"):      # huge: infinite, formatted alone
@@ -1112,18 +1112,26 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
         near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51) | ~(mag < 2.0 ** 52)
                 | (decimals > 22))
     number = np.rint(mag, out=mag)
-    exact = np.flatnonzero(near.any(axis=1))
-    if not len(exact):
-        return _fixed_rows(number, np.signbit(values), decimals)
-    row_format = " ".join(f"%.{d}f" for d in decimals)
+    negative = np.signbit(values)
+    exact = np.flatnonzero(near.any(axis=1)).tolist()
+    row_format = " ".join(f"%.{d}f" for d in decimals) if exact else ""
+    F, C = values.shape
+    step = max(1, _FORMAT_VALUES // C)
     pieces, start = [], 0
-    for f in [*exact.tolist(), len(values)]:
-        if f > start:
-            pieces.append(_fixed_rows(number[start:f], np.signbit(values[start:f]), decimals))
-        if f < len(values):
+    for f in [*exact, F]:
+        for lo in range(start, f, step):        # the rows before it, a block at a time
+            hi = min(f, lo + step)
+            pieces.append(_fixed_rows(number[lo:hi], negative[lo:hi], decimals))
+        if f < F:
             pieces.append(row_format % tuple(values[f].tolist()))
         start = f + 1
     return "\n".join(pieces)
+
+
+#: values formatted at a time by :func:`_format_rows`: the temporaries of a block stay small
+#: (a whole large clip's would be hundreds of MB, the dropping of NULs building an index of
+#: every character)
+_FORMAT_VALUES = 1 << 16
 
 
 def _fixed_rows(number: np.ndarray, negative: np.ndarray, decimals: np.ndarray) -> str:
