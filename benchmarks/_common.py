@@ -216,11 +216,14 @@ def highest_load() -> float:
 def ratio_row(what: str, ours: Timing, reference: Timing, limit: float, *,
               at_most: bool = True, note: str = "") -> Row:
     """A row judging ``ours.median / reference.median`` against ``limit`` (at most it, or at
-    least it with ``at_most=False``), the medians and spreads of both in its note."""
+    least it with ``at_most=False``), the medians and spreads of both and the ratio of their
+    CPU times in its note."""
     ratio = ours.median / reference.median
     ok = ratio <= limit if at_most else ratio >= limit
     detail = (f"{fmt_seconds(ours.median)} / {fmt_seconds(reference.median)} "
               f"({ours.spread()} / {reference.spread()})")
+    if ours.cpu_seconds and reference.cpu_seconds:
+        detail += f"; CPU time {ours.cpu_median / reference.cpu_median:.2f}x"
     return Row(what, f"{ratio:.2f}x", f"{'<=' if at_most else '>='} {limit:g}x", ok,
                "; ".join(filter(None, [detail, note])))
 
