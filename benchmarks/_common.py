@@ -62,10 +62,17 @@ class Timing:
 
     label: str
     seconds: list[float] = field(default_factory=list)
+    #: this process's CPU seconds of the same runs (``time.process_time``: what the machine's
+    #: other work does not stretch, and no wait on a disk)
+    cpu_seconds: list[float] = field(default_factory=list)
 
     @property
     def median(self) -> float:
         return statistics.median(self.seconds)
+
+    @property
+    def cpu_median(self) -> float:
+        return statistics.median(self.cpu_seconds)
 
     @property
     def best(self) -> float:
@@ -93,9 +100,10 @@ def time_runs(fn: Callable[[], object], repeat: int, *, warmup: int = 1,
     timing = Timing(label)
     for _ in range(repeat):
         gc.collect()
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         fn()
         timing.seconds.append(time.perf_counter() - start)
+        timing.cpu_seconds.append(time.process_time() - cpu)
     sample_load()
     return timing
 
@@ -113,7 +121,9 @@ def time_interleaved(calls: dict[str, tuple[Callable[[], object], int]],
             # runs * (r + 1) // rounds - runs * r // rounds: spread evenly, summing to runs
             share = runs * (r + 1) // rounds - runs * r // rounds
             if share:
-                timings[label].seconds += time_runs(fn, share, warmup=0).seconds
+                runs_here = time_runs(fn, share, warmup=0)
+                timings[label].seconds += runs_here.seconds
+                timings[label].cpu_seconds += runs_here.cpu_seconds
     return timings
 
 
@@ -206,11 +216,14 @@ def highest_load() -> float:
 def ratio_row(what: str, ours: Timing, reference: Timing, limit: float, *,
               at_most: bool = True, note: str = "") -> Row:
     """A row judging ``ours.median / reference.median`` against ``limit`` (at most it, or at
-    least it with ``at_most=False``), the medians and spreads of both in its note."""
+    least it with ``at_most=False``), the medians and spreads of both and the ratio of their
+    CPU times in its note."""
     ratio = ours.median / reference.median
     ok = ratio <= limit if at_most else ratio >= limit
     detail = (f"{fmt_seconds(ours.median)} / {fmt_seconds(reference.median)} "
               f"({ours.spread()} / {reference.spread()})")
+    if ours.cpu_seconds and reference.cpu_seconds:
+        detail += f"; CPU time {ours.cpu_median / reference.cpu_median:.2f}x"
     return Row(what, f"{ratio:.2f}x", f"{'<=' if at_most else '>='} {limit:g}x", ok,
                "; ".join(filter(None, [detail, note])))
 

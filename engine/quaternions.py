@@ -23,7 +23,7 @@ import numpy as np
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
            "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix",
            "from_matrix", "from_rotvec", "components", "interleaved", "cmul", "cconj", "crot",
-           "cquat_between", "ctwist_about"]
+           "cquat_between", "ctwist_about", "cfrom_euler"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -116,19 +116,33 @@ def _euler_rows(angles_deg: np.ndarray, axes: list[int]) -> np.ndarray:
     return np.stack(q, axis=-1)
 
 
-def _mul_axis(a: list, axis: int, s: np.ndarray, c: np.ndarray) -> list:
+def _mul_axis(a: list, axis: int, s: np.ndarray, c: np.ndarray,
+              out: np.ndarray | None = None) -> list:
     """Components of ``a * (s e_axis + c)``: ``a`` times a rotation about a coordinate axis.
 
-    ``a`` and the result are lists of the four component arrays x, y, z, w. With ``k`` the axis
-    and ``i, j`` the next two in cyclic order, the Hamilton product keeps two terms per
-    component; each equals :func:`qmul`'s result exactly, since the terms dropped are zeros.
+    ``a`` and the result are lists of the four component arrays x, y, z, w (or, with ``out``,
+    the result goes into the rows of ``out`` ``(4, ...)``, which must not overlap ``a``, and is
+    ``out``). With ``k`` the axis and ``i, j`` the next two in cyclic order, the Hamilton
+    product keeps two terms per component; each equals :func:`qmul`'s result exactly, since
+    the terms dropped are zeros.
     """
     k, i, j = axis, (axis + 1) % 3, (axis + 2) % 3
-    out = [None] * 4
-    out[k] = a[3] * s + a[k] * c
-    out[i] = a[i] * c + a[j] * s
-    out[j] = a[j] * c - a[i] * s
-    out[3] = a[3] * c - a[k] * s
+    if out is None:
+        out = [None] * 4
+        out[k] = a[3] * s + a[k] * c
+        out[i] = a[i] * c + a[j] * s
+        out[j] = a[j] * c - a[i] * s
+        out[3] = a[3] * c - a[k] * s
+        return out
+    t = np.empty(np.shape(s))
+    for r, (p, u), (m, v), sign in ((k, (3, s), (k, c), 1), (i, (i, c), (j, s), 1),
+                                    (j, (j, c), (i, s), -1), (3, (3, c), (k, s), -1)):
+        np.multiply(a[p], u, out=out[r])
+        np.multiply(a[m], v, out=t)
+        if sign > 0:
+            out[r] += t
+        else:
+            out[r] -= t
     return out
 
 
@@ -345,6 +359,31 @@ def cmul(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndar
     w -= np.multiply(ax, bx, out=t)
     w -= np.multiply(ay, by, out=t)
     w -= np.multiply(az, bz, out=t)
+    return out
+
+
+def cfrom_euler(angles_deg: np.ndarray, order: str, out: np.ndarray | None = None
+                ) -> np.ndarray:
+    """:func:`from_euler` on component arrays: angles ``(len(order), ...)`` in degrees, one
+    row per axis of ``order``, to rotations ``(4, ...)`` (into ``out`` when given, not
+    overlapping the angles), bit for bit :func:`from_euler`'s values (the same arithmetic
+    in the same order, the sign of zeros included)."""
+    axes = ["XYZ".index(a.upper()) for a in order]
+    half = np.radians(angles_deg, out=np.empty(np.shape(angles_deg)))     # C-contiguous rows
+    half *= 0.5
+    sin, cos = np.sin(half), np.cos(half)
+    shape = half.shape[1:]
+    out = np.empty((4,) + shape) if out is None else out
+    if len(axes) == 1:
+        out[:] = 0.0
+        out[axes[0]] = sin[0]
+        out[3] = cos[0]
+        return out
+    zero = np.zeros(shape)
+    q = [zero, zero, zero, cos[0]]                     # components x, y, z, w
+    q[axes[0]] = sin[0]
+    for k in range(1, len(axes)):
+        q = _mul_axis(q, axes[k], sin[k], cos[k], out if k == len(axes) - 1 else None)
     return out
 
 

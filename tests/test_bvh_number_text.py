@@ -61,3 +61,16 @@ def test_near_ties_and_mixed_precision():
     columns = rng.choice([6, 7, 10], size=values.shape[1])
     assert _format_rows(values, columns) == _percent_rows(values, columns)
     assert _format_rows(values[:1, :1], columns[:1]) == _percent_rows(values[:1, :1], columns[:1])
+
+
+@pytest.mark.parametrize("block", [1, 5, 12, 1000])
+def test_rows_formatted_a_block_at_a_time(block, monkeypatch):
+    """Blocks of rows that end anywhere, around rows that hold a near tie (written with %),
+    give the same text: every separator in place, none doubled."""
+    monkeypatch.setattr(bvh, "_FORMAT_VALUES", block)
+    rng = np.random.default_rng(20261202)
+    values = rng.normal(scale=300.0, size=(40, 6)) * 10.0 ** rng.integers(-3, 4, size=(40, 6))
+    values[[0, 7, 8, 21, 39], 2] = 0.0000125                # a tie at 6 decimals, rounded
+    values[[3, 4], 5] = -0.0
+    for columns in (np.full(6, 6), np.array([0, 3, 6, 7, 1, 12])):
+        assert _format_rows(values, columns) == _percent_rows(values, columns)

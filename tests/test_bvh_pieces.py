@@ -30,6 +30,27 @@ def test_pieces_give_the_whole_texts_motion(spec, monkeypatch):
     _same(read_bvh(path), whole)
 
 
+@pytest.mark.parametrize("spec", all_bvh_params())
+def test_rotations_are_every_frames_euler_angles_bit_for_bit(spec):
+    """The reader turns a joint whose angles never change once and copies it to every frame,
+    and the others in blocks of frames on component rows: the rotations are still
+    ``from_euler`` of every frame's angles, bit for bit (file axes, a +Y file's root too)."""
+    from motion_composer.engine.quaternions import from_euler
+    path = resolve(spec)
+    record = bvh._read_bvh_record(path)
+    rotations, _ = bvh._local_arrays(record, bvh.detect_position_modes(record))
+    rot_cols, _ = bvh._column_layout(record.channels)
+    for j, chans in enumerate(record.channels):
+        order = "".join(c[0] for c in chans if c.endswith("rotation"))
+        expected = (from_euler(record.values[:, rot_cols[j]], order) if order else
+                    np.tile([0.0, 0.0, 0.0, 1.0], (record.num_frames, 1)))
+        assert np.ascontiguousarray(rotations[:, j].T).tobytes() == expected.tobytes(), \
+            record.names[j]
+    motion = read_bvh(path)
+    if motion.skeleton.source.up_axis == "+Y":                # the root is not turned
+        np.testing.assert_array_equal(motion.rotations, rotations.T)
+
+
 def _write(tmp_path, text: str, name="clip.bvh"):
     out = tmp_path / name
     out.write_bytes(text.encode("latin-1"))

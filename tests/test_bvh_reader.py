@@ -594,6 +594,22 @@ def test_fast_number_parser_refuses(block, columns):
     assert parse_number_rows(block.encode("latin-1"), columns) is None
 
 
+@pytest.mark.parametrize("shift", range(13))
+def test_fast_number_parser_measures_long_tokens_wherever_they_sit(shift):
+    """Tokens up to 24 characters are taken and longer ones refused, at every position
+    against the 12-byte blocks that are looked at first, within a block and at its end."""
+    for width in (8, 11, 12, 14, 15, 16, 23, 24, 25, 26, 40):
+        token = "1" + "0" * (width - 3) + ".5"
+        for block in (f"{' ' * shift}1 {token}\n" + "2 3\n" * 20,
+                      "2 3\n" * 20 + f"{' ' * shift}1 {token}",
+                      "2 3\n" * 20 + f"{' ' * shift}{token} 1\n"):
+            parsed = parse_number_rows(block.encode(), 2)
+            if width <= 24:
+                assert parsed is not None and float(token) in parsed[0]
+            else:
+                assert parsed is None, (width, block)
+
+
 def test_fast_number_parser_counts_rows_and_skips_blank_lines():
     values, rows = parse_number_rows(b"\n1 2\n\n \t\n3 4\r\n5 6", 2)
     assert rows == 3

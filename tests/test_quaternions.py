@@ -182,6 +182,26 @@ def test_component_functions_give_the_interleaved_values_bit_for_bit():
                                   twist_about(a, axis))
 
 
+@pytest.mark.parametrize("order", ALL_ORDERS)
+def test_cfrom_euler_gives_from_eulers_values_bit_for_bit(order):
+    """Euler angles as component rows ``(n, Jg, F)``, as the BVH reader holds them, give
+    :func:`from_euler`'s quaternions bit for bit, the sign of zeros included (zeros, negative
+    zeros, half and whole turns, angles beyond a turn)."""
+    from motion_composer.engine.quaternions import cfrom_euler
+    rng = _rng(95)
+    angles = rng.uniform(-400.0, 400.0, size=(300, 7, len(order)))
+    angles[::5] = 0.0
+    angles[::7] = -0.0
+    angles[::3, 1, 0] = 180.0
+    angles[::4, 2] = -360.0
+    expected = from_euler(angles, order)                                  # (F, Jg, 4)
+    got = cfrom_euler(np.ascontiguousarray(angles.T), order).T           # (F, Jg, 4) view
+    assert np.ascontiguousarray(got).tobytes() == expected.tobytes()
+    out = np.empty((4, 7, 300))
+    assert cfrom_euler(angles.T, order, out) is out                      # strided angles too
+    assert np.ascontiguousarray(out.T).tobytes() == expected.tobytes()
+
+
 def test_from_matrix_equals_scipy_bit_for_bit():
     from motion_composer.engine.quaternions import from_matrix
     matrices = Rotation.random(2000, random_state=11).as_matrix()

@@ -2,7 +2,7 @@
 
 ``float()`` on each of a large file's 340,000 numbers costs about 70 ms. numpy's C reader
 (``numpy.loadtxt``) splits and converts them with the same correctly rounded conversion as
-``float()`` (``PyOS_string_to_double``), so it returns the *same* doubles, in about 15 ms; this
+``float()`` (``PyOS_string_to_double``), so it returns the *same* doubles, in about 13 ms; this
 module adds the checks that keep its result a plain decimal block: only the bytes of decimal
 and exponent notation and white space, tokens of at most 24 characters, every non-blank line
 ``columns`` numbers, every value finite. Anything else (``nan``, a stray character, a
@@ -13,6 +13,8 @@ The block is parsed a piece of about a megabyte at a time, so that the temporari
 beside the values of a large file (a 72 MB file's values are 61 MB).
 """
 from __future__ import annotations
+
+import io
 
 import numpy as np
 
@@ -97,13 +99,13 @@ def parse_number_pieces(pieces, columns: int, *, rows: int | None = None,
 
 def _parse_piece(data: bytes, columns: int) -> np.ndarray | None:
     """``(rows, columns)`` values of whole lines of ``data``, or None."""
-    if data.translate(None, _VALID_BYTES) or _longest_token(data) > _MAX_WIDTH:
+    if data.translate(None, _VALID_BYTES) or _has_long_token(data):
         return None
-    lines = data.decode("ascii").split("\n")
-    if not any(line.strip() for line in lines):
+    if not data or data.isspace():
         return np.zeros((0, columns))
     try:
-        values = np.loadtxt(lines, dtype=float, comments=None, ndmin=2)
+        values = np.loadtxt(io.BytesIO(data), dtype=float, comments=None, ndmin=2,
+                            encoding="ascii")
     except ValueError:                     # a token that is no number, or a ragged row
         return None
     if values.shape[1] != columns or not np.isfinite(values).all():
@@ -111,8 +113,30 @@ def _parse_piece(data: bytes, columns: int) -> np.ndarray | None:
     return values
 
 
+#: 4 flags ``bytes > 32``, all set, as one little-endian integer
+_SOLID = 0x01010101
+#: the blocks looked at first: any run of 23 bytes or more covers a whole one
+_BLOCK = 12
+
+
+def _has_long_token(data: bytes) -> bool:
+    """Whether ``data`` holds a token longer than :data:`_MAX_WIDTH` characters (a run of
+    bytes above the space, white space being the only bytes at or below it that are left).
+
+    The blocks of :data:`_BLOCK` bytes (at multiples of it) are looked at first, as integers
+    of 4 flags: a run of 25 bytes or more covers a whole block (any 23 consecutive bytes do;
+    one reaching past the last whole block has 14 or more bytes before its end, which is a
+    block's end). Only where a block is solid (a token of 12 characters or more sits on it)
+    are the runs measured.
+    """
+    flags = np.frombuffer(data, dtype=np.uint8) > 32
+    whole = len(flags) // _BLOCK * _BLOCK
+    words = flags[:whole].view("<u4") == _SOLID
+    return bool((words[0::3] & words[1::3] & words[2::3]).any()) and \
+        _longest_token(data) > _MAX_WIDTH
+
+
 def _longest_token(data: bytes) -> int:
-    """The length of the longest run of bytes above the space (white space being the only
-    bytes at or below it that are left)."""
+    """The length of the longest run of bytes above the space."""
     gaps = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) <= 32)
     return int(np.diff(gaps, prepend=-1, append=len(data)).max(initial=1)) - 1

@@ -18,6 +18,7 @@ import os
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from itertools import count, repeat
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +27,9 @@ from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
 from ..errors import BVHError, ExportError
 from .. import limits
 from ..fileio import atomic_write, reading
-from ..kinematics import fk_arrays
+from ..kinematics import WorldPose, fk_components
 from ..motion import Motion
-from ..quaternions import from_matrix, qmul
+from ..quaternions import cfrom_euler, from_matrix, qmul
 from ..rotations import euler_to_quat, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
@@ -102,7 +103,7 @@ class _Tokens:
                 self.motion_line = number
                 break
             self.line_tokens[number] = parts
-            self.toks.extend((t, number, i) for i, t in enumerate(parts))
+            self.toks.extend(zip(parts, repeat(number), count()))
         self.last_line = self.toks[-1][1] if self.toks else 1
 
     def error(self, problem, line=None):
@@ -607,32 +608,45 @@ def detect_position_modes(record: BVHRecord) -> dict[str, str]:
     return modes
 
 
-#: angles turned into quaternions at a time by :func:`_local_arrays` (3 MB of them)
+#: angles turned into quaternions at a time by :func:`_local_arrays` (2 MB of them)
 _EULER_VALUES = 1 << 18
 
 
 def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
-    """Local rotations (F, J, 4) and translations (F, K, 3) in file units and file axes."""
+    """Local rotations ``(4, J, F)`` and translations ``(3, K, F)`` in file units and file
+    axes, as component arrays (:mod:`engine.quaternions`: one contiguous row of frames per
+    joint and component, what forward kinematics works on; ``.T`` of each is the
+    ``(F, J, 4)`` or ``(F, K, 3)`` view a :class:`Motion` holds).
+
+    The angles go from the rows into per-axis rows and through :func:`cfrom_euler` a block of
+    frames at a time; a joint whose angles never change (bit for bit) is turned once and its
+    rotation copied to every frame: the same values, without the sines and cosines of every
+    frame (a quarter of a CC3 clip's rotation channels are fingers that never move)."""
     values = record.values
     F = values.shape[0]
     J = len(record.names)
     rot_cols, pos_cols = _column_layout(record.channels)
-    rotations = np.empty((F, J, 4))
-    orders: dict[str, list[int]] = {}
+    bits = values.view(np.int64)
+    still = (bits == bits[:1]).all(axis=0)                        # (C,) never changes
+    rotations = np.empty((4, J, F))
+    groups: dict[tuple[str, bool], list[int]] = {}
     for j, chans in enumerate(record.channels):
-        orders.setdefault("".join(c[0] for c in chans if c in ROTATION_CHANNELS), []).append(j)
-    for order, joints in orders.items():
+        order = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
+        groups.setdefault((order, bool(still[rot_cols[j]].all())), []).append(j)
+    for (order, constant), joints in groups.items():
         if not order:
-            rotations[:, joints] = (0.0, 0.0, 0.0, 1.0)
+            rotations[:3, joints] = 0.0
+            rotations[3, joints] = 1.0
             continue
-        cols = np.array([rot_cols[j] for j in joints])               # (Jg, n)
-        step = max(1, _EULER_VALUES // (len(joints) * len(order)))
+        cols = np.array([rot_cols[j] for j in joints]).T            # (n, Jg)
+        if constant:
+            rotations[:, joints] = cfrom_euler(values.T[cols, :1], order)
+            continue
+        step = max(1, _EULER_VALUES // cols.size)
         for lo in range(0, F, step):              # frames at a time: small temporaries
-            angles = values[lo:lo + step, cols]                       # (f, Jg, n)
-            q = euler_to_quat(angles.reshape(-1, len(order)), order)
-            rotations[lo:lo + step, joints] = q.reshape(len(angles), len(joints), 4)
+            rotations[:, joints, lo:lo + step] = cfrom_euler(values.T[cols, lo:lo + step], order)
     translated = [0] + [j for j in range(1, J) if pos_cols[j]]
-    translations = np.empty((F, len(translated), 3))
+    translations = np.empty((3, len(translated), F))
     for k, j in enumerate(translated):
         off = record.offsets[j]
         cols = pos_cols[j]
@@ -640,9 +654,9 @@ def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
         for axis in range(3):
             if axis in cols:
                 v = values[:, cols[axis]]
-                translations[:, k, axis] = v + off[axis] if relative else v
+                translations[axis, k] = v + off[axis] if relative else v
             else:
-                translations[:, k, axis] = off[axis]
+                translations[axis, k] = off[axis]
     return rotations, translations
 
 
@@ -703,7 +717,9 @@ def _body_vertical(roles, skeleton_file: Skeleton, pose) -> np.ndarray:
 
 def _detect_frame(record: BVHRecord, rotations, translations,
                   skeleton_file: Skeleton) -> _Detection:
-    """Detect the up axis and the units from a sample of frames (file units, file axes).
+    """Detect the up axis and the units from a sample of frames (file units, file axes) of
+    the local ``rotations`` ``(4, J, F)`` and ``translations`` ``(3, K, F)`` (component arrays,
+    as :func:`_local_arrays` gives them).
 
     The up axis is the coordinate axis nearest the body's vertical (:func:`_body_vertical`,
     median over the sample) when the skeleton is a humanoid, whatever its joints are called;
@@ -712,9 +728,10 @@ def _detect_frame(record: BVHRecord, rotations, translations,
     body below its hips joint, so that IK targets hanging from a ground root do not count);
     the units follow from it (:func:`engine.units.detect_units`).
     """
-    F = rotations.shape[0]
+    F = rotations.shape[-1]
     sample = np.unique(np.linspace(0, F - 1, min(F, 48)).round().astype(int))
-    pose = fk_arrays(skeleton_file, rotations[sample], translations[sample])
+    pose = WorldPose(*(a.T for a in fk_components(skeleton_file, rotations[..., sample],
+                                                  translations[..., sample])))
     pts = pose.all_positions()                                        # (S, J+E, 3)
     roles = _body(skeleton_file, pose.positions[0])
     lower = [n.lower() for n in record.names]
@@ -851,11 +868,13 @@ def record_to_motion(record: BVHRecord, *, units: str | None = None, scale: floa
                         source=source)
     translations = translations * scale
     if up_axis != "+Y":
-        translations[:, 0] = translations[:, 0] @ C.T
-        rotations[:, 0] = qmul(from_matrix(C), rotations[:, 0])
+        translations[:, 0] = (np.ascontiguousarray(translations[:, 0].T) @ C.T).T
+        rotations[:, 0] = qmul(from_matrix(C), rotations[:, 0].T).T
     # computed here, unit quaternions (Euler angles or scipy's output) and finite numbers:
-    # the checks and copies of Motion() would only double a large clip's peak memory
-    return Motion._trusted(skeleton, rotations, translations, record.frame_time, name)
+    # the checks and copies of Motion() would only double a large clip's peak memory; the
+    # motion holds the component arrays' transposes, so that forward kinematics of it
+    # (kinematics.joint_major) takes them as they are
+    return Motion._trusted(skeleton, rotations.T, translations.T, record.frame_time, name)
 
 
 def _check_mode(mode, path):
@@ -1058,6 +1077,25 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     return "\n".join(out) + "\n"
 
 
+def _slots(texts) -> np.ndarray:
+    """Texts of at most 4 ASCII characters as little-endian 4-byte integers, NUL-padded."""
+    return np.frombuffer(b"".join(t.encode("ascii").ljust(4, b"\0") for t in texts),
+                         dtype="<u4")
+
+
+#: 4-byte slots of the rows' text (NULs are dropped at the end, so a slot may hold fewer
+#: characters, padded anywhere): three digits (a group of the fraction, or of the integer part
+#: below its leading group), indexed by their value
+_DIGITS3 = _slots(f"{g:03d}" for g in range(1000))
+#: the leading group of an integer part, right-aligned, without the sign and with it
+_LEAD = np.concatenate([_slots(f"{g}".rjust(4, "\0") for g in range(1000)),
+                        _slots(f"-{g}".rjust(4, "\0") for g in range(1000))])
+#: the first group of a fraction, ``.`` and 1, 2 or 3 digits
+_POINT = {k: _slots(f".{g:0{k}d}" for g in range(10 ** k)) for k in (1, 2, 3)}
+#: the separators after a value, in the last byte of a slot
+_SPACE, _NEWLINE = ord(" ") << 24, ord("\n") << 24
+
+
 def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
     """The rows of ``values`` ``(F, C)`` in fixed point with ``decimals[c]`` digits after the
     point in column ``c``, values separated by a space and rows by a newline: the text of
@@ -1065,54 +1103,105 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
 
     ``rint(|v| 10^d)`` of the rounded product is the correctly rounded value of the exact
     product (what ``%`` formatting rounds) unless the product lies within its rounding error of
-    a half (a near tie) or beyond 2^52; those few values are formatted one by one.
+    a half (a near tie) or beyond 2^52; a row holding such a value is formatted with ``%``.
+    The others are written by :func:`_fixed_rows`, :data:`_FORMAT_VALUES` values at a time.
     """
-    F, C = values.shape
     scale = 10.0 ** decimals                                 # exact up to 22 decimals
     with np.errstate(over="ignore", invalid="ignore"):      # huge: infinite, formatted alone
         mag = np.abs(values) * scale
         near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51) | ~(mag < 2.0 ** 52)
                 | (decimals > 22))
-    number = np.where(near, 0.0, np.rint(mag)).astype(np.int64)     # the digits, no point
+    number = np.rint(mag, out=mag)
     negative = np.signbit(values)
-    # digits written: those of the number, at least one before the point
-    least = int(decimals.min()) + 1
-    length = np.full((F, C), least, dtype=np.uint8)
-    power = 10 ** least
-    top = number.max(initial=0)
-    while power <= top:
-        length += number >= power
-        power *= 10
-    length = np.maximum(length, (decimals + 1).astype(np.uint8))
-    exact = {(int(f), int(c)): f"{values[f, c]:.{decimals[c]}f}".encode("ascii")
-             for f, c in zip(*np.nonzero(near))}
-    chars = int((length + negative).max(initial=0))          # sign and digits
-    width = max([chars + 2] + [len(text) + 1 for text in exact.values()])   # point, separator
-    cells = np.zeros((F, C, width), dtype=np.uint8)          # right-aligned, NUL-padded
-    cells[:, :, -1] = ord(" ")
-    cells[:, -1, -1] = ord("\n")
-    sign = np.where(negative, ord("-"), 0).astype(np.uint8)
-    rest = number
-    for p in range(chars):                                   # digits from the right, then "-"
-        char = (rest % 10).astype(np.uint8)
-        char += ord("0")
-        rest = rest // 10
-        if p >= least:                                       # past some token's last digit
-            char = np.where(p < length, char, np.where(p == length, sign, np.uint8(0)))
-        after = (p >= decimals) & (decimals > 0)             # (C,): left of the point there
-        for at, where in ((width - 2 - p, ~after), (width - 3 - p, after)):
-            if where.all():
-                cells[:, :, at] = char
-            elif where.any():
-                plane = cells[:, :, at]
-                plane[...] = np.where(where, char, plane)
-    for d in np.unique(decimals[decimals > 0]):              # "%.0f" writes no point
-        plane = cells[:, :, width - 2 - d]
-        plane[...] = np.where(decimals == d, ord("."), plane)
-    for (f, c), text in exact.items():
-        cells[f, c, :-1] = 0
-        cells[f, c, width - 1 - len(text):-1] = np.frombuffer(text, dtype=np.uint8)
-    return cells[cells != 0].tobytes()[:-1].decode("ascii")
+    exact = np.flatnonzero(near.any(axis=1)).tolist()
+    row_format = " ".join(f"%.{d}f" for d in decimals) if exact else ""
+    F, C = values.shape
+    step = max(1, _FORMAT_VALUES // C)
+    pieces, start = [], 0
+    for f in [*exact, F]:
+        for lo in range(start, f, step):        # the rows before it, a block at a time
+            hi = min(f, lo + step)
+            pieces.append(_fixed_rows(number[lo:hi], negative[lo:hi], decimals))
+        if f < F:
+            pieces.append(row_format % tuple(values[f].tolist()))
+        start = f + 1
+    return "\n".join(pieces)
+
+
+#: values formatted at a time by :func:`_format_rows`: the temporaries of a block stay small
+#: (a whole large clip's would be hundreds of MB, the dropping of NULs building an index of
+#: every character)
+_FORMAT_VALUES = 1 << 16
+
+
+def _fixed_rows(number: np.ndarray, negative: np.ndarray, decimals: np.ndarray) -> str:
+    """:func:`_format_rows` of values whose digits are the whole numbers ``number`` ``(F, C)``
+    (``rint(|v| 10^d)``, below 2^52) and signs ``negative``.
+
+    Each value is a few 4-byte slots (its integer part's groups of three digits, the leading
+    one with the sign; the fraction's groups, the first with the point; the separator in the
+    last byte of the last slot), taken from tables for all values at once; the slots' NULs
+    are dropped in one pass. The integer and the fraction's groups are split off in floating
+    point, exactly: for whole numbers below 2^52, ``floor(n / 10^k)`` is the integer quotient.
+    """
+    F, C = number.shape
+    plans = []
+    for d in np.unique(decimals):
+        cols = np.flatnonzero(decimals == d)
+        d = int(d)
+        groups = -(-d // 3)                                  # of the fraction
+        integer = np.floor(number[:, cols] / 10.0 ** d)
+        fraction = number[:, cols] - integer * 10.0 ** d
+        top = float(integer.max(initial=0.0))
+        lead = 1                                             # groups of the integer part
+        while top >= 1000.0 ** lead:
+            lead += 1
+        plans.append((cols, d, groups, integer, fraction, lead))
+    # slots: integer part, fraction, and one for the separator where the last slot is full
+    width = max(lead + groups + (d in (0, 3)) for _, d, groups, _, _, lead in plans)
+    slots = np.zeros((F, C, width), dtype="<u4")
+    for cols, d, groups, integer, fraction, lead in plans:
+        one = len(cols) == C                                 # every column: no gather
+        out = slots if one else np.zeros((F, len(cols), width), dtype="<u4")
+        full = d in (0, 3)                   # the last slot is full: "-123" or ".123"
+        at = width - 1 - full                                # the fraction's last slot
+        for k in range(groups):                              # the fraction, right to left
+            size = min(3, d - 3 * k)
+            if k < groups - 1:
+                rest = np.floor(fraction / 1000.0)
+                digits = fraction - rest * 1000.0
+                fraction = rest
+            else:
+                digits = fraction
+            table = _POINT[size] if k == groups - 1 else _DIGITS3
+            out[:, :, at - k] = table[digits.astype(np.intp)]
+        at -= groups                                         # the integer part's last slot
+        sign = negative[:, cols] if not one else negative
+        below = None                         # the digits of the group below, as indices
+        for k in range(lead):                                # the integer part, right to left
+            rest = np.floor(integer / 1000.0)
+            digits = integer - rest * 1000.0
+            leading = _LEAD[(digits + 1000.0 * sign).astype(np.intp)]
+            if k:
+                # the slot leads where something is left at it; the group below it, written
+                # as a leading one, is padded to three digits there instead
+                here = integer > 0
+                out[:, :, at - k + 1] = np.where(here, _DIGITS3[below], out[:, :, at - k + 1])
+                out[:, :, at - k] = np.where(here, leading, 0)
+            else:
+                out[:, :, at] = leading
+            below = digits.astype(np.intp)
+            integer = rest
+        separator = np.full(len(cols), _SPACE, dtype="<u4")
+        separator[cols == C - 1] = _NEWLINE
+        if full:
+            out[:, :, -1] = separator
+        else:
+            out[:, :, -1] |= separator
+        if not one:
+            slots[:, cols] = out
+    flat = slots.view(np.uint8).reshape(-1)
+    return np.compress(flat != 0, flat).tobytes()[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
