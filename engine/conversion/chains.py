@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .automap import SIDES, identify
+from .automap import FINGERS, SIDES, identify
 from ..errors import MappingError, MotionComposerError
 from ..quaternions import from_euler, qconj, qmul
 from ..rotations import quat_to_euler
@@ -155,7 +155,7 @@ def chains_of(skeleton: Skeleton, positions=None) -> Chains:
                                          if f"{r}_{s}" in roles)
         base = roles.get(f"hand_{s}", roles.get(f"forearm_{s}"))
         fingers = [idx[v] for k, v in roles.items() if k.endswith(f"_{s}") and
-                   k[:-2].rstrip("0123456789") in ("thumb", "index", "middle", "ring", "pinky")]
+                   k[:-2].rstrip("0123456789") in FINGERS]
         if base is not None and fingers:
             joints: set[int] = set()
             for f in fingers:
