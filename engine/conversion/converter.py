@@ -12,7 +12,7 @@ from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_components, joint_major
 from ..motion import Motion
 from ..quaternions import (cconj, cmul, components, cquat_between, crot, ctwist_about,
-                           interleaved, qconj, qmul, qpow)
+                           interleaved, qconj, qmul, qpow, qslerp)
 from .binding import Binding
 
 __all__ = ["RootOptions", "IntermediatePose", "convert"]
@@ -123,7 +123,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
     whole = [k for k, j in enumerate(mj) if not bones[j].children]
     if whole:
         world[:, mj[whole]] = cmul(pq[:, pm[whole]],
-                                   _rows(qmul(ref_inv[whole], binding.rest_world[mj[whole]])))
+                                   _rows(qmul(ref_inv[whole], binding.aligned_world[mj[whole]])))
     by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
     if by_twist:
         js = mj[by_twist]
@@ -133,22 +133,21 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         axis = _rows(ref / np.linalg.norm(ref, axis=-1, keepdims=True))
         full = cmul(pq[:, pm[by_twist]], _rows(ref_inv[by_twist]))
         twist = ctwist_about(cmul(cconj(swing), full), axis)
-        world[:, js] = cmul(cmul(swing, twist), _rows(binding.rest_world[js]))
+        world[:, js] = cmul(cmul(swing, twist), _rows(binding.aligned_world[js]))
     for k, j in enumerate(mj):
         b = bones[j]
         if b.children and b.roll_by_bones:
             now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (3, C, F)
-            world[:, j] = cmul(_align_rows(b.reference, now), binding.rest_world[j][:, None])
+            world[:, j] = cmul(_align_rows(b.reference, now), binding.aligned_world[j][:, None])
 
     # unmapped joints follow their parent (their local value is their bound rest one, so only
     # those above a mapped joint need a world rotation); chains share their first joint's turn
-    even = binding.options.distribute == "even"
     known = mapped >= 0
     for j in range(J):
         parent = tsk.parents[j]
         if known[j]:
             chain = binding.chains.get(j)
-            if chain and even and mapped[j] >= 0:
+            if chain and _distribution(binding, j) == "even" and mapped[j] >= 0:
                 b = bones[j]
                 world[:, j] = _distribute(binding, j, chain, world[:, j], world,
                                           pp[:, b.performer[0]] - pp[:, mapped[j]], local_t)
@@ -156,9 +155,11 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
             continue
         if not binding.above_mapped[j]:
             continue
-        rest = binding.rest_local[j][:, None]
+        rest = binding.aligned_local[j][:, None]
         world[:, j] = rest if parent < 0 else cmul(world[:, parent], rest)
         known[j] = True
+    if binding.options.pose_offsets or binding.chain_of:
+        world = _posed(binding, world, known)
     positions = {}
     for j in binding.driven:
         ph = mapped[j]
@@ -170,8 +171,80 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         scaled = disp * np.array([h, v, h])[:, None]
         if root.mode == "in-place":
             scaled[[0, 2]] = 0.0
-        positions[j] = binding.rest_positions[j][:, None] + scaled
+        positions[j] = binding.aligned_positions[j][:, None] + scaled
     return world, positions, known
+
+
+def _distribution(binding: Binding, j: int) -> str:
+    """How the chain below mapped target joint ``j`` turns: its named chain's own choice
+    (:class:`~engine.conversion.chains.ChainSettings`), else the binding's."""
+    name = binding.chain_of.get(j)
+    own = binding.options.chain(name).distribute if name is not None else None
+    return own or binding.options.distribute
+
+
+def _posed(binding: Binding, world: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The converted world rotations ``(4, J, F)`` (filled where ``known``) with the chain
+    settings and the pose offsets applied, as changes of local rotations, root to leaves: each
+    joint's local rotation ``L`` (relative to its parent, before the offsets) loses its twist
+    relative to the binding where its chain's ``twist`` is off, is slerped from the bound rest
+    local towards the converted one by its chain's ``weight``, then turned by its offset
+    (``L * offset``); every other local rotation is left as it is."""
+    tsk = binding.target
+    options = binding.options
+    offset = np.any(binding.offsets[:, :3] != 0.0, axis=1)
+    changed = np.zeros(tsk.num_joints, dtype=bool)
+    for j in range(tsk.num_joints):
+        p = tsk.parents[j]
+        changed[j] = known[j] and (j in binding.chain_of or offset[j] or
+                                   (p >= 0 and changed[p]))
+    out = world.copy()
+    axes = _bone_axes(tsk) if any(not s.twist for _, s in options.chains) else {}
+    for j in np.flatnonzero(changed):
+        p = tsk.parents[j]
+        local = world[:, j] if p < 0 else cmul(cconj(world[:, p]), world[:, j])
+        name = binding.chain_of.get(j)
+        if name is not None:
+            local = _chain_local(options.chain(name), binding.aligned_local[j], local,
+                                 axes.get(j))
+        if offset[j]:
+            local = cmul(local, binding.offsets[j][:, None])
+        out[:, j] = local if p < 0 else cmul(out[:, p], local)
+    return out
+
+
+def _chain_local(settings, rest: np.ndarray, local: np.ndarray, axis) -> np.ndarray:
+    """A chain joint's local rotation ``(4, F)`` under its chain's ``settings``: without its
+    twist about ``axis`` (``(3,)``, its bone in its own frame) relative to the bound rest
+    ``rest`` ``(4,)`` when ``twist`` is off, then slerped from ``rest`` by ``weight`` (exactly
+    ``rest`` at 0)."""
+    if settings.weight == 0.0:
+        return np.broadcast_to(rest[:, None], local.shape).copy()
+    if not settings.twist and axis is not None:
+        change = cmul(cconj(rest[:, None]), local)                 # in the bound rest frame
+        twist = ctwist_about(change, axis[:, None])
+        local = cmul(rest[:, None], cmul(change, cconj(twist)))
+    if settings.weight < 1.0:
+        rows = interleaved(local)
+        local = components(qslerp(np.broadcast_to(rest, rows.shape), rows, settings.weight))
+    return local
+
+
+def _bone_axes(tsk) -> dict[int, np.ndarray]:
+    """Per target joint, its bone's direction ``(3,)`` in its own frame: towards its child
+    with the largest subtree, or its End Site; joints with neither (or a zero-length bone)
+    have none."""
+    subtree = np.ones(tsk.num_joints, dtype=np.intp)
+    for j in range(tsk.num_joints - 1, 0, -1):
+        subtree[tsk.parents[j]] += subtree[j]
+    ends = {site.parent: np.asarray(site.offset, dtype=float) for site in tsk.end_sites}
+    axes = {}
+    for j in range(tsk.num_joints):
+        kids = tsk.children[j]
+        bone = (tsk.offsets[max(kids, key=lambda c: subtree[c])] if kids else ends.get(j))
+        if bone is not None and np.linalg.norm(bone) > 1e-9:
+            axes[j] = np.asarray(bone, dtype=float) / np.linalg.norm(bone)
+    return axes
 
 
 def _rows(values: np.ndarray) -> np.ndarray:
@@ -216,14 +289,14 @@ def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
     returns ``j``'s world rotation."""
     tsk = binding.target
     parent = tsk.parents[j]
-    rest = binding.rest_local[j][:, None]
+    rest = binding.aligned_local[j][:, None]
     follow = (np.broadcast_to(rest, rigid.shape) if parent < 0
               else cmul(world[:, parent], rest))
     n = len(chain) + 1
     step = components(qpow(interleaved(cmul(rigid, cconj(follow))), 1.0 / n))
     rots = [cmul(step, follow)]
     for k in chain:
-        rots.append(cmul(step, cmul(rots[-1], binding.rest_local[k][:, None])))
+        rots.append(cmul(step, cmul(rots[-1], binding.aligned_local[k][:, None])))
     # where the primary child ends up, relative to j
     child = binding.bones[j].children[0]
     pos = np.zeros((3,) + rigid.shape[1:])
