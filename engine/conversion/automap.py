@@ -106,6 +106,7 @@ CC3-RLROOT <- Bandai travels with the root unmapped (mapped, it would stand stil
 """
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -238,6 +239,7 @@ def parse_name(name: str) -> NameInfo:
     return info
 
 
+@functools.lru_cache(maxsize=4096)      # a pure function of the name, asked for every read
 def _parse(name: str) -> tuple[NameInfo, str | None]:
     s = re.split(r"[:|]", str(name))[-1].strip()
     for _ in range(3):
