@@ -23,6 +23,7 @@ converge leave the batch.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from collections.abc import Mapping
@@ -79,12 +80,14 @@ class TaskState:
         frames: ``(C, B, 3, 3)`` the world rotation of each chain joint's parent: the frame its
             rotation-vector increment is expressed in; a list of ``C`` arrays ``(B, 3, 3)``
             will do.
+        point: ``(B, 3, 3 + 3C)`` :meth:`point_jacobian` if known, else ``None``.
     """
 
     position: np.ndarray
     rotation: np.ndarray
     pivots: np.ndarray
     frames: np.ndarray
+    point: np.ndarray | None = None
 
     @property
     def batch(self) -> int:
@@ -93,7 +96,10 @@ class TaskState:
     def point_jacobian(self) -> np.ndarray:
         """``(B, 3, 3 + 3C)`` d(joint position) / d(root translation, chain rotation vectors):
         the identity for the root, ``-[p - p_a]x R_parent(a)`` for chain joint ``a``, whose
-        column ``c`` is ``R_parent(a)[:, c] x (p - p_a)`` (all chain joints at once)."""
+        column ``c`` is ``R_parent(a)[:, c] x (p - p_a)`` (all chain joints at once; ``point``
+        when the solver has it already, from another task on the joint)."""
+        if self.point is not None:
+            return self.point
         B, C = self.batch, len(self.pivots)
         out = np.empty((B, 3, 3 + 3 * C))
         out[:, :, :3] = np.eye(3)
@@ -326,6 +332,14 @@ class _Structure:
         # joint clear of the bound)
         self.pins = [[k for k, u in enumerate(self.tasks) if u.kind.fixed_point
                       and u.joint == t.joint] for t in self.tasks]
+        # per task, the first of the point tasks (not angular) on its joint and chain when
+        # there are several (they share the point Jacobian), else None
+        self.shared_point = []
+        for t, chain in zip(self.tasks, self.chains):
+            same = [k for k, (u, c) in enumerate(zip(self.tasks, self.chains))
+                    if not u.kind.angular and u.joint == t.joint and np.array_equal(c, chain)]
+            self.shared_point.append(same[0] if len(same) > 1 and not t.kind.angular
+                                     else None)
 
 
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
@@ -386,12 +400,17 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
     jac = np.zeros((B, structure.k, structure.n))
     on = np.empty((B, len(structure.tasks)), dtype=bool)
     acting = np.empty_like(on)
+    points = {}                 # task -> the point Jacobian of the tasks sharing its joint
     for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
         goal = task.goal if select is None else task.goal[select]
         weight = task.weight if select is None else task.weight[select]
         e = structure.task_local[ti]
+        shared = structure.shared_point[ti]
         state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
-                          frames[structure.chain_unknown[ti]])
+                          frames[structure.chain_unknown[ti]], points.get(shared))
+        if shared is not None and shared not in points:
+            points[shared] = state.point_jacobian()
+            state = dataclasses.replace(state, point=points[shared])
         rows = slice(r0, r0 + task.rows)
         on[:, ti] = weight > 0
         acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
@@ -416,16 +435,20 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
 
 
 class _Rows:
-    """The rows of a task set (``K`` in all): ``weights (B, K)``, each row's task
-    ``task (K,)``, the rows of each priority level, highest first, and each row's tolerance
-    ``tol (K,)`` (metres; radians for orientation)."""
+    """The rows of a task set (``K`` in all; the tasks sorted by priority, so that each level's
+    rows are one slice): ``weights (B, K)``, each row's task ``task (K,)``, the first row of
+    each task ``row0 (T + 1,)``, the rows of each priority level ``levels`` (slices, highest
+    first), and each row's tolerance ``tol (K,)`` (metres; radians for orientation)."""
 
     def __init__(self, tasks: list[Task], structure: _Structure, options: IKOptions):
         self.weights = np.concatenate([np.repeat(t.weight[:, None], t.rows, axis=1)
                                        for t in tasks], axis=1)
         self.task = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
-        self.levels = [np.flatnonzero([tasks[i].priority == lvl for i in self.task])
-                       for lvl in structure.levels]
+        self.row0 = structure.row0
+        self.levels = []
+        for lvl in structure.levels:
+            here = np.flatnonzero([tasks[i].priority == lvl for i in self.task])
+            self.levels.append(slice(int(here[0]), int(here[-1]) + 1))
         angular = np.concatenate([[t.kind.angular] * t.rows for t in tasks])
         self.tol = np.where(angular, options.tolerance / options.scale, options.tolerance)
 
@@ -462,6 +485,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     rot = np.array(rot, dtype=float)
     tra = np.array(tra, dtype=float)
     B = rot.shape[0]
+    # by priority, so that each level's rows are one slice
+    order = sorted(range(len(tasks)), key=lambda i: tasks[i].priority)
+    tasks = [tasks[i] for i in order]
     structure = _Structure(skeleton, tasks, locked)
     rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
@@ -479,41 +505,45 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     active = np.arange(B)
     held_all = np.zeros((B, len(tasks)), dtype=bool)
     polish_all = np.zeros(B, dtype=bool)
-    lower = np.concatenate([np.zeros(0, dtype=np.intp)] + rows.levels[1:])
+    lower = slice(rows.levels[1].start if len(rows.levels) > 1 else structure.k, structure.k)
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
         err, jac, on, acting = _evaluate(skeleton, structure, r, t, slot, active)
         err_on = np.where(acting[:, rows.task], err, 0.0)
-        residual[active] = _task_norms(err_on, structure)
+        residual[active] = _task_norms(err_on, structure.row0)
         if it == options.max_iterations:
             break
         iterations[active] += 1
-        if len(lower) and it >= polish_from:
+        if len(rows.levels) > 1 and it >= polish_from:
             polish_all[active] = True
         polishing = polish_all[active]
         cur = r[:, joints]
         home, home_root = attraction_rot[active][:, joints], attraction_root[active]
 
         def step(frames, rows_on):
-            """The step of ``frames`` with the rows ``rows_on (n, K)`` (polishing or not)."""
-            e = np.where(rows_on, err[frames], 0.0)
+            """The step of ``frames`` (all of them: ``None``) with the rows ``rows_on (n, K)``
+            (polishing or not)."""
+            every = frames is None
+            frames = np.arange(len(active)) if every else frames
             out = np.empty((len(frames), structure.n))
             for polish in (False, True):
                 sel = np.flatnonzero(polishing[frames] == polish)
-                if len(sel):
+                if len(sel) == len(frames) and every:
+                    f = sel = slice(None)
+                elif len(sel):
                     f = frames[sel]
-                    out[sel] = _step(e[sel], np.where(rows_on[sel, :, None], jac[f], 0.0),
-                                     _task_norms(e[sel], structure), rows, active[f],
-                                     structure.n, options, polish, t[f, 0], cur[f],
-                                     home_root[f], home[f], 0.0 if polish else
-                                     options.attraction)
+                else:
+                    continue
+                out[sel] = _step(err[f], jac[f], rows_on[sel], rows, active[f], structure.n,
+                                 options, polish, t[f, 0], cur[f], home_root[f], home[f],
+                                 0.0 if polish else options.attraction)
             return out
 
         # one-sided tasks (a floor) act where violated; once they have acted they hold their
         # joint on the bound (an active set), so that the attraction does not pull it back
         # through on every other iteration, except where a task pins the same joint
         held = held_all[active] & on & ~acting
-        dq = step(np.arange(len(active)), (acting | held)[:, rows.task])
+        dq = step(None, (acting | held)[:, rows.task])
         # a frame is done when its posture has stopped moving: each level is then met or as
         # near as the higher ones let it be (a step this small moves a task by far less than
         # its tolerance), and no task it holds would leave its bound without the hold: else
@@ -554,12 +584,15 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         r, t = _apply_step(dq, r, t, cur, structure, attraction_rot[active], options)
         rot[active] = r
         tra[active] = t
-    return rot, tra, residual, iterations
+    unsorted = np.empty_like(residual)
+    unsorted[:, order] = residual
+    return rot, tra, unsorted, iterations
 
 
-def _task_norms(err: np.ndarray, structure: _Structure) -> np.ndarray:
-    """``(b, T)`` the length of each task's error rows ``err (b, K)``."""
-    return np.sqrt(np.add.reduceat(err * err, structure.row0[:-1], axis=1))
+def _task_norms(err: np.ndarray, row0: np.ndarray) -> np.ndarray:
+    """``(b, T)`` the length of each task's error rows ``err (b, K)``, task ``i``'s rows
+    starting at ``row0[i]``."""
+    return np.sqrt(np.add.reduceat(err * err, row0[:-1], axis=1))
 
 
 def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
@@ -578,38 +611,38 @@ def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
     return out
 
 
-def _step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _Rows,
+def _step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
           active: np.ndarray, n: int, options: IKOptions, polishing: bool, root: np.ndarray,
           cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float) -> np.ndarray:
     """The step ``(b, N)`` of the ``active`` frames: the levels restored in turn
     (:func:`_levels_step`) plus the attraction's pull with ``gain`` in the null space of every
     task (:func:`_attraction_step`)."""
-    dq, stacked, gram = _levels_step(err, jac, task_err, rows, active, n, options, polishing)
+    dq, stacked, gram = _levels_step(err, jac, rows_on, rows, active, n, options, polishing)
     if gain == 0.0:
         return dq
     return dq + _attraction_step(stacked, gram, root, cur, home_root, home, gain, options)
 
 
-def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _Rows,
+def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
                  active: np.ndarray, n: int, options: IKOptions,
                  polishing: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The step ``(b, N)`` that restores the priority levels in turn, each in the null space
-    of the levels above, the stacked Jacobian ``(b, K, N)`` of every level and its Gram matrix
-    ``(b, K, K)`` (assembled from the products each level's projection computes anyway).
+    of the levels above, the stacked Jacobian ``(b, K', N)`` of the levels that act and its
+    Gram matrix ``(b, K', K')`` (assembled from the products each level's projection computes
+    anyway).
 
-    ``err (b, K)``, ``jac (b, K, N)`` and ``task_err (b, T)`` are the errors, Jacobians and
-    per-task errors of the ``active`` frames; while ``polishing`` only the first level acts
-    (and only its rows are stacked).
+    ``err (b, K)`` and ``jac (b, K, N)`` are every row's error and Jacobian at the ``active``
+    frames, ``rows_on (b, K)`` the rows that act there; while ``polishing`` only the first
+    level acts.
     """
     scale = options.scale
     lam2 = (options.damping * scale) ** 2
     ns_lam2 = (options.nullspace_damping * scale) ** 2
-    err_raw = err
+    err_raw = np.where(rows_on, err, 0.0)
     # clamp the correction asked of each task
-    norms = task_err[:, rows.task]
-    err = err * np.minimum(1.0, options.max_step * scale / np.maximum(norms, 1e-12))
-    w = rows.weights[active]
-    err = err * w
+    norms = _task_norms(err_raw, rows.row0)[:, rows.task]
+    w = rows.weights[active] * rows_on
+    err = err_raw * np.minimum(1.0, options.max_step * scale / np.maximum(norms, 1e-12)) * w
     jac = jac * w[:, :, None]
     nb = len(active)
     dq = np.zeros((nb, n))
@@ -618,19 +651,22 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _
     for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
         on = np.flatnonzero(np.any(w[:, level] > 0, axis=1))
+        some = len(on) > 0
+        if len(on) == nb:
+            on = slice(None)                # every frame: views instead of copies
         rows_all = jac[:, level]
         if stacked is None:
             block = rows_all @ rows_all.transpose(0, 2, 1)
-            if len(on):
-                jl, el = rows_all[on], err[on[:, None], level]
+            if some:
+                jl, el = rows_all[on], err[on, level]
                 dq[on] += _damped_solve(jl, el, lam2, block[on])
             stacked, gram = rows_all, block
         else:
-            k, m = stacked.shape[1], len(level)
+            k, m = stacked.shape[1], level.stop - level.start
             grown = np.zeros((nb, k + m, k + m))
             grown[:, :k, :k] = gram
-            if len(on):
-                jl, el = rows_all[on], err[on[:, None], level]
+            if some:
+                jl, el = rows_all[on], err[on, level]
                 above = stacked[on]
                 cross = above @ jl.transpose(0, 2, 1)                          # (f, k, m)
                 # the rows' part in the null space of the levels above
@@ -645,7 +681,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _
                 grown[on, :k, k:] = cross
                 grown[on, k:, :k] = cross.transpose(0, 2, 1)
                 grown[on, k:, k:] = jl @ jl.transpose(0, 2, 1)
-            stacked, gram = np.concatenate([stacked, rows_all], axis=1), grown
+            stacked, gram = jac[:, :level.stop], grown
         behind = np.maximum(behind, (np.abs(err_raw[:, level]) / rows.tol[level]).max(axis=1))
     return dq, stacked, gram
 
