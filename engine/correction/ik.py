@@ -166,8 +166,10 @@ class IKOptions:
             ``scale``. Default 0.05; positive.
         attraction: gain [0, 1] of the pull towards the attraction posture per iteration.
             Default 0.5.
-        settle: [rad or m] a frame whose tasks are met is done once its largest step is below
-            this: the null-space pull has converged too. Default 1e-5; >= 0.
+        settle: [rad or m] a frame is done once its largest step is below this: its tasks are
+            met, or as near as the higher priorities let them be, and the null-space pull has
+            converged too (a frame that stops with a lower level unmet polishes first, see
+            ``polish_share``). Default 1e-5; >= 0.
         nullspace_damping: the lambda, as a fraction of ``scale``, of the damped
             pseudo-inverses that project a lower level and the attraction into the null space
             of the higher levels; small, so that the projection stays nearly exact.
@@ -178,7 +180,9 @@ class IKOptions:
         polish_share: the share [0, 1] of ``max_iterations`` at their end during which, with
             more than one priority level, only the first level is restored (no lower level,
             no attraction): frames still going there have unreachable lower levels, which
-            would otherwise end mid-oscillation. Default 0.25 (the last quarter).
+            would otherwise end mid-oscillation. A frame that stops moving earlier with a
+            lower level unmet polishes from then on, until its step is below
+            :data:`POLISH_SETTLE` times ``settle``. Default 0.25 (the last quarter).
         priority_gate: a lower priority level runs in full while the higher levels are at
             most this many times their tolerance from being met, fades out linearly to
             nothing at twice that, and waits beyond (its steps are first-order invisible to
@@ -558,6 +562,21 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             free = step(frames, acting[frames][:, rows.task])
             stay = _pushed_through(structure, active[frames], err[frames], jac[frames], free,
                                    held[frames])
+            # where the step without any hold pushes several through, each is asked again
+            # with the others held: one may be kept up only by the others' hold
+            several = np.flatnonzero(stay.sum(axis=1) > 1)
+            for ti in np.flatnonzero(stay[several].any(axis=0)):
+                sub = several[stay[several, ti]]
+                f = frames[sub]
+                others = held[f].copy()
+                others[:, ti] = False
+                alone = step(f, (acting[f] | others)[:, rows.task])
+                only = np.zeros_like(others)
+                only[:, ti] = True
+                stay[sub, ti] = _pushed_through(structure, active[f], err[f], jac[f], alone,
+                                                only)[:, ti]
+            # one released at a time (an active set): the others' answers assumed it held
+            stay |= held[frames] & (np.cumsum(held[frames] & ~stay, axis=1) > 1)
             release = np.flatnonzero(np.any(held[frames] & ~stay, axis=1))
             frames, stay = frames[release], stay[release]
             held[frames] = stay
