@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from motion_composer.engine import forward_kinematics
+from motion_composer.engine.conversion import retarget
 from motion_composer.engine.correction.constraints import Constraint, ConstraintError, constraints_from_json, \
     constraints_to_json, floor_constraint
 from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
@@ -102,6 +103,27 @@ def test_batches_and_the_papers_warm_start_reach_the_same_posture(hand_case):
     assert np.abs(a.rotvecs - b.rotvecs).max() < 1e-3
     assert np.linalg.norm(_pos(b.motion, "LeftHand")[410:431] - c.goal["point"], axis=1).max() \
         < 1e-3
+
+
+def test_the_papers_warm_start_and_the_batches_agree_with_automatic_contacts():
+    """Issue 19 point 5 on a real clip: feet pinned heel and toe, foot-flat orientations one
+    priority lower and whole-clip floors (one-sided planes that hold a joint once it touches
+    them). Frame by frame from t - 1 and in batches from the attraction posture, the solver
+    reaches the same posture: the one nearest the attraction that meets the tasks (a floor
+    that held a toe while the posture no longer pushes it down lets it go)."""
+    performer, target, corr, _ = walk_on_bandai()
+    performer = performer.frames(slice(190, 240))
+    composed = retarget(performer, target, corr)
+    cons = contact_constraints(detect_contacts(performer), performer, composed, corr.pairs)
+    assert {"position", "orientation", "plane"} <= {c.kind for c in cons}
+    batched = enforce(composed, cons)
+    framewise = enforce(composed, cons, warm_start=True)
+    a, b = (forward_kinematics(r.motion).positions for r in (batched, framewise))
+    assert np.linalg.norm(a - b, axis=-1).max() < 1e-3
+    for result in (batched, framewise):
+        for i, c in enumerate(cons):
+            if c.kind == "position":
+                assert np.nanmax(result.residual[i][c.start:c.end + 1]) < 1e-3, c.name
 
 
 def test_an_unreachable_goal_stops_at_the_closest_posture_and_reports_the_residual():

@@ -23,6 +23,7 @@ converge leave the batch.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from collections.abc import Mapping
@@ -33,7 +34,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import qconj, qmul, qnormalize, qrot, to_matrix
+from ..quaternions import cmul, crot, qconj, qmul, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -67,18 +68,6 @@ def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     return q[..., :3] * scale
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """``(..., 3, 3)`` cross-product matrices of ``(..., 3)`` vectors."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1] = -v[..., 2]
-    out[..., 0, 2] = v[..., 1]
-    out[..., 1, 0] = v[..., 2]
-    out[..., 1, 2] = -v[..., 0]
-    out[..., 2, 0] = -v[..., 1]
-    out[..., 2, 1] = v[..., 0]
-    return out
-
-
 @dataclass(frozen=True)
 class TaskState:
     """The kinematics of one task's joint for a batch of ``B`` frames, at the current posture.
@@ -86,16 +75,19 @@ class TaskState:
     Attributes:
         position: ``(B, 3)`` [m] the joint's world position.
         rotation: ``(B, 4)`` its world rotation (x, y, z, w).
-        pivots: ``C`` arrays ``(B, 3)`` [m] world positions of the chain's joints (those whose
-            rotation moves the task, in column order).
-        frames: ``C`` arrays ``(B, 3, 3)`` the world rotation of each chain joint's parent: the
-            frame its rotation-vector increment is expressed in.
+        pivots: ``(C, B, 3)`` [m] world positions of the chain's joints (those whose rotation
+            moves the task, in column order); a list of ``C`` arrays ``(B, 3)`` will do.
+        frames: ``(C, B, 3, 3)`` the world rotation of each chain joint's parent: the frame its
+            rotation-vector increment is expressed in; a list of ``C`` arrays ``(B, 3, 3)``
+            will do.
+        point: ``(B, 3, 3 + 3C)`` :meth:`point_jacobian` if known, else ``None``.
     """
 
     position: np.ndarray
     rotation: np.ndarray
-    pivots: list
-    frames: list
+    pivots: np.ndarray
+    frames: np.ndarray
+    point: np.ndarray | None = None
 
     @property
     def batch(self) -> int:
@@ -103,11 +95,22 @@ class TaskState:
 
     def point_jacobian(self) -> np.ndarray:
         """``(B, 3, 3 + 3C)`` d(joint position) / d(root translation, chain rotation vectors):
-        the identity for the root, ``-[p - p_a]x R_parent(a)`` for chain joint ``a``."""
-        B = self.batch
-        blocks = [np.broadcast_to(np.eye(3), (B, 3, 3))]
-        blocks += [-_skew(self.position - pa) @ m for pa, m in zip(self.pivots, self.frames)]
-        return np.concatenate(blocks, axis=2)
+        the identity for the root, ``-[p - p_a]x R_parent(a)`` for chain joint ``a``, whose
+        column ``c`` is ``R_parent(a)[:, c] x (p - p_a)`` (all chain joints at once; ``point``
+        when the solver has it already, from another task on the joint)."""
+        if self.point is not None:
+            return self.point
+        B, C = self.batch, len(self.pivots)
+        out = np.empty((B, 3, 3 + 3 * C))
+        out[:, :, :3] = np.eye(3)
+        if C:
+            d = self.position - np.asarray(self.pivots).reshape(C, B, 3)          # (C, B, 3)
+            m = np.asarray(self.frames).reshape(C, B, 3, 3)
+            u0, u1, u2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]          # rows of R: (C, B, 3c)
+            d0, d1, d2 = d[..., 0:1], d[..., 1:2], d[..., 2:3]
+            blocks = np.stack([u1 * d2 - u2 * d1, u2 * d0 - u0 * d2, u0 * d1 - u1 * d0])
+            out[:, :, 3:] = blocks.transpose(2, 0, 1, 3).reshape(B, 3, 3 * C)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,8 +166,10 @@ class IKOptions:
             ``scale``. Default 0.05; positive.
         attraction: gain [0, 1] of the pull towards the attraction posture per iteration.
             Default 0.5.
-        settle: [rad or m] a frame whose tasks are met is done once its largest step is below
-            this: the null-space pull has converged too. Default 1e-5; >= 0.
+        settle: [rad or m] a frame is done once its largest step is below this: its tasks are
+            met, or as near as the higher priorities let them be, and the null-space pull has
+            converged too (a frame that stops with a lower level unmet polishes first, see
+            ``polish_share``). Default 1e-5; >= 0.
         nullspace_damping: the lambda, as a fraction of ``scale``, of the damped
             pseudo-inverses that project a lower level and the attraction into the null space
             of the higher levels; small, so that the projection stays nearly exact.
@@ -175,7 +180,9 @@ class IKOptions:
         polish_share: the share [0, 1] of ``max_iterations`` at their end during which, with
             more than one priority level, only the first level is restored (no lower level,
             no attraction): frames still going there have unreachable lower levels, which
-            would otherwise end mid-oscillation. Default 0.25 (the last quarter).
+            would otherwise end mid-oscillation. A frame that stops moving earlier with a
+            lower level unmet polishes from then on, until its step is below
+            :data:`POLISH_SETTLE` times ``settle``. Default 0.25 (the last quarter).
         priority_gate: a lower priority level runs in full while the higher levels are at
             most this many times their tolerance from being met, fades out linearly to
             nothing at twice that, and waits beyond (its steps are first-order invisible to
@@ -264,8 +271,19 @@ def _checked_limits(limits) -> tuple:
     return tuple(sorted(out.items()))
 
 
+#: a polishing frame (only the first level acts) is done once its step is below this share
+#: of ``settle``: the first level restored to rounding, as polishing up to the cap would
+POLISH_SETTLE = 1e-6
+
+#: a frame's held one-sided tasks are checked for release every this many iterations (and
+#: when it would be done)
+RELEASE_EVERY = 4
+
+
 class _Structure:
-    """What a task set needs from the skeleton: the unknown joints and each task's chain."""
+    """What a task set needs from the skeleton: the unknown joints, each task's chain, and the
+    index arrays that evaluate every task at once (the joints forward kinematics places,
+    level by level, and where each task's joints and columns are among them)."""
 
     def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset()):
         self.tasks = tasks
@@ -288,28 +306,125 @@ class _Structure:
         self.levels = sorted({t.priority for t in tasks})
         self.row0 = np.cumsum([0] + [t.rows for t in tasks])
         self.k = int(self.row0[-1])
+        self._index(skeleton)
+
+    def _index(self, skeleton: Skeleton) -> None:
+        """Positions among ``fk_joints`` ("local"): FK levels ``(joints, parents)`` by depth
+        below the root, each unknown joint's parent (-1 for the root), each task's joint and
+        chain, and each task's Jacobian columns."""
+        local = {int(j): k for k, j in enumerate(self.fk_joints)}
+        parents = skeleton.parents
+        depth = skeleton.depth[self.fk_joints]
+        self.fk_levels = []
+        for d in range(1, int(depth.max(initial=0)) + 1):
+            here = np.flatnonzero(depth == d)
+            up = np.array([local[int(parents[self.fk_joints[h]])] for h in here], dtype=np.intp)
+            self.fk_levels.append((here, up))
+        self.fk_offsets = skeleton.offsets[self.fk_joints].T[:, :, None]         # (3, n, 1)
+        self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
+                                       dtype=np.intp)
+        unknown = {int(j): k for k, j in enumerate(self.joints)}
+        self.task_local = [local[t.joint] for t in self.tasks]
+        self.chain_local = [np.array([local[int(a)] for a in c], dtype=np.intp)
+                            for c in self.chains]
+        self.chain_unknown = [np.array([unknown[int(a)] for a in c], dtype=np.intp)
+                              for c in self.chains]
+        self.task_cols = [np.concatenate([np.arange(0, 3)] + [
+            np.arange(self.col[int(a)], self.col[int(a)] + 3) for a in c]) for c in self.chains]
+        # per task, the tasks that pin its joint to a point (a one-sided task on that joint
+        # does not hold it on its bound where one is on: the pin decides, and it may hold the
+        # joint clear of the bound)
+        self.pins = [[k for k, u in enumerate(self.tasks) if u.kind.fixed_point
+                      and u.joint == t.joint] for t in self.tasks]
+        # per task, the first of the point tasks (not angular) on its joint and chain when
+        # there are several (they share the point Jacobian), else None
+        self.shared_point = []
+        for t, chain in zip(self.tasks, self.chains):
+            same = [k for k, (u, c) in enumerate(zip(self.tasks, self.chains))
+                    if not u.kind.angular and u.joint == t.joint and np.array_equal(c, chain)]
+            self.shared_point.append(same[0] if len(same) > 1 and not t.kind.angular
+                                     else None)
 
 
-def _fk_partial(skeleton: Skeleton, joints: np.ndarray, rot: np.ndarray, tra: np.ndarray,
-                slot: dict):
-    """World rotations and positions ``{joint: (B, 4) / (B, 3)}`` for ``joints`` (closed under
-    ancestors, sorted)."""
-    wq, wp = {}, {}
-    for j in joints:
-        j = int(j)
-        p = int(skeleton.parents[j])
-        t = tra[:, slot[j]] if j in slot else skeleton.offsets[j]
-        if p < 0:
-            wq[j] = rot[:, j]
-            wp[j] = np.broadcast_to(t, (rot.shape[0], 3))
-        else:
-            wq[j] = qmul(wq[p], rot[:, j])
-            wp[j] = wp[p] + qrot(wq[p], t)
+def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
+                slot: dict) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
+    (closed under ancestors, sorted: the root first) as component arrays, one depth level at a
+    time, from local rotations ``rot (B, J, 4)`` and the translated joints' translations
+    ``tra (B, K, 3)``."""
+    joints = structure.fk_joints
+    B, n = rot.shape[0], len(joints)
+    local_q = np.ascontiguousarray(rot[:, joints].transpose(2, 1, 0))            # (4, n, B)
+    local_t = np.empty((3, n, B))
+    local_t[:] = structure.fk_offsets
+    for k, j in enumerate(joints):
+        if int(j) in slot:
+            local_t[:, k] = tra[:, slot[int(j)]].T
+    wq = np.empty((4, n, B))
+    wp = np.empty((3, n, B))
+    wq[:, 0] = local_q[:, 0]
+    wp[:, 0] = local_t[:, 0]
+    for here, up in structure.fk_levels:
+        parent_q = wq[:, up]
+        wq[:, here] = cmul(parent_q, local_q[:, here])
+        wp[:, here] = wp[:, up] + crot(parent_q, local_t[:, here])
     return wq, wp
 
 
+def _matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of component quaternions ``q (4, ...)``."""
+    x, y, z, w = q
+    out = np.empty(q.shape[1:] + (3, 3))
+    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    out[..., 0, 1] = 2 * (x * y - z * w)
+    out[..., 0, 2] = 2 * (x * z + y * w)
+    out[..., 1, 0] = 2 * (x * y + z * w)
+    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    out[..., 1, 2] = 2 * (y * z - x * w)
+    out[..., 2, 0] = 2 * (x * z - y * w)
+    out[..., 2, 1] = 2 * (y * z + x * w)
+    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return out
+
+
+def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
+              slot: dict, select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
+    the task acts there or not, with ``on (B, T)`` (its weight is not zero) and ``acting
+    (B, T)`` (on, and for a one-sided task violated). ``select`` picks the frames of the
+    tasks' goals that ``rot`` holds (all by default)."""
+    B = rot.shape[0]
+    wq, wp = _fk_partial(skeleton, structure, rot, tra, slot)
+    positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
+    parent = structure.unknown_parent
+    frames = np.empty((len(parent), B, 3, 3))
+    frames[parent < 0] = np.eye(3)
+    frames[parent >= 0] = _matrices(wq[:, parent[parent >= 0]])
+    err = np.empty((B, structure.k))
+    jac = np.zeros((B, structure.k, structure.n))
+    on = np.empty((B, len(structure.tasks)), dtype=bool)
+    acting = np.empty_like(on)
+    points = {}                 # task -> the point Jacobian of the tasks sharing its joint
+    for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
+        goal = task.goal if select is None else task.goal[select]
+        weight = task.weight if select is None else task.weight[select]
+        e = structure.task_local[ti]
+        shared = structure.shared_point[ti]
+        state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
+                          frames[structure.chain_unknown[ti]], points.get(shared))
+        if shared is not None and shared not in points:
+            points[shared] = state.point_jacobian()
+            state = dataclasses.replace(state, point=points[shared])
+        rows = slice(r0, r0 + task.rows)
+        on[:, ti] = weight > 0
+        acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
+        err[:, rows] = task.kind.error(goal, state)
+        jac[:, rows, structure.task_cols[ti]] = task.kind.jacobian(goal, state)
+    return err, jac, on, acting
+
+
 def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
-                            tra: np.ndarray, slot: dict, select=None, sticky=None):
+                            tra: np.ndarray, slot: dict, select=None):
     """Errors ``(B, K)`` and Jacobians ``(B, K, N)`` of the tasks at the current posture.
 
     Each task's rows are its kind's error and Jacobian at the posture. Columns: root
@@ -317,80 +432,27 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
     of a task that is off or not active (a satisfied one-sided plane) are zero. Weights are
     not applied here.
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
-    ``sticky``: ``(B, T)`` one-sided tasks already activated in this solve stay active (held
-    on the plane) so that the attraction cannot pull them back through it on every other
-    iteration, except where a position task holds the same joint (which may hold it clear
-    of the plane); the array is updated in place.
     """
-    B = rot.shape[0]
-    wq, wp = _fk_partial(skeleton, structure.fk_joints, rot, tra, slot)
-    err = np.zeros((B, structure.k))
-    jac = np.zeros((B, structure.k, structure.n))
-    parent_m = {}
-    # frames where a joint's position is pinned by a task: a one-sided task on that joint does
-    # not stick there (the pin decides, and it may hold the joint clear of the plane)
-    pinned: dict[int, np.ndarray] = {}
-    for task in structure.tasks:
-        if task.kind.fixed_point:
-            weight = task.weight if select is None else task.weight[select]
-            pinned[task.joint] = pinned.get(task.joint, np.zeros(B, dtype=bool)) | (weight > 0)
-    for ti, (task, chain, r0) in enumerate(zip(structure.tasks, structure.chains,
-                                               structure.row0)):
-        e = task.joint
-        if select is not None:
-            task = task.take(select)
-        mats = []
-        for a in chain:
-            a = int(a)
-            if a not in parent_m:
-                p = int(skeleton.parents[a])
-                parent_m[a] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if p < 0
-                               else to_matrix(wq[p]))
-            mats.append(parent_m[a])
-        cols = np.concatenate([np.arange(0, 3)] + [
-            np.arange(structure.col[int(a)], structure.col[int(a)] + 3) for a in chain])
-        state = TaskState(wp[e], wq[e], [wp[int(a)] for a in chain], mats)
-        on = task.weight > 0
-        active = on & task.kind.active(task.goal, state)
-        if sticky is not None:
-            active |= on & sticky[:, ti] & ~pinned.get(e, np.zeros(B, dtype=bool))
-            sticky[:, ti] |= active
-        rows = slice(r0, r0 + task.rows)
-        err[:, rows] = np.where(active[:, None], task.kind.error(task.goal, state), 0.0)
-        jac[:, rows, cols] = np.where(active[:, None, None],
-                                      task.kind.jacobian(task.goal, state), 0.0)
-    return err, jac
-
-
-def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float) -> np.ndarray:
-    """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``."""
-    k = a.shape[1]
-    gram = a @ a.transpose(0, 2, 1) + lam2 * np.eye(k)
-    y = np.linalg.solve(gram, rhs[..., None])
-    return (a.transpose(0, 2, 1) @ y)[..., 0]
-
-
-def _damped_projection(a: np.ndarray, b: np.ndarray, lam2: float) -> np.ndarray:
-    """``(a a^T + lam2 I)^-1 a b`` for batches ``a (B, K, N)``, ``b (B, N, M)``: the
-    coefficients of ``b``'s part in the row space of ``a`` (damped), ``(B, K, M)``; ``a^T``
-    times it is that part. One linear solve with ``M`` right-hand sides instead of the
-    ``(N, K)`` damped pseudo-inverse."""
-    k = a.shape[1]
-    gram = a @ a.transpose(0, 2, 1) + lam2 * np.eye(k)
-    return np.linalg.solve(gram, a @ b)
+    err, jac, _, acting = _evaluate(skeleton, structure, rot, tra, slot, select)
+    rows = acting[:, np.repeat(np.arange(len(structure.tasks)), np.diff(structure.row0))]
+    return np.where(rows, err, 0.0), np.where(rows[:, :, None], jac, 0.0)
 
 
 class _Rows:
-    """The rows of a task set (``K`` in all): ``weights (B, K)``, each row's task
-    ``task (K,)``, the rows of each priority level, highest first, and each row's tolerance
-    ``tol (K,)`` (metres; radians for orientation)."""
+    """The rows of a task set (``K`` in all; the tasks sorted by priority, so that each level's
+    rows are one slice): ``weights (B, K)``, each row's task ``task (K,)``, the first row of
+    each task ``row0 (T + 1,)``, the rows of each priority level ``levels`` (slices, highest
+    first), and each row's tolerance ``tol (K,)`` (metres; radians for orientation)."""
 
     def __init__(self, tasks: list[Task], structure: _Structure, options: IKOptions):
         self.weights = np.concatenate([np.repeat(t.weight[:, None], t.rows, axis=1)
                                        for t in tasks], axis=1)
         self.task = np.concatenate([[i] * t.rows for i, t in enumerate(tasks)])
-        self.levels = [np.flatnonzero([tasks[i].priority == lvl for i in self.task])
-                       for lvl in structure.levels]
+        self.row0 = structure.row0
+        self.levels = []
+        for lvl in structure.levels:
+            here = np.flatnonzero([tasks[i].priority == lvl for i in self.task])
+            self.levels.append(slice(int(here[0]), int(here[-1]) + 1))
         angular = np.concatenate([[t.kind.angular] * t.rows for t in tasks])
         self.tol = np.where(angular, options.tolerance / options.scale, options.tolerance)
 
@@ -403,8 +465,10 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
 
     Each iteration: the tasks' errors at the current posture; a step that restores the
     priority levels in turn (:func:`_levels_step`), plus the pull towards the attraction
-    posture in the null space of every task (:func:`_attraction_step`); frames whose tasks
-    are met and whose posture has stopped moving leave the batch; the step is applied
+    posture in the null space of every task (:func:`_attraction_step`); one-sided tasks hold
+    their joint on their bound once they have acted; frames whose posture has stopped moving
+    and whose held tasks the step without them would not push
+    through (:func:`_pushed_through`) leave the batch; the step is applied
     (:func:`_apply_step`).
 
     Args:
@@ -425,6 +489,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     rot = np.array(rot, dtype=float)
     tra = np.array(tra, dtype=float)
     B = rot.shape[0]
+    # by priority, so that each level's rows are one slice
+    order = sorted(range(len(tasks)), key=lambda i: tasks[i].priority)
+    tasks = [tasks[i] for i in order]
     structure = _Structure(skeleton, tasks, locked)
     rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
@@ -433,33 +500,100 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     others = np.setdiff1d(np.arange(skeleton.num_joints), joints)
     rot[:, others] = attraction_rot[:, others]
     # the last share of the cap only restores the first level (for frames still going:
-    # unreachable lower levels, which would otherwise end mid-oscillation)
+    # unreachable lower levels, which would otherwise end mid-oscillation; a frame that
+    # stops with a lower level unmet polishes from then on)
     polish_from = int((1.0 - options.polish_share) * options.max_iterations)
 
     iterations = np.zeros(B, dtype=np.intp)
     residual = np.zeros((B, len(tasks)))
     active = np.arange(B)
-    sticky_all = np.zeros((B, len(tasks)), dtype=bool)
+    held_all = np.zeros((B, len(tasks)), dtype=bool)
+    polish_all = np.zeros(B, dtype=bool)
+    lower = slice(rows.levels[1].start if len(rows.levels) > 1 else structure.k, structure.k)
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
-        sticky = sticky_all[active]
-        err, jac = task_error_and_jacobian(skeleton, structure, r, t, slot, active, sticky)
-        sticky_all[active] = sticky
-        task_err = np.sqrt(np.add.reduceat(err * err, structure.row0[:-1], axis=1))
-        residual[active] = task_err
-        met = np.all(np.abs(err) <= rows.tol, axis=1)
+        err, jac, on, acting = _evaluate(skeleton, structure, r, t, slot, active)
+        err_on = np.where(acting[:, rows.task], err, 0.0)
+        residual[active] = _task_norms(err_on, structure.row0)
         if it == options.max_iterations:
             break
         iterations[active] += 1
-        polishing = len(rows.levels) > 1 and it >= polish_from
-        dq, stacked = _levels_step(err, jac, task_err, rows, active, structure.n, options,
-                                   polishing)
+        if len(rows.levels) > 1 and it >= polish_from:
+            polish_all[active] = True
+        polishing = polish_all[active]
         cur = r[:, joints]
-        dq += _attraction_step(stacked, t[:, 0], cur, attraction_root[active],
-                               attraction_rot[active][:, joints],
-                               0.0 if polishing else options.attraction, options)
-        # a frame is done when its tasks are met and the posture has stopped moving
-        settled = met & (np.abs(dq).max(axis=1) < options.settle)
+        home, home_root = attraction_rot[active][:, joints], attraction_root[active]
+
+        def step(frames, rows_on):
+            """The step of ``frames`` (all of them: ``None``) with the rows ``rows_on (n, K)``
+            (polishing or not)."""
+            every = frames is None
+            frames = np.arange(len(active)) if every else frames
+            out = np.empty((len(frames), structure.n))
+            for polish in (False, True):
+                sel = np.flatnonzero(polishing[frames] == polish)
+                if len(sel) == len(frames) and every:
+                    f = sel = slice(None)
+                elif len(sel):
+                    f = frames[sel]
+                else:
+                    continue
+                out[sel] = _step(err[f], jac[f], rows_on[sel], rows, active[f], structure.n,
+                                 options, polish, t[f, 0], cur[f], home_root[f], home[f],
+                                 0.0 if polish else options.attraction)
+            return out
+
+        # one-sided tasks (a floor) act where violated; once they have acted they hold their
+        # joint on the bound (an active set), so that the attraction does not pull it back
+        # through on every other iteration, except where a task pins the same joint
+        held = held_all[active] & on & ~acting
+        dq = step(None, (acting | held)[:, rows.task])
+        # a frame is done when its posture has stopped moving: each level is then met or as
+        # near as the higher ones let it be (a step this small moves a task by far less than
+        # its tolerance), and no task it holds would leave its bound without the hold: else
+        # those are released and it goes on (so that the result is the posture nearest the
+        # attraction that meets the tasks, whatever the start). Held tasks are checked so
+        # then, and every few iterations (a hold may keep a lower level from being met)
+        size = np.abs(dq).max(axis=1)
+        settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
+        check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
+        frames = np.flatnonzero(check & held.any(axis=1))
+        if len(frames):
+            free = step(frames, acting[frames][:, rows.task])
+            stay = _pushed_through(structure, active[frames], err[frames], jac[frames], free,
+                                   held[frames])
+            # where the step without any hold pushes several through, each is asked again
+            # with the others held: one may be kept up only by the others' hold
+            several = np.flatnonzero(stay.sum(axis=1) > 1)
+            for ti in np.flatnonzero(stay[several].any(axis=0)):
+                sub = several[stay[several, ti]]
+                f = frames[sub]
+                others = held[f].copy()
+                others[:, ti] = False
+                alone = step(f, (acting[f] | others)[:, rows.task])
+                only = np.zeros_like(others)
+                only[:, ti] = True
+                stay[sub, ti] = _pushed_through(structure, active[f], err[f], jac[f], alone,
+                                                only)[:, ti]
+            # one released at a time (an active set): the others' answers assumed it held
+            stay |= held[frames] & (np.cumsum(held[frames] & ~stay, axis=1) > 1)
+            release = np.flatnonzero(np.any(held[frames] & ~stay, axis=1))
+            frames, stay = frames[release], stay[release]
+            held[frames] = stay
+            dq[frames] = free[release]
+            settled[frames] = False
+            again = np.flatnonzero(stay.any(axis=1))
+            if len(again):
+                dq[frames[again]] = step(frames[again],
+                                         (acting | held)[frames[again]][:, rows.task])
+        # a frame that stops with a lower level unmet (out of reach, or against a higher one)
+        # polishes: the first level alone, restored from the lower levels' push
+        short = settled & ~polishing & np.any(np.abs(err_on[:, lower]) > rows.tol[lower],
+                                              axis=1)
+        polish_all[active[short]] = True
+        settled &= ~short
+        pinned = np.stack([on[:, pins].any(axis=1) for pins in structure.pins], axis=1)
+        held_all[active] = (held | acting) & on & ~pinned
         if np.all(settled):
             iterations[active] -= 1
             break
@@ -469,74 +603,134 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         r, t = _apply_step(dq, r, t, cur, structure, attraction_rot[active], options)
         rot[active] = r
         tra[active] = t
-    return rot, tra, residual, iterations
+    unsorted = np.empty_like(residual)
+    unsorted[:, order] = residual
+    return rot, tra, unsorted, iterations
 
 
-def _levels_step(err: np.ndarray, jac: np.ndarray, task_err: np.ndarray, rows: _Rows,
+def _task_norms(err: np.ndarray, row0: np.ndarray) -> np.ndarray:
+    """``(b, T)`` the length of each task's error rows ``err (b, K)``, task ``i``'s rows
+    starting at ``row0[i]``."""
+    return np.sqrt(np.add.reduceat(err * err, row0[:-1], axis=1))
+
+
+def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
+                    jac: np.ndarray, dq: np.ndarray, idle: np.ndarray) -> np.ndarray:
+    """``(b, T)`` where an ``idle`` task (on but not acting: a satisfied one-sided plane) would
+    act after the step ``dq (b, N)``, to first order: the step pushes its joint through its
+    bound (``err`` and ``jac``: every task's rows, acting or not, of the ``active``
+    frames)."""
+    out = np.zeros_like(idle)
+    for ti in np.flatnonzero(idle.any(axis=0)):
+        task = structure.tasks[ti]
+        frames = np.flatnonzero(idle[:, ti])
+        rows = slice(structure.row0[ti], structure.row0[ti] + task.rows)
+        after = err[frames, rows] - np.einsum("bkn,bn->bk", jac[frames, rows], dq[frames])
+        out[frames, ti] = task.kind.acts(task.goal[active[frames]], after)
+    return out
+
+
+def _step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
+          active: np.ndarray, n: int, options: IKOptions, polishing: bool, root: np.ndarray,
+          cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float) -> np.ndarray:
+    """The step ``(b, N)`` of the ``active`` frames: the levels restored in turn
+    (:func:`_levels_step`) plus the attraction's pull with ``gain`` in the null space of every
+    task (:func:`_attraction_step`)."""
+    dq, stacked, gram = _levels_step(err, jac, rows_on, rows, active, n, options, polishing)
+    if gain == 0.0:
+        return dq
+    return dq + _attraction_step(stacked, gram, root, cur, home_root, home, gain, options)
+
+
+def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
                  active: np.ndarray, n: int, options: IKOptions,
-                 polishing: bool) -> tuple[np.ndarray, np.ndarray]:
+                 polishing: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The step ``(b, N)`` that restores the priority levels in turn, each in the null space
-    of the levels above, and the stacked Jacobian ``(b, K, N)`` of every level.
+    of the levels above, the stacked Jacobian ``(b, K', N)`` of the levels that act and its
+    Gram matrix ``(b, K', K')`` (assembled from the products each level's projection computes
+    anyway).
 
-    ``err (b, K)``, ``jac (b, K, N)`` and ``task_err (b, T)`` are the errors, Jacobians and
-    per-task errors of the ``active`` frames; while ``polishing`` only the first level acts.
+    ``err (b, K)`` and ``jac (b, K, N)`` are every row's error and Jacobian at the ``active``
+    frames, ``rows_on (b, K)`` the rows that act there; while ``polishing`` only the first
+    level acts.
     """
     scale = options.scale
     lam2 = (options.damping * scale) ** 2
     ns_lam2 = (options.nullspace_damping * scale) ** 2
-    err_raw = err
+    err_raw = np.where(rows_on, err, 0.0)
     # clamp the correction asked of each task
-    norms = task_err[:, rows.task]
-    err = err * np.minimum(1.0, options.max_step * scale / np.maximum(norms, 1e-12))
-    w = rows.weights[active]
-    err = err * w
+    norms = _task_norms(err_raw, rows.row0)[:, rows.task]
+    w = rows.weights[active] * rows_on
+    err = err_raw * np.minimum(1.0, options.max_step * scale / np.maximum(norms, 1e-12)) * w
     jac = jac * w[:, :, None]
-    dq = np.zeros((len(active), n))
-    stacked = None
-    behind = np.zeros(len(active))          # how far the higher levels are from being met
-    for level in rows.levels:
+    nb = len(active)
+    dq = np.zeros((nb, n))
+    stacked = gram = None
+    behind = np.zeros(nb)                   # how far the higher levels are from being met
+    for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
         on = np.flatnonzero(np.any(w[:, level] > 0, axis=1))
-        if stacked is not None and polishing:
-            on = on[:0]
-        if len(on):
-            jl, el = jac[on[:, None], level], err[on[:, None], level]
-            if stacked is None:
-                jt = jl
-                gate = 1.0
-            else:
+        some = len(on) > 0
+        if len(on) == nb:
+            on = slice(None)                # every frame: views instead of copies
+        rows_all = jac[:, level]
+        if stacked is None:
+            block = rows_all @ rows_all.transpose(0, 2, 1)
+            if some:
+                jl, el = rows_all[on], err[on, level]
+                dq[on] += _damped_solve(jl, el, lam2, block[on])
+            stacked, gram = rows_all, block
+        else:
+            k, m = stacked.shape[1], level.stop - level.start
+            grown = np.zeros((nb, k + m, k + m))
+            grown[:, :k, :k] = gram
+            if some:
+                jl, el = rows_all[on], err[on, level]
                 above = stacked[on]
-                jt = jl - _damped_projection(above, jl.transpose(0, 2, 1), ns_lam2
-                                             ).transpose(0, 2, 1) @ above
+                cross = above @ jl.transpose(0, 2, 1)                          # (f, k, m)
+                # the rows' part in the null space of the levels above
+                coef = np.linalg.solve(gram[on] + ns_lam2 * np.eye(k), cross)
+                jt = jl - coef.transpose(0, 2, 1) @ above
                 # a lower level waits while a higher one is not met: its steps are
                 # first-order invisible to the higher levels, but near their singularities
                 # (a stretched leg) the second-order part would push them off faster than
                 # they recover
                 gate = np.clip(2.0 - behind[on] / options.priority_gate, 0.0, 1.0)[:, None]
-            dq[on] += gate * _damped_solve(jt, el - (jl @ dq[on][..., None])[..., 0], lam2)
+                dq[on] += gate * _damped_solve(jt, el - (jl @ dq[on][..., None])[..., 0], lam2)
+                grown[on, :k, k:] = cross
+                grown[on, k:, :k] = cross.transpose(0, 2, 1)
+                grown[on, k:, k:] = jl @ jl.transpose(0, 2, 1)
+            stacked, gram = jac[:, :level.stop], grown
         behind = np.maximum(behind, (np.abs(err_raw[:, level]) / rows.tol[level]).max(axis=1))
-        stacked = jac[:, level] if stacked is None else np.concatenate(
-            [stacked, jac[:, level]], axis=1)
-    return dq, stacked
+    return dq, stacked, gram
 
 
-def _attraction_step(stacked: np.ndarray, root: np.ndarray, cur: np.ndarray,
-                     home_root: np.ndarray, home: np.ndarray, gain: float,
+def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float,
+                  gram: np.ndarray | None = None) -> np.ndarray:
+    """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``; ``gram``:
+    ``a a^T`` when known."""
+    gram = a @ a.transpose(0, 2, 1) if gram is None else gram
+    y = np.linalg.solve(gram + lam2 * np.eye(a.shape[1]), rhs[..., None])
+    return (a.transpose(0, 2, 1) @ y)[..., 0]
+
+
+def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
+                     cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float,
                      options: IKOptions) -> np.ndarray:
     """The pull ``(b, N)`` towards the attraction posture, in the null space of every task.
 
     ``root (b, 3)`` and ``cur (b, C, 4)`` are the current root translation and rotations of
     the unknown joints, ``home_root`` and ``home`` the attraction posture's; ``stacked``
-    ``(b, K, N)`` the tasks' weighted Jacobian.
+    ``(b, K, N)`` the tasks' weighted Jacobian and ``gram (b, K, K)`` its Gram matrix.
     """
     nb = len(root)
-    dz = np.zeros((nb, stacked.shape[2]))
+    dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
     dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
     dz *= gain
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
-    return dz - (stacked.transpose(0, 2, 1)
-                 @ _damped_projection(stacked, dz[..., None], ns_lam2))[..., 0]
+    coef = np.linalg.solve(gram + ns_lam2 * np.eye(gram.shape[1]), stacked @ dz[..., None])
+    return dz - (stacked.transpose(0, 2, 1) @ coef)[..., 0]
 
 
 def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,

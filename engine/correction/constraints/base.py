@@ -240,6 +240,12 @@ class ConstraintKind(ABC):
         at world positions ``(B, 3)`` [m] (everywhere for a kind that is not one-sided)."""
         return np.ones(len(goal), dtype=bool)
 
+    def acts(self, goal: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """``(B,)`` where the task acts given task goals ``(B, goal_size)`` and its error rows
+        ``(B, rows)`` (as :meth:`active` at a posture with that error: everywhere for a kind
+        that is not one-sided). The IK asks it of the error a step would leave."""
+        return np.ones(len(goal), dtype=bool)
+
     @abstractmethod
     def error(self, goal: np.ndarray, state: "TaskState") -> np.ndarray:
         """``(B, rows)`` the task error (goal minus current) for task goals ``(B, goal_size)``."""

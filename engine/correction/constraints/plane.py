@@ -112,6 +112,10 @@ class PlaneKind(ConstraintKind):
         side = goal[:, 6]
         return (side == 0) | ((side > 0) & (s < 0)) | ((side < 0) & (s > 0))
 
+    def acts(self, goal, error):
+        side = goal[:, 6]
+        return (side == 0) | (side * error[:, 0] > 0)      # error = -distance
+
     def one_sided(self, goal):
         return SIDES[goal["side"]] != 0.0
 
