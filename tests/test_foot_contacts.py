@@ -206,16 +206,24 @@ def test_planted_feet_stay_on_or_above_the_floor(solved):
         assert low >= -1e-3, f"{part} {tj} {s}-{e}: {low * 1000:.1f} mm below its rest height"
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 14 point 2), measured on the keyed result: "
-                   "walk 1.72 (LeftLeg at 840, ramp 840-854, moved by the other foot's output "
-                   "ramp), run 1.24 (RightLeg at 67, ramp 63-67), kick 1.51 (LeftLeg at 46), "
-                   "jump-fair1 1.37 (Hips at 341), jumps 2.25 (Hips at 468: the input ramps' "
-                   "solves hit the iteration cap, the root and hips compromise jumping). Easing "
-                   "the correction in joint space (three designs tried) did not pass all five "
-                   "either: where ramps of one foot's heel, toe and flat overlap one another "
-                   "and the other foot's active range, the eased posture and the held tasks "
-                   "disagree and the solve jumps where the set of active tasks changes")
-def test_no_joint_pops_around_a_ramp(solved):
+#: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
+#: shows: the worst joint over its limit, and why
+POPS_OPEN = {
+    "walk-cmumax-ely": "2.0: mixamorig:LeftLeg at frame 840, 14 deg/s over a limit of 7 (ramp "
+                       "840-854): the other foot's ramps move the hips under this planted leg "
+                       "faster than this ramp's own small correction allows",
+    "run-bandai-mannequin": "1.04: mixamorig:RightLeg at frame 10 (a one-frame switch 10-11 "
+                            "beside the ramp 7-11)",
+    "kick-bandai-cmutpose": "1.2: LeftUpLeg at frame 74 (ramp 71-75)",
+    "jumps-cmumb-holden": "1.5: RightLeg at frame 1062 (ramp 1061-1073)",
+}
+
+
+def test_no_joint_pops_around_a_ramp(solved, request):
+    case = request.node.callspec.id
+    if case in POPS_OPEN:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="open (issue 14 point 2): "
+                                              + POPS_OPEN[case]))
     scene, solution, _ = solved
     direct, corrected = scene.composed, solution.motion
     fps = direct.fps
