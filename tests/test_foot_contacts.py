@@ -206,12 +206,24 @@ def test_planted_feet_stay_on_or_above_the_floor(solved):
         assert low >= -1e-3, f"{part} {tj} {s}-{e}: {low * 1000:.1f} mm below its rest height"
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 14 point 2): around some ramps a knee or the "
-                   "hips still turns 1.2-2.2 times the limit on every clip: a knee where a "
-                   "contact ends with the leg stretched, the hips where a landing foot's pin "
-                   "eases in and the compromise between the root's translation and the hips' "
-                   "turn shifts back and forth")
-def test_no_joint_pops_around_a_ramp(solved):
+#: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
+#: shows: the worst joint over its limit, and why
+POPS_OPEN = {
+    "walk-cmumax-ely": "2.0: mixamorig:LeftLeg at frame 840, 14 deg/s over a limit of 7 (ramp "
+                       "840-854): the other foot's ramps move the hips under this planted leg "
+                       "faster than this ramp's own small correction allows",
+    "run-bandai-mannequin": "1.04: mixamorig:RightLeg at frame 10 (a one-frame switch 10-11 "
+                            "beside the ramp 7-11)",
+    "kick-bandai-cmutpose": "1.2: LeftUpLeg at frame 74 (ramp 71-75)",
+    "jumps-cmumb-holden": "1.5: RightLeg at frame 1062 (ramp 1061-1073)",
+}
+
+
+def test_no_joint_pops_around_a_ramp(solved, request):
+    case = request.node.callspec.id
+    if case in POPS_OPEN:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="open (issue 14 point 2): "
+                                              + POPS_OPEN[case]))
     scene, solution, _ = solved
     direct, corrected = scene.composed, solution.motion
     fps = direct.fps

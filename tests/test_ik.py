@@ -68,28 +68,35 @@ def test_no_pops_at_the_ramp_boundaries(hand_case):
     assert rate.max() <= bound, (np.degrees(rate.max()), np.degrees(source))
 
 
-def test_the_input_ramp_moves_the_goal_along_a_straight_line(hand_case):
+def _held_on(composed, c, frame):
+    """The correction on ``frame`` with ``c``'s goal held there at full strength."""
+    return enforce(composed, [c.with_range(frame, frame, frame + 1, frame + 1)]).rotvecs[frame]
+
+
+def test_the_input_ramp_eases_the_correction_in_along_a_smoothstep(hand_case):
+    """Issue 14 point 2: on an input ramp the correction is the posture that holds the goal on
+    that frame, times a smoothstep of the ramp's fraction (zero slope at both ends: the
+    correction neither jumps nor kinks where the ramp begins or where the range starts)."""
     composed, c, result = hand_case
-    hand = _pos(result.motion, "LeftHand")
-    start_pos = _pos(composed, "LeftHand")[c.smooth_in]   # pass one = direct conversion here
-    for f in range(c.smooth_in + 1, c.start):
+    for f in (c.smooth_in + 1, (c.smooth_in + c.start) // 2, c.start - 1):
         u = (f - c.smooth_in) / (c.start - c.smooth_in)
-        expected = start_pos + (c.goal["point"] - start_pos) * u
-        assert np.linalg.norm(hand[f] - expected) < 1e-3
+        share = u * u * (3 - 2 * u)
+        np.testing.assert_allclose(result.rotvecs[f], share * _held_on(composed, c, f),
+                                   atol=1e-9)
+    goal = np.linalg.norm(_pos(result.motion, "LeftHand")[c.start] - c.goal["point"])
+    assert goal < 1e-3
 
 
-def test_the_output_ramp_interpolates_the_chain_between_end_and_smooth_out(hand_case):
+def test_the_output_ramp_eases_the_correction_out_and_leaves_other_joints_alone(hand_case):
     composed, c, result = hand_case
     sk = composed.skeleton
     j = sk.index["LeftHand"]
     chain = sorted(sk.ancestors(j) + [j])
-    mid = (c.end + c.smooth_out) // 2
-    u = (mid - c.end) / (c.smooth_out - c.end)
-    a = result.motion.rotations[c.end, chain]
-    b = result.motion.rotations[c.smooth_out, chain]
-    from motion_composer.engine.quaternions import qpow
-    expected = qmul(qpow(qmul(b, qconj(a)), u), a)
-    assert np.degrees(angle_between(result.motion.rotations[mid, chain], expected)).max() < 1e-6
+    for f in (c.end + 1, (c.end + c.smooth_out) // 2, c.smooth_out - 1):
+        u = (f - c.end) / (c.smooth_out - c.end)
+        share = 1 - u * u * (3 - 2 * u)
+        np.testing.assert_allclose(result.rotvecs[f], share * _held_on(composed, c, f),
+                                   atol=1e-9)
     others = [k for k in range(sk.num_joints) if k not in chain]
     np.testing.assert_array_equal(result.motion.rotations[c.end + 1:c.smooth_out, others],
                                   composed.rotations[c.end + 1:c.smooth_out, others])

@@ -123,7 +123,9 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
     # every joint stays near the dense solve
     F = keyed.num_frames
     curves = solution.scene.displacement.curves
-    assert curves and sum(len(c) for c in curves.values()) < 0.6 * F * len(curves)
+    # (0.65: the eased ramps no longer turn the toes, whose few keys lowered the mean: the
+    # walk's keys fell from 3,297 on 30 channels to 2,964 on 24)
+    assert curves and sum(len(c) for c in curves.values()) < 0.65 * F * len(curves)
     gap = np.linalg.norm(_positions(keyed) - _positions(dense), axis=-1).max()
     assert gap < 1e-3
     # outside every window the direct conversion, bit for bit

@@ -1,41 +1,39 @@
-"""Enforcing Cartesian constraints over time (the paper's section 3): two passes and a
-displacement map.
+"""Enforcing Cartesian constraints over time (the paper's section 3): key postures, eased
+ramps and a displacement map.
 
 :func:`enforce` takes the composed (directly converted) motion, which is the attraction
 posture of every frame, and a list of :class:`~engine.correction.constraints.Constraint`, and returns a
 :class:`Correction`: the dense displacement (per joint rotation vectors and the root's
 translation) that, added to the composed motion, meets the constraints, with residuals.
 
-Pass one solves every frame inside an active range ``[start, end]`` with no smoothing; it gives
-the key postures. Pass two, as section 3.3 says:
-
-* input ramp ``[smooth_in, start)``: the effector's goal moves along the line from where the
-  effector was at ``smooth_in`` (pass one; where it lies in another constraint's ramp, the
-  pass-two posture there, see below) to the goal at ``start`` (Cartesian smoothing; a
-  plane slides along its normal, an orientation turns along the shortest arc: each kind's
-  ``ramp_goal``);
-* active range: the goal itself;
-* output ramp ``(end, smooth_out]``: the joint values of the constrained joint's chain, from
-  the effector up to the root, are interpolated between the posture at ``end`` and the
-  composed motion at ``smooth_out``; the other joints corrected at ``end`` (other
-  constraints' chains) keep their correction there, fading out over the ramp. These values
-  replace the attraction posture, so where another constraint is still active its IK pulls
-  towards them rather than fighting them, and where none is they are the result. (The paper
-  interpolates the chain towards the pass-one posture at ``smooth_out``; around other
-  constraints that pops, see :func:`_output_ramps`.)
+Every frame is solved from the composed motion with the tasks active there (``[start, end]``
+of each constraint, and the one-sided planes such as the floor where they are needed): the
+key postures. A ramp eases its constraints' correction in and out along a smoothstep ``s``
+of the ramp's fraction (zero slope at both ends): on a frame of an input ramp
+``(smooth_in, start)`` the posture is the blend ``(1 - s) X0 + s X1`` of the corrections of
+that frame solved without the constraint (``X0``) and with its goal at ``start`` held
+(``X1``); an output ramp ``(end, smooth_out)`` likewise with the goal at ``end`` and ``1 - s``.
+Where ramps overlap, every subset of them is solved and the blend weighs each by the product
+of its ramps' shares (multilinear in the shares), so the posture is continuous in time however
+ramps lie (a ramp alone gives ``exp(s r) direct``, what the no-pop rule of issue 14 allows:
+no joint turns faster than the direct conversion plus 1.5 times the correction over the
+ramp). The blend meets the tasks held on those frames only nearly; they are solved again
+from it (pass two), the posture each frame starts from and is pulled towards. (The paper
+moves the goal along a straight line over the input ramp and interpolates the joint values
+over the output ramp; solved from the converted motion the line's postures can turn a
+stretched knee or shift the compromise between the root and the hips from frame to frame.)
 
 Frames that share the same set of tasks are solved together as one vectorised batch, each
 starting from its attraction posture (the converted motion). With ``warm_start=True`` frames
-are instead solved one by one in time order, each starting from the solution at t - 1, as the
-paper does; both converge to the same posture, the posture nearest the attraction that meets
-the tasks (a test checks it), and the batch is many times faster.
+are instead solved one by one in order, each starting from the solution before, as the paper
+does; both converge to the same posture, the posture nearest the attraction that meets the
+tasks (a test checks it), and the batch is many times faster.
 
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
 
-The steps, in order: :func:`_check` (the constraints that apply), :func:`_pass_one` (key
-postures), :func:`_input_ramps` and :func:`_output_ramps`, :func:`_pass_two` (again where a
-constraint is released or eases in inside another one's ramp, its fade or its ramp starting
-from the pass-two posture, until those postures are the result's own), and
+The steps, in order: :func:`_check` (the constraints that apply), :func:`_ramp_units` and
+:func:`_virtual_frames` (the postures to solve), :func:`_pass_one` (solving them and
+:func:`_blend`), :func:`_pass_two` (the held tasks again on the blended frames) and
 :func:`_correction` (the displacement and the corrected motion).
 """
 from __future__ import annotations
@@ -53,7 +51,7 @@ from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
 from ..errors import MotionComposerError
 from ..kinematics import fk_arrays
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qnormalize, qpow_many
+from ..quaternions import qconj, qmul, qnormalize
 
 __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FRAMES"]
 
@@ -61,10 +59,6 @@ __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FR
 #: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
 #: same as the whole batch's: every frame is solved on its own).
 CHUNK_FRAMES = 2048
-
-#: pass two is solved again at most this many times where ramps lie inside each other's
-#: (each time from the postures the one before solved)
-RELEASE_PASSES = 8
 
 #: a joint whose rotation (quaternion components) never moves further than this from its
 #: first frame's is held still by the conversion (rounding aside)
@@ -82,7 +76,8 @@ class Correction:
         residual: constraint index -> ``(F,)`` the task's residual at each frame where it was
             solved (metres; radians for orientation; NaN where not solved); a
             :class:`Residuals` mapping, which keeps only the solved frames.
-        iterations: ``(F,)`` solver iterations per frame in pass two.
+        iterations: ``(F,)`` solver iterations per frame: the most of its solves in pass one,
+            pass two's where a ramp's blend was solved again.
         seconds: wall time of each pass.
     """
 
@@ -368,158 +363,181 @@ def _active_entries(cons) -> list:
     return entries
 
 
-def _pass_one(problem: _Problem):
-    """The key postures: every frame inside an active range, with no smoothing."""
-    composed = problem.composed
-    entries = _where_needed(problem, _active_entries(problem.cons), composed.rotations,
-                            composed.translations)
-    rot1, tra1, _, _ = _solve(problem, entries, composed.rotations, composed.translations)
-    return rot1, tra1
+def smoothstep(u: np.ndarray) -> np.ndarray:
+    """``3u^2 - 2u^3``: from 0 at ``u = 0`` to 1 at ``u = 1``, with zero slope at both ends and
+    at most 1.5 between (:data:`~engine.correction.quality.SMOOTHSTEP_PEAK`)."""
+    return u * u * (3.0 - 2.0 * u)
 
 
-def _input_ramps(problem: _Problem, rot1, tra1) -> list:
-    """Per constraint, the entry of its input ramp ``(smooth_in, start)`` (``None`` for none):
-    the goal moves from where the effector is at ``smooth_in`` in the posture ``rot1``,
-    ``tra1`` (pass one's, or an earlier pass two's where ramps overlap) to the goal at
-    ``start`` (the kind's :meth:`~engine.correction.constraints.ConstraintKind.ramp_goal`)."""
-    sk = problem.skeleton
-    need = sorted({c.smooth_in for c in problem.cons if c.smooth_in < c.start})
-    effector_at = {}
-    if need:
-        pose = fk_arrays(sk, rot1[need], tra1[need], end_sites=False)
-        for k, f in enumerate(need):
-            effector_at[f] = (pose.positions[k], pose.rotations[k])
+def _ramp_units(cons) -> list:
+    """The ramps, those with the same frames and direction taken together (a foot's heel pin
+    and its flat turn): ``(lo, hi, rising, constraint indices)``; the ramp's inner frames are
+    ``lo + 1 .. hi - 1``, where the constraints' share is ``smoothstep((t - lo) / (hi - lo))``
+    (rising, an input ramp ``(smooth_in, start)``) or one minus it (an output ramp
+    ``(end, smooth_out)``)."""
+    units: dict[tuple, list] = {}
+    for i, c in enumerate(cons):
+        if c.start - c.smooth_in >= 2:
+            units.setdefault((c.smooth_in, c.start, True), []).append(i)
+        if c.smooth_out - c.end >= 2:
+            units.setdefault((c.end, c.smooth_out, False), []).append(i)
+    return [(lo, hi, rising, idx) for (lo, hi, rising), idx in sorted(units.items())]
+
+
+def _virtual_frames(problem: _Problem, units):
+    """The postures to solve: each frame once with the tasks held there, and each frame inside
+    ramps once more for every other subset of its ramps, their constraints held at full
+    strength at their goal at ``start`` (input) or ``end`` (output).
+
+    Returns ``src (V,)`` each virtual frame's clip frame, ``weight (V,)`` its share in the
+    blend of its clip frame (the products of the ramps' shares in the subset and one minus
+    those outside it), ``single (V,)`` whether it is its frame's only one, and per virtual
+    frame the constraint indices it adds."""
+    F = problem.num_frames
+    cover = [[] for _ in range(F)]
+    for k, (lo, hi, rising, _) in enumerate(units):
+        for t in range(lo + 1, hi):
+            cover[t].append(k)
+    src, weight, single, extra = [], [], [], []
+    for t in range(F):
+        here = cover[t]
+        if not here:
+            src.append(t)
+            weight.append(1.0)
+            single.append(True)
+            extra.append(())
+            continue
+        share = []
+        for k in here:
+            lo, hi, rising, _ = units[k]
+            s = float(smoothstep(np.array((t - lo) / (hi - lo))))
+            share.append(s if rising else 1.0 - s)
+        for m in range(1 << len(here)):
+            w = 1.0
+            added = []
+            for b, k in enumerate(here):
+                if m >> b & 1:
+                    w *= share[b]
+                    added += units[k][3]
+                else:
+                    w *= 1.0 - share[b]
+            src.append(t)
+            weight.append(w)
+            single.append(False)
+            extra.append(tuple(added))
+    return (np.array(src, dtype=np.intp), np.array(weight), np.array(single, dtype=bool),
+            extra)
+
+
+def _virtual_entries(problem: _Problem, src, extra) -> list:
+    """Entries over virtual frames: each constraint where it is active at the clip frame
+    (its goal there) or added (its goal at ``start`` or ``end``, whichever its ramp there
+    leads to)."""
+    cons = problem.cons
+    added = [[] for _ in cons]
+    for v, idx in enumerate(extra):
+        for i in idx:
+            added[i].append(v)
     entries = []
-    for i, c in enumerate(problem.cons):
-        if c.smooth_in < c.start - 1:
-            j = sk.index[c.joint]
-            pos, wrot = effector_at[c.smooth_in]
-            frames = np.arange(c.smooth_in + 1, c.start)
-            u = (frames - c.smooth_in) / (c.start - c.smooth_in)
-            goals = np.array([c.kind_object.ramp_goal(c, pos[j], wrot[j], x) for x in u])
-            entries.append((i, frames, goals))
-        else:
-            entries.append(None)
+    for i, c in enumerate(cons):
+        held = np.flatnonzero((src >= c.start) & (src <= c.end))
+        goals = c.kind_object.task_goals(c, src[held])
+        more = np.array(added[i], dtype=np.intp)
+        if len(more):
+            key = np.where(src[more] < c.start, c.start, c.end)
+            goals = np.concatenate([goals, c.kind_object.task_goals(c, key)])
+            held = np.concatenate([held, more])
+        order = np.argsort(held, kind="stable")
+        entries.append((i, held[order], goals[order]))
     return entries
 
 
-def _chain(sk, joint: int) -> np.ndarray:
-    return np.array(sorted(sk.ancestors(joint) + [joint]), dtype=np.intp)
-
-
-def _output_ramps(problem: _Problem, rot1, tra1):
-    """The attraction posture over the output ramps ``(end, smooth_out)``.
-
-    On the constrained joint's chain the joint values are interpolated from the posture at
-    ``end`` to the composed motion at ``smooth_out``, the posture every frame after the ramp
-    is solved from (the pass-one posture at ``smooth_out``, as the paper has it, would carry
-    the corrections of the constraints active there, which their own tasks then add once
-    more: a jump at ``smooth_out``). The other joints the posture at ``end`` corrects (other
-    constraints' chains) keep that correction, fading out linearly over the ramp, so that the
-    constraints still active start from where they were instead of sharing their correction
-    anew among the joints the released one held (a jump at ``end``). Where ramps overlap, the
-    one that faded least shapes a frame. ``rot1``, ``tra1``: the posture whose values at
-    ``end`` the ramps start from. Returns the attraction rotations and translations and the
-    frames they changed."""
-    sk, F = problem.skeleton, problem.num_frames
+def _blend(problem: _Problem, rot_v, tra_v, src, weight, single):
+    """The clip's posture: a frame's only virtual frame as it is, else the weighted sum of
+    its virtual frames' corrections (rotation vectors per joint and the root's offset)."""
     composed = problem.composed
-    attraction_rot = composed.rotations.copy()
-    attraction_tra = composed.translations.copy()
-    touched = np.zeros(F, dtype=bool)
-    held = np.zeros(F)                      # the share of its posture at end a frame keeps
-    for c in problem.cons:
-        if c.smooth_out > c.end + 1:
-            frames = np.arange(c.end + 1, c.smooth_out)
-            u = (frames - c.end) / (c.smooth_out - c.end)
-            more = 1.0 - u > held[frames]
-            frames, u = frames[more], u[more]
-            if not len(frames):
-                continue
-            chain = _chain(sk, sk.index[c.joint])
-            a, b = rot1[c.end, chain], composed.rotations[c.smooth_out, chain]
-            steps = qpow_many(qmul(b, qconj(a)), u)                               # (n, C, 4)
-            attraction_rot[frames[:, None], chain[None, :]] = qnormalize(qmul(steps, a))
-            others = np.flatnonzero(np.any(rot1[c.end] != composed.rotations[c.end], axis=-1))
-            others = np.setdiff1d(others, chain)
-            if len(others):
-                offset = qmul(rot1[c.end, others], qconj(composed.rotations[c.end, others]))
-                fade = qpow_many(offset, 1.0 - u)                                 # (n, O, 4)
-                attraction_rot[frames[:, None], others[None, :]] = qnormalize(
-                    qmul(fade, composed.rotations[frames[:, None], others[None, :]]))
-            root_a, root_b = tra1[c.end, 0], composed.translations[c.smooth_out, 0]
-            attraction_tra[frames, 0] = root_a + (root_b - root_a) * u[:, None]
-            held[frames] = 1.0 - u
-            touched[frames] = True
-    return attraction_rot, attraction_tra, touched
+    base_rot, base_tra = composed.rotations, composed.translations
+    rot, tra = base_rot.copy(), base_tra.copy()
+    one = np.flatnonzero(single)
+    rot[src[one]], tra[src[one]] = rot_v[one], tra_v[one]
+    many = np.flatnonzero(~single)
+    blended = np.zeros(problem.num_frames, dtype=bool)
+    if not len(many):
+        return rot, tra, blended
+    t = src[many]
+    moved = np.any(rot_v[many] != base_rot[t], axis=-1)                          # (n, J)
+    offset = np.zeros(moved.shape + (3,))
+    offset[moved] = quat_to_rotvec(qmul(rot_v[many][moved], qconj(base_rot[t][moved])))
+    frames, first = np.unique(t, return_index=True)
+    total = np.add.reduceat(offset * weight[many, None, None], first, axis=0)     # (f, J, 3)
+    shift = np.add.reduceat((tra_v[many, 0] - base_tra[t, 0]) * weight[many, None], first,
+                            axis=0)
+    turned = np.add.reduceat(moved, first, axis=0) > 0
+    from .ik import rotvec_to_quat
+    r = rot[frames]
+    r[turned] = qnormalize(qmul(rotvec_to_quat(total[turned]), base_rot[frames][turned]))
+    rot[frames] = r
+    tra[frames, 0] = base_tra[frames, 0] + shift
+    blended[frames] = True
+    return rot, tra, blended
 
 
-def _overlapping_ramps(cons) -> bool:
-    """Whether a constraint ends, or starts its input ramp, inside another one's ramps (where
-    pass two's posture differs from pass one's)."""
-    ends = [c.end for c in cons if c.smooth_out > c.end + 1]
-    ends += [c.smooth_in for c in cons if c.smooth_in < c.start - 1]
-    return any(d.smooth_in <= e <= d.smooth_out and not d.start <= e <= d.end
-               for e in ends for d in cons)
+def _virtual(problem: _Problem, src) -> _Problem:
+    """The problem over virtual frames (the composed motion's frames ``src``)."""
+    composed = problem.composed
+    motion = Motion._trusted(composed.skeleton, composed.rotations[src],
+                             composed.translations[src], composed.frame_time, composed.name)
+    return dataclasses.replace(problem, composed=motion)
 
 
-@dataclass(frozen=True, eq=False)
-class _PassTwo:
-    """A result of :func:`_pass_two`: the posture ``rot``, ``tra``, the residuals and
-    iterations, the frames it ``changed``; what it was solved against (``attraction_rot``,
-    ``attraction_tra`` and the input ramps' entries ``ramps``) and how many frames it solved
-    ``again`` (all of them the first time)."""
-
-    rot: np.ndarray
-    tra: np.ndarray
-    residual: Residuals
-    iterations: np.ndarray
-    changed: np.ndarray
-    attraction_rot: np.ndarray
-    attraction_tra: np.ndarray
-    ramps: list
-    again: int
+def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals:
+    """Residuals over virtual frames ``keep`` (a mask) as residuals over their clip frames."""
+    out = Residuals(num_frames, len(residual))
+    for i in residual:
+        values = residual[i]
+        v = np.flatnonzero(keep & np.isfinite(values))
+        if len(v):
+            out.add(i, src[v], values[v])
+    return out
 
 
-def _moved(result: _PassTwo, attraction_rot, attraction_tra, ramps) -> np.ndarray:
-    """``(F,)`` the frames whose attraction posture or input-ramp goal differs from what
-    ``result`` was solved against."""
-    moved = (np.any(attraction_rot != result.attraction_rot, axis=(1, 2))
-             | np.any(attraction_tra != result.attraction_tra, axis=(1, 2)))
-    for now, then in zip(ramps, result.ramps):
-        if now is not None:
-            moved[now[1][np.any(now[2] != then[2], axis=1)]] = True
-    return moved
-
-
-def _pass_two(problem: _Problem, released, previous: _PassTwo | None = None) -> _PassTwo:
-    """The result: the active ranges and the input ramps solved against the attraction
-    posture that the output ramps shape, each fading out from the posture ``released``
-    (``(rot, tra)``) has at its ``end``, each input ramp starting from where ``released``
-    puts the effector at ``smooth_in``. ``previous``: an earlier pass two, whose frames are
-    kept where their attraction posture and goals are the same (every frame is solved on its
-    own, so solving them again would give them again)."""
-    ramps = _input_ramps(problem, *released)
-    entries = []
-    for active, ramp in zip(_active_entries(problem.cons), ramps):
-        entries += [active] if ramp is None else [active, ramp]
-    attraction_rot, attraction_tra, touched = _output_ramps(problem, *released)
-    entries = _where_needed(problem, entries, attraction_rot, attraction_tra)
-    changed = touched.copy()
+def _pass_one(problem: _Problem):
+    """The key postures and the blend over the ramps: every virtual frame
+    (:func:`_virtual_frames`) solved from the composed motion, then blended per clip frame.
+    Returns rot, tra, residuals (of the frames solved once), iterations, the frames solved
+    and the frames blended (both ``(F,)``)."""
+    F = problem.num_frames
+    src, weight, single, extra = _virtual_frames(problem, _ramp_units(problem.cons))
+    virtual = _virtual(problem, src)
+    entries = _where_needed(virtual, _virtual_entries(problem, src, extra),
+                            virtual.composed.rotations, virtual.composed.translations)
+    rot_v, tra_v, residual_v, iters_v = _solve(virtual, entries, virtual.composed.rotations,
+                                               virtual.composed.translations)
+    rot, tra, blended = _blend(problem, rot_v, tra_v, src, weight, single)
+    iters = np.zeros(F, dtype=np.intp)
+    np.maximum.at(iters, src, iters_v)
+    solved = np.zeros(F, dtype=bool)
     for _, frames, _ in entries:
-        changed[frames] = True
-    if previous is None:
-        rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
-        return _PassTwo(rot2, tra2, residual, iters, changed, attraction_rot, attraction_tra,
-                        ramps, problem.num_frames)
-    again = _moved(previous, attraction_rot, attraction_tra, ramps)
-    entries = [(i, frames[again[frames]], goals[again[frames]]) for i, frames, goals in entries]
-    rot2, tra2, residual, iters = _solve(problem, entries, attraction_rot, attraction_tra)
-    keep = ~again
-    rot2[keep], tra2[keep] = previous.rot[keep], previous.tra[keep]
-    iters[keep] = previous.iterations[keep]
-    residual.extend(previous.residual.outside(again))
-    return _PassTwo(rot2, tra2, residual, iters, changed, attraction_rot, attraction_tra, ramps,
-                    int(again.sum()))
+        solved[src[frames]] = True
+    return rot, tra, _map_residuals(residual_v, src, single, F), iters, solved, blended
+
+
+def _pass_two(problem: _Problem, rot, tra, blended):
+    """The tasks held on the ``blended`` frames solved again from the blend ``rot``, ``tra``
+    (a weighted sum of postures that each meet them meets them only nearly). Those frames
+    start next to their solution, so they settle to a tenth of the usual step: their tasks
+    end as close as a solve from afar brings them. Returns rot, tra, residuals, iterations."""
+    options = problem.options
+    entries = _where_needed(problem, _restricted(_active_entries(problem.cons), blended), rot,
+                            tra)
+    closer = dataclasses.replace(problem, options=dataclasses.replace(
+        options, settle=options.settle * 0.1))
+    return _solve(closer, entries, rot, tra)
+
+
+def _restricted(entries, mask: np.ndarray) -> list:
+    """``entries`` on the frames of ``mask`` only."""
+    return [(i, frames[mask[frames]], goals[mask[frames]]) for i, frames, goals in entries]
 
 
 def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings) -> Correction:
@@ -571,23 +589,15 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
                        _still_joints(composed))
     timings = {}
     t0 = time.perf_counter()
-    rot1, tra1 = _pass_one(problem)
+    rot1, tra1, residual, iters, changed, blended = _pass_one(problem)
     timings["pass one"] = time.perf_counter() - t0
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    result = _pass_two(problem, (rot1, tra1))
-    if _overlapping_ramps(problem.cons):
-        # a constraint released (or easing in) while another one's ramp is still fading lets
-        # go of (or starts from) the posture pass two solved there, not pass one's: solved
-        # again from it (the frames whose attraction posture or goal that changes), until
-        # the postures the ramps start from are the result's own (ramps one inside another)
-        for _ in range(RELEASE_PASSES):
-            result = _pass_two(problem, (result.rot, result.tra), previous=result)
-            if not result.again:
-                break
-    rot2, tra2, residual, iters, changed = (result.rot, result.tra, result.residual,
-                                            result.iterations, result.changed)
+    rot2, tra2, residual2, iters2 = _pass_two(problem, rot1, tra1, blended)
+    residual.extend(residual2)
+    iters[blended] = iters2[blended]
+    changed |= blended
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
