@@ -502,7 +502,7 @@ class Scene:
             return enforce(composed, constraints, options=options).motion, "full"
         lo, hi = window
         part = enforce(composed, _preview.window_problem(constraints, lo, hi),
-                       options=options).motion
+                       options=options, pins=True).motion
         return _preview.splice(base_motion, part, lo, hi), "window"
 
 

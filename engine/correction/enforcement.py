@@ -141,8 +141,9 @@ class Residuals(Mapping):
         return len(self._parts)
 
 
-def _check(constraints, composed: Motion) -> list:
-    """The enabled constraints, each on a joint of the target and within the clip."""
+def _check(constraints, composed: Motion, pins: bool = False) -> list:
+    """The enabled constraints, each on a joint of the target and within the clip; a
+    one-frame range with no ramps inside the clip is refused unless ``pins``."""
     sk = composed.skeleton
     F = composed.num_frames
     out = []
@@ -155,7 +156,8 @@ def _check(constraints, composed: Motion) -> list:
         if c.smooth_out > F - 1:
             raise ConstraintError(f"constraint {c.name or c.joint!r}: smooth_out {c.smooth_out} "
                                   f"is past the last frame ({F - 1})")
-        if c.smooth_in == c.start == c.end == c.smooth_out and 0 < c.start < F - 1:
+        if not pins and c.smooth_in == c.start == c.end == c.smooth_out and \
+                0 < c.start < F - 1:
             raise ConstraintError(
                 f"constraint {c.name or c.joint!r}: the range {list(c.range)} holds the joint on "
                 "one frame with no ramps, so it would jump there and back; give it ramps "
@@ -561,7 +563,7 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
-            chunk_frames: int = CHUNK_FRAMES) -> Correction:
+            chunk_frames: int = CHUNK_FRAMES, pins: bool = False) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -576,10 +578,14 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             :class:`~engine.errors.MotionComposerError`.
         chunk_frames: at most this many frames are solved as one batch (bounds the memory
             of a long clip; the result does not depend on it); >= 1.
+        pins: solve one-frame ranges with no ramps inside the clip, which a user's
+            constraint may not have (its joint would jump there and back) but the live
+            preview's window problem makes: a constraint that only shapes a key posture,
+            held on that frame (:func:`~engine.correction.preview.window_problem`).
     """
     from ..describe import stature
 
-    cons = _check(constraints, composed)
+    cons = _check(constraints, composed, pins)
     options = options if options is not None else IKOptions()
     if options.scale is None:
         options = dataclasses.replace(options, scale=max(stature(composed), 0.1))

@@ -98,6 +98,9 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
     * every other enabled constraint active at one of those keys (it shapes that key posture);
     * each constraint's active range clipped to ``[L, H]``, dropping a ramp that lies wholly
       outside (a clipped end has no ramp: what lies beyond does not reach the window).
+
+    A constraint that only shapes a key posture may be left one frame long with no ramps (a
+    pin at the key): solve the problem with ``enforce(..., pins=True)``.
     """
     inside = overlapping(constraints, lo, hi)
     keys = set()

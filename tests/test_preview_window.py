@@ -1,0 +1,52 @@
+"""The live preview's window problem (engine/correction/preview.py) on real automatic contacts:
+dragging a contact's input handles back re-solves only the frames the change reaches, and
+there the preview is the full solve's motion.
+
+A constraint that only shapes a key posture outside the window is cut to its active frames at
+that key; where that leaves it one frame long (a pin at the key, no ramps) the window problem
+must still solve (a user's one-frame range with no ramps is refused, a key posture's is not).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from motion_composer.engine.correction.enforcement import enforce
+from motion_composer.engine.correction.preview import changed_window, window_problem
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.project import open_project
+from motion_composer.engine.scene import Scene
+
+DEMO = Path(__file__).resolve().parent.parent / "resources" / "demo" / "demo.mcp"
+
+
+def _positions(motion) -> np.ndarray:
+    return fk_arrays(motion.skeleton, motion.rotations, motion.translations,
+                     end_sites=False).positions
+
+
+def test_a_moved_contact_previews_in_its_window_as_the_full_solve():
+    project, performer, target = open_project(DEMO)
+    solution = Scene(project, performer, target).solve()
+    scene, constraints = solution.scene, list(solution.constraints)
+    F = scene.num_frames
+    pins = []                         # moves whose window problem pins a key posture's frame
+    for i, c in enumerate(constraints):
+        if not (c.auto and c.kind == "position" and c.smooth_in >= 4):
+            continue
+        after = list(constraints)
+        after[i] = c.with_range(c.smooth_in - 4, c.start - 4, c.end, c.smooth_out)
+        lo, hi = changed_window(constraints, after)
+        problem = window_problem(after, lo, hi)
+        if any(x.smooth_in == x.start == x.end == x.smooth_out and 0 < x.start < F - 1
+               for x in problem):
+            pins.append((after, lo, hi))
+    assert pins, "the demo's contacts give no window with a pinned key posture"
+    for after, lo, hi in pins[:2]:
+        motion, mode = scene.preview(after, base_constraints=constraints,
+                                     base_motion=scene.motion, whole=False)
+        assert mode == "window"
+        full = enforce(scene.edited, after, options=project.ik_options).motion
+        gap = np.abs(_positions(motion) - _positions(full))[lo:hi + 1].max()
+        assert gap < 1e-4, (lo, hi, gap)             # [m] the window: the full solve
