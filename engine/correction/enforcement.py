@@ -64,6 +64,11 @@ CHUNK_FRAMES = 2048
 #: first frame's is held still by the conversion (rounding aside)
 STILL = 1e-12
 
+#: ramps (of distinct frames or direction) that may overlap on one frame at most: a frame
+#: inside k of them is solved for each of their 2^k subsets (automatic contacts overlap two
+#: or three; a tangle of more is refused by name rather than solved for minutes)
+MAX_OVERLAPPING_RAMPS = 8
+
 
 @dataclass(frozen=True, eq=False)
 class Correction:
@@ -403,6 +408,13 @@ def _virtual_frames(problem: _Problem, units):
     src, weight, single, extra = [], [], [], []
     for t in range(F):
         here = cover[t]
+        if len(here) > MAX_OVERLAPPING_RAMPS:
+            names = sorted({problem.cons[i].name or problem.cons[i].joint
+                            for k in here for i in units[k][3]})
+            raise ConstraintError(
+                f"{len(here)} ramps overlap at frame {t} (constraints {', '.join(names)}); "
+                f"at most {MAX_OVERLAPPING_RAMPS} can be eased together: shorten or move some "
+                "of their smooth_in/smooth_out handles", "range")
         if not here:
             src.append(t)
             weight.append(1.0)
