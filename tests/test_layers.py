@@ -143,9 +143,10 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
 
 
 @pytest.mark.xfail(strict=True, reason="open (issue 15 point 1): the fitted keys are 28 % (demo, "
-                   "median channel) and 64 % (the Bandai walk onto the CMU skeleton) of their window frames, not 10 %: "
-                   "within 0.1 mm the keys follow the dense solve, whose root correction on the "
-                   "walk jumps 13 cm in one frame at 30 fps; a 1 mm fit only reaches about 50 %")
+                   "median channel) and 64 % (the Bandai walk onto the CMU skeleton) of their "
+                   "window frames, not 10 %: within 0.1 mm the keys follow the dense solve, "
+                   "whose root correction on the walk jumps 13 cm in one frame at 30 fps; a "
+                   "1 mm fit only reaches about 50 %")
 @pytest.mark.parametrize("name", ["demo", "walk onto another skeleton"])
 def test_each_channel_has_at_most_a_tenth_as_many_keys_as_window_frames(name):
     solution = _solved(name)
