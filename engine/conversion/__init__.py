@@ -33,10 +33,14 @@ a hand's thumb does not hang from the metacarpal of its primary finger), so its 
 """
 from .automap import automap
 from .binding import BindOptions, Binding, bind, is_upright, reference_pose
+from .chains import (CHAINS, ChainSettings, chain_of_joint, chains_of, effector,
+                     euler_to_offset, mirror_joint, mirrored_offset, offset_to_euler)
 from .composer import compose, retarget, transfer
 from .converter import IntermediatePose, RootOptions, convert
 from .correspondence import Correspondence
 
 __all__ = ["Correspondence", "automap", "BindOptions", "Binding", "bind", "is_upright",
            "reference_pose", "IntermediatePose", "RootOptions", "convert", "compose",
-           "retarget", "transfer"]
+           "retarget", "transfer", "CHAINS", "ChainSettings", "chains_of", "chain_of_joint",
+           "effector", "mirror_joint", "mirrored_offset", "euler_to_offset",
+           "offset_to_euler"]

@@ -23,10 +23,13 @@ bone* in the performer's reference pose. Its steps:
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .chains import CHAINS, ChainSettings, ChainSettingsError
 from .correspondence import Correspondence
 from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_arrays
@@ -53,12 +56,21 @@ class BindOptions:
             paper's *rest posture*); ``False`` keeps the target's own initial posture.
         distribute: how a target chain with unmapped inner joints turns: ``"even"`` spreads
             the turn over the chain's joints, ``"first"`` turns only the chain's first joint.
+        pose_offsets: the animator's retarget pose: sorted pairs ``(target joint, (x, y, z,
+            w))``, a unit quaternion turning the joint in its *binding frame* (its bound rest
+            local frame: ``rest_local' = rest_local * offset``); every frame follows it (see
+            :mod:`engine.conversion`). A dict or pairs are accepted and sorted; identities
+            are dropped.
+        chains: sorted pairs ``(chain name, ChainSettings)`` overriding the defaults
+            (:mod:`engine.conversion.chains`); defaults are dropped.
     """
 
     performer_reference: str | int = "auto"
     target_reference: str | int = "auto"
     rest_alignment: bool = True
     distribute: str = "even"
+    pose_offsets: tuple = ()
+    chains: tuple = ()
 
     def __post_init__(self):
         for ref in (self.performer_reference, self.target_reference):
@@ -69,6 +81,103 @@ class BindOptions:
         if self.distribute not in ("even", "first"):
             raise MotionComposerError(f"distribute must be 'even' or 'first', not "
                                       f"{self.distribute!r}")
+        object.__setattr__(self, "pose_offsets", _offset_pairs(self.pose_offsets))
+        object.__setattr__(self, "chains", _chain_pairs(self.chains))
+
+    def offset(self, joint: str) -> np.ndarray:
+        """``(4,)`` the pose offset of ``joint`` (identity if none)."""
+        for name, q in self.pose_offsets:
+            if name == joint:
+                return np.array(q)
+        return np.array([0.0, 0.0, 0.0, 1.0])
+
+    def with_offset(self, joint: str, quat) -> "BindOptions":
+        """These options with ``joint``'s pose offset set to ``quat`` (``(4,)``); ``None`` or
+        the identity removes it."""
+        kept = [(n, q) for n, q in self.pose_offsets if n != joint]
+        if quat is not None:
+            kept.append((joint, quat))
+        return dataclasses.replace(self, pose_offsets=tuple(kept))
+
+    def without_offsets(self) -> "BindOptions":
+        """These options without any pose offset."""
+        return dataclasses.replace(self, pose_offsets=())
+
+    def chain(self, name: str) -> ChainSettings:
+        """The settings of chain ``name`` (the defaults unless overridden)."""
+        for n, settings in self.chains:
+            if n == name:
+                return settings
+        if name not in CHAINS:
+            raise MotionComposerError(f"{name!r} is not a chain (expected one of "
+                                      f"{', '.join(CHAINS)})")
+        return ChainSettings()
+
+    def with_chain(self, name: str, settings: ChainSettings | None) -> "BindOptions":
+        """These options with chain ``name``'s settings replaced (``None`` or the defaults
+        remove the override)."""
+        kept = [(n, s) for n, s in self.chains if n != name]
+        if settings is not None:
+            kept.append((name, settings))
+        return dataclasses.replace(self, chains=tuple(kept))
+
+
+#: how far from 1 a pose offset's norm may be (typed angles give unit quaternions to rounding)
+_UNIT_TOLERANCE = 1e-6
+
+
+def _offset_pairs(value) -> tuple:
+    """``pose_offsets`` as sorted ``(joint, (x, y, z, w))`` pairs of floats, identities
+    dropped; raises :class:`MotionComposerError` naming the joint of a bad value."""
+    items = value.items() if isinstance(value, dict) else value
+    out = {}
+    for item in items:
+        try:
+            joint, quat = item
+        except (TypeError, ValueError):
+            raise MotionComposerError(f"pose_offsets: expected (joint, (x, y, z, w)) pairs, "
+                                      f"not {item!r}") from None
+        if not isinstance(joint, str) or not joint:
+            raise MotionComposerError(f"pose_offsets: a joint's name, not {joint!r}")
+        if joint in out:
+            raise MotionComposerError(f"pose_offsets: a second offset for {joint!r}")
+        try:
+            q = tuple(float(x) for x in quat)
+        except (TypeError, ValueError):
+            q = ()
+        if len(q) != 4 or not all(math.isfinite(x) for x in q) or \
+                abs(math.sqrt(sum(x * x for x in q)) - 1.0) > _UNIT_TOLERANCE:
+            raise MotionComposerError(f"pose_offsets[{joint!r}]: expected a unit quaternion "
+                                      f"(x, y, z, w), not {quat!r}")
+        if q[:3] != (0.0, 0.0, 0.0):
+            out[joint] = q
+    return tuple(sorted(out.items()))
+
+
+def _chain_pairs(value) -> tuple:
+    """``chains`` as sorted ``(chain name, ChainSettings)`` pairs, defaults dropped."""
+    items = value.items() if isinstance(value, dict) else value
+    out = {}
+    for item in items:
+        try:
+            name, settings = item
+        except (TypeError, ValueError):
+            raise MotionComposerError(f"chains: expected (chain name, ChainSettings) pairs, "
+                                      f"not {item!r}") from None
+        if name not in CHAINS:
+            raise MotionComposerError(f"chains: {name!r} is not a chain (expected one of "
+                                      f"{', '.join(CHAINS)})")
+        if not isinstance(settings, ChainSettings):
+            raise MotionComposerError(f"chains[{name!r}]: expected ChainSettings, not "
+                                      f"{settings!r}")
+        if name.startswith("fingers") and settings.ik_blend > 0:
+            raise ChainSettingsError("ik_blend", f"the {name} chain has no end effector to "
+                                                 "reach with (keep it 0)")
+        if name in out:
+            raise MotionComposerError(f"chains: a second entry for {name!r}")
+        if not settings.is_default:
+            out[name] = settings
+    return tuple(sorted(out.items()))
 
 
 def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> bool:
@@ -135,10 +244,18 @@ class Binding:
         performer: the performer skeleton.
         correspondence: the map used.
         mapped: ``(J,)`` performer joint index driving each target joint, or -1.
-        rest_world: ``(J, 4)`` world rotations of the bound rest posture (the target's axes,
-            the performer's bone directions when rest alignment is on).
-        rest_local: ``(J, 4)`` local rotations of the bound rest posture.
-        rest_positions: ``(J, 3)`` [m] world joint positions of the bound rest posture.
+        rest_world: ``(J, 4)`` world rotations of the bound rest posture with the pose
+            offsets: the *binding pose* (the target's axes, the performer's bone directions
+            when rest alignment is on, then each joint turned by its offset).
+        rest_local: ``(J, 4)`` local rotations of the binding pose (``aligned_local *
+            offsets``).
+        rest_positions: ``(J, 3)`` [m] world joint positions of the binding pose.
+        aligned_world, aligned_local, aligned_positions: the same before the pose offsets
+            (what the converter turns; the very arrays above without offsets).
+        offsets: ``(J, 4)`` each target joint's pose offset (identity where none).
+        chain_of: target joint index -> the name of its chain
+            (:func:`~engine.conversion.chains.chains_of`), for the chains whose settings
+            differ from the defaults; empty without such settings.
         performer_rest_world: ``(Jp, 4)`` performer world rotations in its reference pose.
         performer_rest_positions: ``(Jp, 3)`` [m] performer positions in its reference pose.
         bones: per mapped target joint, its virtual bones (see :class:`_Bones`).
@@ -164,6 +281,11 @@ class Binding:
     rest_world: np.ndarray
     rest_local: np.ndarray
     rest_positions: np.ndarray
+    aligned_world: np.ndarray
+    aligned_local: np.ndarray
+    aligned_positions: np.ndarray
+    offsets: np.ndarray
+    chain_of: dict
     performer_rest_world: np.ndarray
     performer_rest_positions: np.ndarray
     bones: dict
@@ -267,19 +389,28 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving)
     chains = _chains(tsk, bones)
 
-    rest_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
-    rest_local = rest_world.copy()
-    rest_local[1:] = qmul(qconj(rest_world[tsk.parents[1:]]), rest_world[1:])
-    bound = fk_arrays(tsk, rest_local[None], t_ref.translations[None])
-    rest_positions = bound.positions[0]
-    bones = _bones_in_posture(bones, rest_world, rest_positions)
+    aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
+    aligned_local = aligned_world.copy()
+    aligned_local[1:] = qmul(qconj(aligned_world[tsk.parents[1:]]), aligned_world[1:])
+    bound = fk_arrays(tsk, aligned_local[None], t_ref.translations[None])
+    aligned_positions = bound.positions[0]
+    bones = _bones_in_posture(bones, aligned_world, aligned_positions)
+    offsets = _offsets(tsk, options)
+    rest_world, rest_local, rest_positions = aligned_world, aligned_local, aligned_positions
+    if options.pose_offsets:
+        rest_local = qmul(aligned_local, offsets)
+        posed = fk_arrays(tsk, rest_local[None], t_ref.translations[None])
+        rest_world, rest_positions = posed.rotations[0], posed.positions[0]
+    chain_of = _chain_of(tsk, options, aligned_positions)
 
-    t_hip = _height_above_floor(np.concatenate([rest_positions, bound.end_positions[0]]),
+    t_hip = _height_above_floor(np.concatenate([aligned_positions, bound.end_positions[0]]),
                                 body_root)
     p_hip = _height_above_floor(p_ref.all_positions, int(mapped[body_root]))
     ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
     return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
                    rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
+                   aligned_world=aligned_world, aligned_local=aligned_local,
+                   aligned_positions=aligned_positions, offsets=offsets, chain_of=chain_of,
                    performer_rest_world=p_ref.world, performer_rest_positions=p_ref.positions,
                    bones=bones, chains=chains, body_root=body_root,
                    driven=_driven(tsk, mapped, body_root, p_moving),
@@ -288,6 +419,28 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                    options=options,
                    notes={"performer reference": p_ref.label, "target reference": t_ref.label,
                           "hip height ratio": f"{ratio:.4f}"})
+
+
+def _offsets(tsk: Skeleton, options: BindOptions) -> np.ndarray:
+    """``(J, 4)`` each target joint's pose offset (normalised; identity where none)."""
+    offsets = np.zeros((tsk.num_joints, 4))
+    offsets[:, 3] = 1.0
+    for joint, q in options.pose_offsets:
+        if joint not in tsk.index:
+            raise MappingError(f"a pose offset names {joint!r}, which is not a joint of the "
+                               f"target {tsk.names[0]!r}'s skeleton")
+        offsets[tsk.index[joint]] = np.asarray(q) / np.linalg.norm(q)
+    return offsets
+
+
+def _chain_of(tsk: Skeleton, options: BindOptions, positions: np.ndarray) -> dict[int, str]:
+    """Target joint index -> chain name for the chains ``options`` sets (``positions``
+    ``(J, 3)`` [m]: the bound posture, which tells left from right)."""
+    if not options.chains:
+        return {}
+    from .chains import chains_of
+    chains = chains_of(tsk, positions)
+    return {tsk.index[j]: name for name, _ in options.chains for j in chains.get(name, ())}
 
 
 @dataclass(frozen=True, eq=False)

@@ -123,7 +123,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
     whole = [k for k, j in enumerate(mj) if not bones[j].children]
     if whole:
         world[:, mj[whole]] = cmul(pq[:, pm[whole]],
-                                   _rows(qmul(ref_inv[whole], binding.rest_world[mj[whole]])))
+                                   _rows(qmul(ref_inv[whole], binding.aligned_world[mj[whole]])))
     by_twist = [k for k, j in enumerate(mj) if bones[j].children and not bones[j].roll_by_bones]
     if by_twist:
         js = mj[by_twist]
@@ -133,12 +133,12 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         axis = _rows(ref / np.linalg.norm(ref, axis=-1, keepdims=True))
         full = cmul(pq[:, pm[by_twist]], _rows(ref_inv[by_twist]))
         twist = ctwist_about(cmul(cconj(swing), full), axis)
-        world[:, js] = cmul(cmul(swing, twist), _rows(binding.rest_world[js]))
+        world[:, js] = cmul(cmul(swing, twist), _rows(binding.aligned_world[js]))
     for k, j in enumerate(mj):
         b = bones[j]
         if b.children and b.roll_by_bones:
             now = pp[:, b.performer] - pp[:, [mapped[j]]]                 # (3, C, F)
-            world[:, j] = cmul(_align_rows(b.reference, now), binding.rest_world[j][:, None])
+            world[:, j] = cmul(_align_rows(b.reference, now), binding.aligned_world[j][:, None])
 
     # unmapped joints follow their parent (their local value is their bound rest one, so only
     # those above a mapped joint need a world rotation); chains share their first joint's turn
@@ -156,7 +156,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
             continue
         if not binding.above_mapped[j]:
             continue
-        rest = binding.rest_local[j][:, None]
+        rest = binding.aligned_local[j][:, None]
         world[:, j] = rest if parent < 0 else cmul(world[:, parent], rest)
         known[j] = True
     positions = {}
@@ -170,7 +170,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         scaled = disp * np.array([h, v, h])[:, None]
         if root.mode == "in-place":
             scaled[[0, 2]] = 0.0
-        positions[j] = binding.rest_positions[j][:, None] + scaled
+        positions[j] = binding.aligned_positions[j][:, None] + scaled
     return world, positions, known
 
 
@@ -216,14 +216,14 @@ def _distribute(binding: Binding, j: int, chain: list[int], rigid: np.ndarray,
     returns ``j``'s world rotation."""
     tsk = binding.target
     parent = tsk.parents[j]
-    rest = binding.rest_local[j][:, None]
+    rest = binding.aligned_local[j][:, None]
     follow = (np.broadcast_to(rest, rigid.shape) if parent < 0
               else cmul(world[:, parent], rest))
     n = len(chain) + 1
     step = components(qpow(interleaved(cmul(rigid, cconj(follow))), 1.0 / n))
     rots = [cmul(step, follow)]
     for k in chain:
-        rots.append(cmul(step, cmul(rots[-1], binding.rest_local[k][:, None])))
+        rots.append(cmul(step, cmul(rots[-1], binding.aligned_local[k][:, None])))
     # where the primary child ends up, relative to j
     child = binding.bones[j].children[0]
     pos = np.zeros((3,) + rigid.shape[1:])

@@ -21,7 +21,10 @@ gives the same bytes::
       "target": {...},
       "correspondence": {"pairs": {"Hips": "Hips", ...}},
       "binding": {"performer_reference": "auto", "target_reference": "auto",
-                  "rest_alignment": true, "distribute": "even"},
+                  "rest_alignment": true, "distribute": "even",
+                  "pose_offsets": {"LeftArm": [x, y, z, w]},
+                  "chains": {"arm_l": {"weight": 1.0, "twist": true, "distribute": null,
+                                       "ik_blend": 0.0}}},
       "root": {"mode": "scaled", "scale": null},
       "contacts": {"auto": true, "options": {"height": 0.03, ...}},
       "floor": null,
@@ -37,6 +40,11 @@ gives the same bytes::
                   "channels": [...]}],
       "embedded": {"performer": "HIERARCHY\\n..."}
     }
+
+``binding.pose_offsets`` and ``binding.chains`` are written only when set: a file without
+them (every file before them) means none, so they need no new version. :mod:`.profile` holds
+the retarget profiles (``.mcprofile``): the parts of a project that belong to the pair of
+skeletons.
 
 Source paths are stored relative to the project file's folder (so a project folder moved with
 its clips still opens) and held absolute in memory. ``embedded`` (last, as it is long) holds the
@@ -66,6 +74,9 @@ from .json import project_from_json, project_to_json
 from .migrations import MIGRATIONS, migrate, migrator
 from .model import (FORMAT, ROLES, SKELETONS, SUFFIX, VERSION, MissingSourceError,
                     OpenedProject, Project, ProjectError, Source, ViewerState)
+from .profile import (PROFILE_FORMAT, PROFILE_SUFFIX, PROFILE_VERSION, Profile, ProfileError,
+                      apply_profile, profile_from_json, profile_of, profile_to_json,
+                      read_profile, save_profile)
 
 __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceError",
            "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "ROLES",
@@ -73,4 +84,7 @@ __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceErr
            "project_from_json", "save_project", "load_project", "open_project", "read_sources",
            "check_project", "correction_keys",
            "embed_sources", "autosave_path", "write_autosave", "find_autosave",
-           "discard_autosave", "remove_autosave_file", "new_session", "backup_path"]
+           "discard_autosave", "remove_autosave_file", "new_session", "backup_path",
+           "Profile", "ProfileError", "profile_of", "apply_profile", "save_profile",
+           "read_profile", "profile_to_json", "profile_from_json", "PROFILE_FORMAT",
+           "PROFILE_VERSION", "PROFILE_SUFFIX"]

@@ -164,6 +164,10 @@ def _check(project: Project, performer: Motion, target: Motion, check_map: bool)
         if not isinstance(ref, str) and ref >= motion.num_frames:
             raise _Invalid(f"binding.{key}", f"frame {ref} is past the clip's last frame "
                                              f"({motion.num_frames - 1})")
+    for joint, _ in project.bind_options.pose_offsets:
+        if joint not in tsk.index:
+            raise _Invalid(_sub("binding.pose_offsets", joint),
+                           _not_a_joint(joint, tsk, "target"))
     for i, c in enumerate(project.constraints):
         where = f"constraints[{i}]"
         if c.joint not in tsk.index:

@@ -12,6 +12,7 @@ import numpy as np
 
 from .. import limits
 from ..conversion.binding import BindOptions
+from ..conversion.chains import CHAINS, ChainSettings, ChainSettingsError
 from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
 from ..correction.constraints import KINDS, Constraint, ConstraintError
@@ -26,7 +27,8 @@ from .migrations import migrate
 from .model import (FORMAT, ROLES, SKELETONS, SOLVED_LAYER, VERSION, Project, ProjectError,
                     Source, ViewerState, _Invalid, _kind, _show)
 
-__all__ = ["project_to_json", "project_from_json", "ik_dict", "IK_FIELDS"]
+__all__ = ["project_to_json", "project_from_json", "ik_dict", "binding_dict", "IK_FIELDS",
+           "CHAIN_FIELDS"]
 
 #: the IK settings a project stores (``scale`` is taken from the character on each run)
 IK_FIELDS = tuple(f.name for f in dataclasses.fields(IKOptions) if f.name != "scale")
@@ -63,9 +65,7 @@ def _project_dict(p: Project, folder) -> dict:
         "performer": _source_dict(p.performer, folder, "performer"),
         "target": _source_dict(p.target, folder, "target"),
         "correspondence": corr,
-        "binding": {"performer_reference": _reference_out(b.performer_reference),
-                    "target_reference": _reference_out(b.target_reference),
-                    "rest_alignment": bool(b.rest_alignment), "distribute": b.distribute},
+        "binding": binding_dict(b),
         "root": {"mode": p.root.mode,
                  "scale": list(p.root.scale) if p.root.scale is not None else None},
         "contacts": {"auto": bool(p.auto_contacts),
@@ -89,6 +89,20 @@ def _project_dict(p: Project, folder) -> dict:
                 if getattr(p, role).embedded is not None}
     if embedded:
         out["embedded"] = embedded
+    return out
+
+
+def binding_dict(b: BindOptions) -> dict:
+    """The ``"binding"`` object; ``pose_offsets`` and ``chains`` only when set (files without
+    them mean none)."""
+    out = {"performer_reference": _reference_out(b.performer_reference),
+           "target_reference": _reference_out(b.target_reference),
+           "rest_alignment": bool(b.rest_alignment), "distribute": b.distribute}
+    if b.pose_offsets:
+        out["pose_offsets"] = {joint: [float(x) for x in q] for joint, q in b.pose_offsets}
+    if b.chains:
+        out["chains"] = {name: {key: getattr(settings, key) for key in CHAIN_FIELDS}
+                         for name, settings in b.chains}
     return out
 
 
@@ -368,7 +382,55 @@ def _binding(data) -> BindOptions:
         rest_alignment=_bool(d.get("rest_alignment", default.rest_alignment),
                              "binding.rest_alignment"),
         distribute=_choice(d.get("distribute", default.distribute), "binding.distribute",
-                           ("even", "first")))
+                           ("even", "first")),
+        pose_offsets=_pose_offsets(d.get("pose_offsets", {}), "binding.pose_offsets"),
+        chains=_chains(d.get("chains", {}), "binding.chains"))
+
+
+def _pose_offsets(data, where: str) -> tuple:
+    """``{joint: [x, y, z, w]}``: unit quaternions in each joint's binding frame."""
+    out = []
+    for joint, value in _obj(data, where).items():
+        at = _sub(where, joint)
+        if not joint:
+            raise _Invalid(at, "expected a target joint's name, not an empty string")
+        q = [_num(x, f"{at}[{i}]") for i, x in enumerate(_list(value, at))]
+        if len(q) != 4 or abs(math.sqrt(sum(x * x for x in q)) - 1.0) > 1e-6:
+            raise _Invalid(at, f"expected a unit quaternion [x, y, z, w], not {_show(value)}")
+        out.append((joint, tuple(q)))
+    return tuple(out)
+
+
+#: a chain's settings in a file, in order
+CHAIN_FIELDS = tuple(f.name for f in dataclasses.fields(ChainSettings))
+
+
+def _chains(data, where: str) -> tuple:
+    """``{chain: {"weight", "twist", "distribute", "ik_blend"}}`` (each setting optional)."""
+    out = []
+    for name, value in _obj(data, where).items():
+        at = _sub(where, name)
+        if name not in CHAINS:
+            raise _Invalid(at, f"unknown chain (expected one of {', '.join(CHAINS)})")
+        d = _obj(value, at, optional=CHAIN_FIELDS)
+        values = {}
+        for key in ("weight", "ik_blend"):
+            if key in d:
+                values[key] = _num(d[key], f"{at}.{key}")
+        if "twist" in d:
+            values["twist"] = _bool(d["twist"], f"{at}.twist")
+        if d.get("distribute") is not None:
+            values["distribute"] = _choice(d["distribute"], f"{at}.distribute",
+                                           ("even", "first"))
+        try:
+            settings = ChainSettings(**values)
+        except ChainSettingsError as exc:
+            raise _Invalid(f"{at}.{exc.field}", exc.problem) from None
+        if name.startswith("fingers") and settings.ik_blend > 0:
+            raise _Invalid(f"{at}.ik_blend", "the fingers have no end effector to reach with "
+                                             "(expected 0)")
+        out.append((name, settings))
+    return tuple(out)
 
 
 def _root(data) -> RootOptions:
