@@ -176,6 +176,9 @@ class MainWindow(QtWidgets.QMainWindow):
             page.setWidget(panel)
             page.setWidgetResizable(True)
             page.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+            page.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+            page.setMinimumWidth(panel.minimumSizeHint().width() +
+                                 page.verticalScrollBar().sizeHint().width())
             return panel, page
         elif name == "inspector":
             from motion_composer.app.gui.inspector import ConstraintInspector

@@ -350,6 +350,11 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     def __init__(self, document, parent=None):
         super().__init__()
         self.doc = document
+        # a depth buffer, asked for: left unspecified, Mesa under X may give a window none,
+        # and a skinned mesh then shows whichever of its faces was drawn last (its back)
+        surface = QtGui.QSurfaceFormat.defaultFormat()
+        surface.setDepthBufferSize(24)
+        self.setFormat(surface)
         if gl_possible():
             self.widget = QtWidgets.QWidget.createWindowContainer(self, parent)
             self.widget.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
