@@ -375,9 +375,10 @@ class BindingPanel(QtWidgets.QWidget):
         height = table.horizontalHeader().height() + 2 * table.frameWidth() + sum(
             table.rowHeight(r) for r in range(table.rowCount()))
         table.setFixedHeight(height)
-        self.chain_notes.setText("" if chains else
-                                 "<i>No limb chains: the target's joints have no humanoid "
-                                 "roles.</i>" if skeleton is not None else "")
+        self.chain_notes.setText("<i>No limb chains: the target's joints have no humanoid "
+                                 "roles.</i>")
+        self.chain_notes.setVisible(skeleton is not None and not chains)
+        table.setVisible(bool(chains))
 
     @staticmethod
     def _scale_spin(tip: str) -> QtWidgets.QDoubleSpinBox:
