@@ -42,6 +42,7 @@ from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
+from .correction.reach import SOURCE as REACH, reach_constraints, unreached
 from .correction import preview as _preview
 from .correction.quality import quality
 from .errors import MotionComposerError
@@ -412,7 +413,8 @@ class Scene:
         project's settings (:meth:`automatic_constraints`) beside the user's. The IK starts
         from :attr:`edited` (the composed motion with the animator's layers) and its
         correction, as fitted keys, replaces the solved layer only: the animator's layers are
-        kept bit for bit. ``ik_options`` overrides the project's. Raises
+        kept bit for bit. The chains' IK blends add their reach goals (made again on every
+        solve, :meth:`reach_constraints`). ``ik_options`` overrides the project's. Raises
         :class:`~engine.errors.MotionComposerError` (``cancel()`` returning True stops it).
         """
         timings = {}
@@ -429,6 +431,8 @@ class Scene:
             t0 = time.perf_counter()
             chosen = [c for c in chosen if not c.auto] + self.automatic_constraints()
             timings["contact_detection_s"] = time.perf_counter() - t0
+        chosen, unreached = self._with_reach(chosen)
+        warnings += unreached
         correction = None
         if any(c.enabled for c in chosen):
             t0 = time.perf_counter()
@@ -446,6 +450,27 @@ class Scene:
                                     self.binding)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
+
+    def reach_constraints(self, constraints=()) -> list[Constraint]:
+        """The chains' IK blends as reach goals on their effectors
+        (:mod:`engine.correction.reach`), one priority level below the contacts among
+        ``constraints`` (level 2 without contacts). Empty without a direct conversion or
+        without IK blends."""
+        composed = self.composed
+        if composed is None or not any(s.ik_blend > 0 for _, s in self.bind_options.chains):
+            return []
+        below = 1 + max((c.priority for c in constraints
+                         if c.meta.get("source") == "contact"), default=1)
+        return reach_constraints(self.binding, self.performer, composed, self.project.root,
+                                 priority=below)
+
+    def _with_reach(self, constraints: list) -> tuple[list, list[str]]:
+        """``constraints`` with the reach goals made again from the chain settings (any
+        previous ones dropped), and lines naming the IK blends that have no goal."""
+        kept = [c for c in constraints if c.meta.get("source") != REACH]
+        if not any(s.ik_blend > 0 for _, s in self.bind_options.chains):
+            return (kept if len(kept) != len(constraints) else constraints), []
+        return kept + self.reach_constraints(kept), unreached(self.binding)
 
     def quality(self) -> dict | None:
         """The quality figures (:func:`~engine.correction.quality.quality`) of the motion as

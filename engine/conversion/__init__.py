@@ -30,6 +30,22 @@ target chain has more joints than the performer maps (CC3's spine under CMU's), 
 the chain so that its end still lies exactly along the virtual bone; ``"first"`` puts it all on
 the chain's first joint. A branching joint keeps its whole turn (it also places its other bones:
 a hand's thumb does not hang from the metacarpal of its primary finger), so its twist is kept.
+
+The animator's hand on the binding (:attr:`BindOptions.pose_offsets`, :attr:`BindOptions.chains`,
+:mod:`.chains`): a *pose offset* ``q`` on joint ``j`` turns ``j`` in its binding frame, so the
+*binding pose* (``Binding.rest_local``) is ``rest_local * q``. The converter turns the
+bound posture before the offsets as above, then takes each joint's per-frame local rotation
+``L`` relative to its parent and makes it ``L * q``: the joint's local rotation changes by
+exactly that rotation in the binding frame on every frame, and no other joint's does (its
+children keep their local rotations and follow it rigidly, so the limb below turns with it).
+Per-chain settings act on the same local rotations, before the offset: with ``twist`` off a
+chain joint's rotation relative to its bound rest one loses its twist about the joint's bone
+(towards its child with the largest subtree: swing-twist relative to the binding); the
+``weight`` slerps each chain joint's local rotation from its bound rest value (0: exactly the
+binding pose on every frame) to the converted one (1); a chain's own ``distribute`` replaces
+the global one for the unmapped joints below its mapped ones. Defaults change nothing, bit
+for bit. A chain's ``ik_blend`` is not the converter's: it adds a reach goal to the IK
+(:mod:`engine.correction.reach`).
 """
 from .automap import automap
 from .binding import BindOptions, Binding, bind, is_upright, reference_pose

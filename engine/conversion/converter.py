@@ -12,7 +12,7 @@ from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_components, joint_major
 from ..motion import Motion
 from ..quaternions import (cconj, cmul, components, cquat_between, crot, ctwist_about,
-                           interleaved, qconj, qmul, qpow)
+                           interleaved, qconj, qmul, qpow, qslerp)
 from .binding import Binding
 
 __all__ = ["RootOptions", "IntermediatePose", "convert"]
@@ -142,13 +142,12 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
 
     # unmapped joints follow their parent (their local value is their bound rest one, so only
     # those above a mapped joint need a world rotation); chains share their first joint's turn
-    even = binding.options.distribute == "even"
     known = mapped >= 0
     for j in range(J):
         parent = tsk.parents[j]
         if known[j]:
             chain = binding.chains.get(j)
-            if chain and even and mapped[j] >= 0:
+            if chain and _distribution(binding, j) == "even" and mapped[j] >= 0:
                 b = bones[j]
                 world[:, j] = _distribute(binding, j, chain, world[:, j], world,
                                           pp[:, b.performer[0]] - pp[:, mapped[j]], local_t)
@@ -159,6 +158,8 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         rest = binding.aligned_local[j][:, None]
         world[:, j] = rest if parent < 0 else cmul(world[:, parent], rest)
         known[j] = True
+    if binding.options.pose_offsets or binding.chain_of:
+        world = _posed(binding, world, known)
     positions = {}
     for j in binding.driven:
         ph = mapped[j]
@@ -172,6 +173,78 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
             scaled[[0, 2]] = 0.0
         positions[j] = binding.aligned_positions[j][:, None] + scaled
     return world, positions, known
+
+
+def _distribution(binding: Binding, j: int) -> str:
+    """How the chain below mapped target joint ``j`` turns: its named chain's own choice
+    (:class:`~engine.conversion.chains.ChainSettings`), else the binding's."""
+    name = binding.chain_of.get(j)
+    own = binding.options.chain(name).distribute if name is not None else None
+    return own or binding.options.distribute
+
+
+def _posed(binding: Binding, world: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The converted world rotations ``(4, J, F)`` (filled where ``known``) with the chain
+    settings and the pose offsets applied, as changes of local rotations, root to leaves: each
+    joint's local rotation ``L`` (relative to its parent, before the offsets) loses its twist
+    relative to the binding where its chain's ``twist`` is off, is slerped from the bound rest
+    local towards the converted one by its chain's ``weight``, then turned by its offset
+    (``L * offset``); every other local rotation is left as it is."""
+    tsk = binding.target
+    options = binding.options
+    offset = np.any(binding.offsets[:, :3] != 0.0, axis=1)
+    changed = np.zeros(tsk.num_joints, dtype=bool)
+    for j in range(tsk.num_joints):
+        p = tsk.parents[j]
+        changed[j] = known[j] and (j in binding.chain_of or offset[j] or
+                                   (p >= 0 and changed[p]))
+    out = world.copy()
+    axes = _bone_axes(tsk) if any(not s.twist for _, s in options.chains) else {}
+    for j in np.flatnonzero(changed):
+        p = tsk.parents[j]
+        local = world[:, j] if p < 0 else cmul(cconj(world[:, p]), world[:, j])
+        name = binding.chain_of.get(j)
+        if name is not None:
+            local = _chain_local(options.chain(name), binding.aligned_local[j], local,
+                                 axes.get(j))
+        if offset[j]:
+            local = cmul(local, binding.offsets[j][:, None])
+        out[:, j] = local if p < 0 else cmul(out[:, p], local)
+    return out
+
+
+def _chain_local(settings, rest: np.ndarray, local: np.ndarray, axis) -> np.ndarray:
+    """A chain joint's local rotation ``(4, F)`` under its chain's ``settings``: without its
+    twist about ``axis`` (``(3,)``, its bone in its own frame) relative to the bound rest
+    ``rest`` ``(4,)`` when ``twist`` is off, then slerped from ``rest`` by ``weight`` (exactly
+    ``rest`` at 0)."""
+    if settings.weight == 0.0:
+        return np.broadcast_to(rest[:, None], local.shape).copy()
+    if not settings.twist and axis is not None:
+        change = cmul(cconj(rest[:, None]), local)                 # in the bound rest frame
+        twist = ctwist_about(change, axis[:, None])
+        local = cmul(rest[:, None], cmul(change, cconj(twist)))
+    if settings.weight < 1.0:
+        rows = interleaved(local)
+        local = components(qslerp(np.broadcast_to(rest, rows.shape), rows, settings.weight))
+    return local
+
+
+def _bone_axes(tsk) -> dict[int, np.ndarray]:
+    """Per target joint, its bone's direction ``(3,)`` in its own frame: towards its child
+    with the largest subtree, or its End Site; joints with neither (or a zero-length bone)
+    have none."""
+    subtree = np.ones(tsk.num_joints, dtype=np.intp)
+    for j in range(tsk.num_joints - 1, 0, -1):
+        subtree[tsk.parents[j]] += subtree[j]
+    ends = {site.parent: np.asarray(site.offset, dtype=float) for site in tsk.end_sites}
+    axes = {}
+    for j in range(tsk.num_joints):
+        kids = tsk.children[j]
+        bone = (tsk.offsets[max(kids, key=lambda c: subtree[c])] if kids else ends.get(j))
+        if bone is not None and np.linalg.norm(bone) > 1e-9:
+            axes[j] = np.asarray(bone, dtype=float) / np.linalg.norm(bone)
+    return axes
 
 
 def _rows(values: np.ndarray) -> np.ndarray:
