@@ -273,14 +273,26 @@ def test_the_chain_table_edits_each_chain_as_one_command(qtbot, panel, doc):
     assert arm["weight"].value == 1.0 and panel.chain_rows["spine"]["twist"].isChecked()
 
 
-def test_the_ik_blend_slider_sets_the_chain_and_the_solve_reaches(qtbot, panel, doc):
+def test_an_ik_blend_edit_solves_and_the_hand_reaches(qtbot, panel, doc):
     blend = panel.chain_rows["arm_r"]["ik_blend"]
-    blend.slider.setValue(100)
+    count = doc.undo_stack.count()
+    blend.slider.setValue(50)
+    blend.slider.setValue(100)                     # one slider's run: one step, one solve
+    assert doc.undo_stack.count() == count + 1
     assert doc.scene.bind_options.chain("arm_r").ik_blend == 1.0
     assert doc.undo_stack.undoText() == "Set right arm IK blend to 1.00"
+    qtbot.waitUntil(lambda: not doc.pending, timeout=WAIT_MS * 4)
+    reach = [c for c in doc.scene.constraints if c.name == "reach arm_r"]
+    assert len(reach) == 1 and reach[0].auto
+    frames = np.arange(reach[0].start, reach[0].end + 1)
+    hand = doc.pose("target").positions[frames,
+                                        doc.scene.target.skeleton.index[reach[0].joint]]
+    miss = np.linalg.norm(hand - reach[0].goal_point(frames), axis=1)
+    assert np.percentile(miss, 90) < 0.005, np.percentile(miss, [50, 90, 100])
+    assert doc.undo_stack.count() == count + 1       # the solve landed in the same step
     doc.undo_stack.undo()
     assert doc.scene.bind_options.chain("arm_r").ik_blend == 0.0
-    assert blend.value == 0.0
+    assert blend.value == 0.0 and not doc.scene.constraints
 
 
 def test_edit_in_the_viewport_is_the_viewer_option(panel, doc):

@@ -11,7 +11,8 @@ viewport and the correspondence editor), its pose offset as typed X, Y, Z angles
 binding-frame axes (:func:`~engine.conversion.chains.euler_to_offset`), Mirror to the other
 side, Reset joint and Reset all, and "Edit in the viewport" (the viewport's binding-pose mode
 with its rotation gizmo). The chain table: per chain of the target (spine, neck, arms, legs,
-fingers) its rotation weight, twist on or off, chain turns and IK blend.
+fingers) its rotation weight, twist on or off, chain turns and IK blend (an IK blend edit
+solves the scene in the background: only a solve meets, or drops, its reach goals).
 
 Spin boxes and sliders merge: consecutive edits of one control (the two root scales count as
 one; a slider's drag) are one undo step whose text names the last value.
@@ -531,9 +532,11 @@ class BindingPanel(QtWidgets.QWidget):
 
     # ------------------------------------------------------------------ widgets -> model
     def _push(self, text: str, bind: BindOptions | None = None,
-              root: RootOptions | None = None, merge_key: str | None = None) -> None:
+              root: RootOptions | None = None, merge_key: str | None = None,
+              solve: bool = False) -> None:
         """One command; with ``merge_key``, consecutive pushes with the same key (and nothing
-        else pushed in between) are one undo step named after the last one."""
+        else pushed in between) are one undo step named after the last one; ``solve``: the
+        new scene is solved in the background."""
         stack = self.doc.undo_stack
         top = stack.command(stack.index() - 1) if stack.index() > 0 else None
         continuing = (merge_key is not None and merge_key == self._merge_key
@@ -543,7 +546,8 @@ class BindingPanel(QtWidgets.QWidget):
         foreign_mergeable = top is not None and top.id() != -1 and not continuing
         merge = merge_key is not None and not foreign_mergeable
         index = stack.index()
-        push_options(self.doc, bind_options=bind, root_options=root, text=text, merge=merge)
+        push_options(self.doc, bind_options=bind, root_options=root, text=text, merge=merge,
+                     solve=solve)
         new_top = stack.command(stack.index() - 1) if stack.index() > 0 else None
         merged = continuing and stack.index() == index and new_top is top
         if merged:
@@ -608,9 +612,11 @@ class BindingPanel(QtWidgets.QWidget):
             what = f"twist {'on' if value else 'off'}"
         else:
             what = f"chain turns to {dict(CHAIN_DISTRIBUTIONS)[value].lower()}"
+        # an IK blend's reach goals are met, or dropped, by a solve
         self._push(f"Set {CHAIN_TITLES[name].lower()} {what}",
                    bind=b.with_chain(name, settings),
-                   merge_key=f"chain {name} {key}" if sliding else None)
+                   merge_key=f"chain {name} {key}" if sliding else None,
+                   solve=key == "ik_blend")
 
     def _reference_chosen(self, side: str) -> None:
         chooser = getattr(self, f"{side}_reference")
