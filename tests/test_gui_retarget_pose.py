@@ -543,3 +543,28 @@ def test_the_quality_panel_follows_an_offset_edit(qtbot, tmp_path, monkeypatch):
     assert float(row.text(1).split()[0]) == pytest.approx(error("LeftForeArm"), abs=0.06)
     doc.undo_stack.undo()
     assert error("LeftForeArm") < 0.01
+
+
+def test_the_window_shares_the_joint_and_the_mode_between_its_panels(qtbot, tmp_path,
+                                                                     monkeypatch):
+    from PySide6.QtTest import QTest
+    w = _window(qtbot, tmp_path, monkeypatch)
+    doc, panel, corr = w.doc, w.binding_panel, w.correspondence_panel
+    # a click in the correspondence editor's target tree selects the binding panel's joint
+    w.correspondence_dock.raise_()
+    tree = corr.target_tree
+    item = tree.items["LeftArm"]
+    tree.scrollToItem(item)
+    QTest.mouseClick(tree.viewport(), Qt.MouseButton.LeftButton,
+                     pos=tree.visualItemRect(item).center())
+    assert doc.selection == ("target", "LeftArm")
+    assert panel.pose_joint.currentData() == "LeftArm"
+    # and the panel's choice selects it in the tree
+    panel.pose_joint.setCurrentIndex(panel.pose_joint.findData("RightUpLeg"))
+    assert tree.selected_joint() == "RightUpLeg"
+    # View > Edit Binding Pose, the panel's check box and the viewport's mode are one
+    action = _menu_action(w, "Edit Binding Pose")
+    action.trigger()
+    assert panel.pose_edit.isChecked() and w.viewport.option("pose_edit")
+    panel.pose_edit.setChecked(False)
+    assert not action.isChecked() and not w.viewport.option("pose_edit")
