@@ -457,6 +457,9 @@ def test_esc_and_a_right_click_cancel_a_drag(view, qtbot):
     qtbot.keyClick(v, Qt.Key.Key_Escape)
     assert v._pose_drag is None
     np.testing.assert_allclose(v.figures["target"].points, shown)
+    camera = v.camera_state()
+    qtbot.mouseMove(v, points[0])              # the button still held: no orbit either
+    assert v.camera_state() == camera
     qtbot.mouseRelease(v, Qt.MouseButton.LeftButton, pos=points[-1])
     assert doc.undo_stack.count() == count and doc.scene.bind_options.pose_offsets == ()
     # a right click during the drag cancels it too
@@ -468,6 +471,12 @@ def test_esc_and_a_right_click_cancel_a_drag(view, qtbot):
     qtbot.mouseRelease(v, Qt.MouseButton.LeftButton, pos=points[-1])
     np.testing.assert_allclose(v.figures["target"].points, shown)
     assert doc.undo_stack.count() == count and doc.scene.bind_options.pose_offsets == ()
+    # and the next drag works again
+    qtbot.mousePress(v, Qt.MouseButton.LeftButton, pos=points[0])
+    for p in points[1:]:
+        qtbot.mouseMove(v, p)
+    qtbot.mouseRelease(v, Qt.MouseButton.LeftButton, pos=points[-1])
+    assert doc.undo_stack.count() == count + 1
 
 
 def _ring_pixels_drawn(v) -> list[int]:

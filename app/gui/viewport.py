@@ -421,6 +421,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             self.rings.append(ring)
             self.addItem(ring)
         self._pose_drag: _PoseDrag | None = None
+        self._drag_cancelled = False      # a cancelled drag's button is still held
         self._binding_poses: tuple | None = None
         self._press = None
         self.mousePos = QtCore.QPointF()
@@ -903,14 +904,6 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         normals = to_view(pose_gizmo.ring_axes(frame))
         return joint, j, center, normals, GIZMO_RADIUS * self._size()
 
-    def ring_pixels(self) -> list[np.ndarray]:
-        """The gizmo's three rings as pixel polylines (``(n, 2)`` each), or [] without one."""
-        gizmo = self.gizmo()
-        if gizmo is None:
-            return []
-        _joint, _j, center, normals, radius = gizmo
-        return [self.project(pose_gizmo.ring_points(center, n, radius)) for n in normals]
-
     def _refresh_gizmo(self, layout) -> None:
         """The rings around the selected target joint (the one dragged highlighted)."""
         gizmo = self.gizmo() if "target" in layout else None
@@ -943,7 +936,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         if gizmo is None:
             return None
         joint, j, center, normals, radius = gizmo
-        k = pose_gizmo.nearest_ring(self.ring_pixels(), x, y, GIZMO_PICK_PX)
+        pixels = [self.project(pose_gizmo.ring_points(center, n, radius)) for n in normals]
+        k = pose_gizmo.nearest_ring(pixels, x, y, GIZMO_PICK_PX)
         if k is None:
             return None
         offset = np.asarray(self.doc.scene.bind_options.offset(joint), dtype=float)
@@ -959,11 +953,13 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
 
     def cancel_pose_drag(self) -> bool:
         """Drop a gizmo drag in progress (Esc, right click): the binding pose stays as it
-        was. False when there was none."""
+        was, and the pointer does nothing more until the left button is released. False when
+        there was none."""
         if self._pose_drag is None:
             return False
         self._pose_drag = None
         self._press = None
+        self._drag_cancelled = True
         self.refresh()
         return True
 
@@ -1152,6 +1148,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             if not left:                          # a right click cancels the gizmo's drag
                 self.cancel_pose_drag()
             return
+        if self._drag_cancelled:
+            return
         self._press = ev.position()
         self.mousePos = ev.position()
         if left:
@@ -1180,6 +1178,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         return constraints, engine
 
     def mouseMoveEvent(self, ev):
+        if self._drag_cancelled:
+            return
         if self._pose_drag is not None:
             self._drag_ring(ev.position().x(), ev.position().y())
             self.mousePos = ev.position()
@@ -1208,6 +1208,9 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self.update()
 
     def mouseReleaseEvent(self, ev):
+        if self._drag_cancelled:
+            self._drag_cancelled = ev.buttons() != QtCore.Qt.MouseButton.NoButton
+            return
         if self._pose_drag is not None:
             if ev.button() == QtCore.Qt.MouseButton.LeftButton:
                 self._drag_ring(ev.position().x(), ev.position().y())
