@@ -331,6 +331,50 @@ def _write_output(args, motion, character):
     return motion
 
 
+def _settings_inputs(args) -> tuple:
+    """The settings files a run reads, as ``(what, path)`` for the output checks."""
+    return tuple((f"the {flag} file", path) for flag, path in (
+        ("--profile", args.profile), ("--pose-offsets", args.pose_offsets),
+        ("--chain-settings", args.chain_settings)) if path)
+
+
+def _profile(args):
+    """The ``--profile`` file's profile, or the defaults."""
+    from motion_composer.engine.project import Profile, read_profile
+    return read_profile(args.profile) if args.profile else Profile()
+
+
+def bind_options_from_args(args, base, target_skeleton=None):
+    """``base`` (the profile's :class:`~engine.conversion.BindOptions`, or the defaults) with
+    the binding flags given (``--reference``, ``--target-reference``, ``--keep-target-pose``,
+    ``--distribute``), then the ``--pose-offsets`` file's offsets (by joint, replacing the
+    profile's for those joints; checked against ``target_skeleton`` when given) and the
+    ``--chain-settings`` file's settings (by chain, over the profile's for the settings it
+    gives)."""
+    import dataclasses
+
+    from motion_composer.engine.project import (SettingsFileError, read_chain_settings,
+                                                read_pose_offsets)
+
+    flags = {"performer_reference": "reference", "target_reference": "target_reference",
+             "distribute": "distribute"}                 # batch has none of these
+    changes = {k: getattr(args, flag, None) for k, flag in flags.items()}
+    changes = {k: v for k, v in changes.items() if v is not None}
+    if getattr(args, "keep_target_pose", False):
+        changes["rest_alignment"] = False
+    options = dataclasses.replace(base, **changes)
+    if args.pose_offsets:
+        for joint, quat in read_pose_offsets(args.pose_offsets).items():
+            if target_skeleton is not None and joint not in target_skeleton.index:
+                raise SettingsFileError(f"{joint!r} is not a joint of the target skeleton",
+                                        args.pose_offsets, joint)
+            options = options.with_offset(joint, tuple(quat))
+    if args.chain_settings:
+        for name, settings in read_chain_settings(args.chain_settings, options).items():
+            options = options.with_chain(name, settings)
+    return options
+
+
 def cmd_retarget(args) -> int:
     import time
 
@@ -340,20 +384,22 @@ def cmd_retarget(args) -> int:
     from motion_composer.engine.conversion.correspondence import Correspondence
     from motion_composer.engine.errors import MotionComposerError
     from motion_composer.engine.fileio import atomic_write, check_outputs, read_regular_file
-    from motion_composer.engine.conversion import BindOptions, RootOptions
-    from motion_composer.engine.correction.ik import IKOptions
+    from motion_composer.engine.conversion import RootOptions
     from motion_composer.engine.project import Project, Source
     from motion_composer.engine.scene import Scene
 
     started = time.perf_counter()
-    ik_options = ik_options_from_args(args, IKOptions())
     # an output that is an input, a folder or a device, or an unwritable suffix, fails
     # before any work
     check_outputs((("-o", args.output), ("--save-map", args.save_map),
-                   ("--save-project", args.save_project), ("--report", args.report)),
+                   ("--save-project", args.save_project), ("--save-profile", args.save_profile),
+                   ("--report", args.report)),
                   (("the performer", args.performer), ("the target", args.target),
-                   ("the --map file", args.map), ("the --constraints file", args.constraints)))
+                   ("the --map file", args.map), ("the --constraints file", args.constraints),
+                   *_settings_inputs(args)))
     output_format(args.output)
+    profile = _profile(args)
+    ik_options = ik_options_from_args(args, profile.ik_options)
     performer_options = side_options(args, "performer")
     if args.take is not None:
         from motion_composer.engine.formats import sniff
@@ -377,6 +423,9 @@ def cmd_retarget(args) -> int:
     if args.map:
         correspondence = Correspondence.load(args.map)
         correspondence.validate(target.skeleton, performer.skeleton, path=args.map)
+    elif args.profile and len(profile.correspondence):
+        correspondence = profile.correspondence
+        correspondence.validate(target.skeleton, performer.skeleton, path=args.profile)
     else:
         from motion_composer.engine.conversion.automap import automap
         correspondence = automap(target.skeleton, performer.skeleton)
@@ -395,20 +444,20 @@ def cmd_retarget(args) -> int:
         performer=Source(os.path.abspath(args.performer), **performer_options),
         target=Source(os.path.abspath(args.target), **target_options),
         correspondence=correspondence,
-        bind_options=BindOptions(performer_reference=args.reference,
-                                 target_reference=args.target_reference,
-                                 rest_alignment=not args.keep_target_pose,
-                                 distribute=args.distribute),
-        root=RootOptions(mode=args.root,
-                         scale=tuple(args.root_scale) if args.root_scale else None),
-        constraints=constraints, auto_contacts=args.auto_contacts, floor=args.floor,
-        ik_options=ik_options)
+        bind_options=bind_options_from_args(args, profile.bind_options, target.skeleton),
+        root=RootOptions(mode=args.root or profile.root.mode,
+                         scale=tuple(args.root_scale) if args.root_scale else profile.root.scale),
+        constraints=constraints, auto_contacts=args.auto_contacts or profile.auto_contacts,
+        contact_options=profile.contact_options, floor=args.floor, ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
     for line in result.report["warnings"]:
         print(f"motion-composer: warning: {line}", file=sys.stderr)
     written = _write_output(args, result.motion, character)  # mesh and skin when it has
     if args.save_map:
         correspondence.save(args.save_map)
+    if args.save_profile:
+        from motion_composer.engine.project import profile_of, save_profile
+        save_profile(args.save_profile, profile_of(result.scene.project))
     if args.save_project:
         # the session as a project, with every constraint enforced (the user's and the
         # automatic ones) and the IK correction as displacement-map keys
@@ -495,6 +544,16 @@ def cmd_batch(args) -> int:
 
     started = time.perf_counter()
     project = load_project(args.project, check_sources=False)
+    if args.profile:
+        from motion_composer.engine.project import apply_profile, read_profile
+        project = apply_profile(project, read_profile(args.profile))
+    target_skeleton = None
+    if args.pose_offsets and project.target.path is not None:
+        from motion_composer.engine.formats import read_motion
+        target_skeleton = read_motion(project.target.path, **{
+            **project.target.reader_options(), **side_options(args, "target")}).skeleton
+    project = project.replace(bind_options=bind_options_from_args(
+        args, project.bind_options, target_skeleton))
     recipe = recipe_from_project(project, suffix=args.suffix)
     performer_reader = side_options(args, "performer")
     if args.take is not None:
@@ -507,7 +566,7 @@ def cmd_batch(args) -> int:
     ik = ik_options_from_args(args, project.ik_options)
     recipe = type(recipe)(**{**recipe.__dict__, "ik": dataclasses.asdict(ik)})
     inputs = (("the project", args.project), ("the target", recipe.target_path),
-              *((f"the clip {clip}", clip) for clip in args.clips))
+              *_settings_inputs(args), *((f"the clip {clip}", clip) for clip in args.clips))
     check_outputs((("--summary", args.summary),), inputs)
     check_batch_outputs(recipe, args.clips, args.output, inputs[:1])
     width = len(str(len(args.clips)))
@@ -564,6 +623,40 @@ def _add_window_options(parser) -> None:
                              "'self-test: FAILED: reason' (exit 1)")
 
 
+def _add_binding_options(parser, batch: bool = False) -> None:
+    """The binding flags and the retarget-pose files of ``retarget`` and ``batch``: given,
+    each overrides the ``--profile``'s (or, for batch, the project's) setting."""
+    group = parser.add_argument_group(
+        "binding and retarget pose (given flags override the --profile's"
+        + (" and the project's)" if batch else ")"))
+    group.add_argument("--profile", metavar="P.mcprofile",
+                       help="a retarget profile (map, binding, pose offsets, chain settings, "
+                            "root, IK and contact settings) to apply"
+                            + (" to every clip" if batch else ""))
+    group.add_argument("--pose-offsets", metavar="FILE.json",
+                       help='pose offsets: {"LeftArm": [x, y, z], ...}, degrees about each '
+                            "joint's binding-frame axes (intrinsic XYZ); by joint over the "
+                            "profile's")
+    group.add_argument("--chain-settings", metavar="FILE.json",
+                       help='per-chain settings: {"arm_l": {"weight": 0.5, "twist": false, '
+                            '"distribute": "first", "ik_blend": 1.0}, ...} (chains spine, '
+                            "neck, arm_l/r, leg_l/r, fingers_l/r); by setting over the "
+                            "profile's")
+    if batch:
+        return
+    group.add_argument("--reference", type=_reference,
+                       help="the performer's reference pose: rest (zero rotations), frame:N, "
+                            "or auto (rest if it stands upright, else frame 0; the default)")
+    group.add_argument("--target-reference", type=_reference,
+                       help="the target's initial posture: rest, frame:N or auto (default)")
+    group.add_argument("--keep-target-pose", action="store_true",
+                       help="keep the target's own initial posture instead of turning its "
+                            "bones onto the performer's (rest-posture alignment)")
+    group.add_argument("--distribute", choices=("even", "first"),
+                       help="how a target chain with unmapped inner joints turns: spread over "
+                            "the chain (default) or all at its first joint")
+
+
 def build_parser() -> ArgumentParser:
     parser = ArgumentParser(
         prog="motion-composer",
@@ -605,22 +698,12 @@ def build_parser() -> ArgumentParser:
     rt.add_argument("--map", help="a mapping file (JSON with a \"pairs\" object); "
                                   "automatic mapping when not given")
     rt.add_argument("--save-map", help="write the mapping actually used to this JSON file")
-    rt.add_argument("--reference", type=_reference, default="auto",
-                    help="the performer's reference pose: rest (zero rotations), frame:N, or "
-                         "auto (rest if it stands upright, else frame 0; the default)")
-    rt.add_argument("--target-reference", type=_reference, default="auto",
-                    help="the target's initial posture: rest, frame:N or auto (default)")
-    rt.add_argument("--keep-target-pose", action="store_true",
-                    help="keep the target's own initial posture instead of turning its bones "
-                         "onto the performer's (rest-posture alignment)")
-    rt.add_argument("--root", choices=("scaled", "absolute", "in-place"), default="scaled",
+    _add_binding_options(rt)
+    rt.add_argument("--root", choices=("scaled", "absolute", "in-place"),
                     help="root translation: scaled by the ratio of hip heights (default), as "
                          "captured, or with the horizontal displacement removed")
     rt.add_argument("--root-scale", type=float, nargs=2, metavar=("H", "V"),
                     help="horizontal and vertical root scale, overriding the hip-height ratio")
-    rt.add_argument("--distribute", choices=("even", "first"), default="even",
-                    help="how a target chain with unmapped inner joints turns: spread over "
-                         "the chain (default) or all at its first joint")
     fix = rt.add_argument_group("correction (inverse kinematics)")
     fix.add_argument("--constraints", metavar="FILE.json",
                      help='Cartesian constraints to enforce (JSON: {"constraints": [...]})')
@@ -637,6 +720,10 @@ def build_parser() -> ArgumentParser:
                            "constraints and the IK correction), to reopen or export later")
     proj.add_argument("--embed-sources", action="store_true",
                       help="embed both clips in the project so that it can be sent on its own")
+    proj.add_argument("--save-profile", metavar="P.mcprofile",
+                      help="also save the retarget profile used (map, binding with pose "
+                           "offsets and chain settings, root, IK and contact settings), for "
+                           "--profile on other clips")
     _add_side_options(rt, "detected when not given; --save-project stores them")
     _add_ik_options(rt, "the solver's defaults; --save-project stores them")
     _add_output_options(rt)
@@ -666,6 +753,7 @@ def build_parser() -> ArgumentParser:
                     help="map each clip automatically instead of with the project's map "
                          "(clips from other skeletons)")
     bt.add_argument("--summary", metavar="FILE.json", help="write the per-clip summary")
+    _add_binding_options(bt, batch=True)
     _add_side_options(bt, "detected per clip when not given; the target's: the project's")
     _add_ik_options(bt, "the project's")
     bt.set_defaults(func=cmd_batch)

@@ -41,7 +41,8 @@ class Recipe:
             BVH, or a glTF character's bind pose).
         pairs: the correspondence, target joint -> performer joint; empty means automatic
             mapping for each clip (clips from different skeletons then work too).
-        bind: BindOptions fields; root: RootOptions fields.
+        bind: BindOptions fields (pose offsets and chain settings included); root:
+            RootOptions fields.
         auto_contacts: pin the feet where the performer plants them.
         floor: keep the feet on or above this height [m], or None.
         suffix: appended to each clip's stem for its output name.
@@ -73,7 +74,9 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
         from .errors import MotionComposerError
         raise MotionComposerError("the project's target is only embedded; batch needs the "
                                   "target as a file")
-    bind = dataclasses.asdict(project.bind_options)
+    # shallow: the chain settings stay ChainSettings (asdict would make them dicts)
+    bind = {f.name: getattr(project.bind_options, f.name)
+            for f in dataclasses.fields(project.bind_options)}
     root = dataclasses.asdict(project.root)
     return Recipe(target_path=str(src.path), pairs=dict(project.correspondence.pairs),
                   bind=bind, root=root, auto_contacts=bool(project.auto_contacts),

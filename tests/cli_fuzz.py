@@ -221,6 +221,8 @@ def _json_edit(doc, rng: random.Random) -> str:
     """Change ``doc`` in place at a random place: a value of another type, a missing key, a
     huge array, a huge or negative number. Returns what was done."""
     paths = [p for p, _ in _json_paths(doc) if p]
+    if not paths:                              # a small document edited down to nothing
+        return "nothing left to edit"
     path = rng.choice(paths)
     parent = doc
     for key in path[:-1]:

@@ -317,3 +317,37 @@ def test_ik_blend_below_pinned_feet_reaches_where_the_arm_can():
     assert err[ok].max() < 1e-3
     before = forward_kinematics(scene.composed).positions[:, sk.index[c.joint]]
     assert np.linalg.norm(before - c.goal["points"], axis=1)[ok].mean() > 0.01
+
+
+# --------------------------------------------------------------------------- scene, files
+def test_a_saved_posed_project_gives_the_same_motion_bit_for_bit(tmp_path):
+    from motion_composer.engine.project import open_project, save_project
+    options = BindOptions(pose_offsets={"LeftArm": tuple(euler_to_offset([3, -2, 11]))},
+                          chains={"arm_r": ChainSettings(weight=0.4, twist=False),
+                                  "leg_l": ChainSettings(ik_blend=0.5)})
+    scene = _scene(("bundled", "cmu_131_01_walk.bvh"), ("bundled", "cmu_rest_tpose.bvh"),
+                   options, auto_contacts=True)
+    solved = scene.solve(regenerate=True).scene
+    path = tmp_path / "posed.mcp"
+    save_project(solved.project, path)
+    opened = open_project(path)
+    assert opened.project.bind_options == options
+    again = Scene(opened.project, opened.performer, opened.target)
+    assert np.array_equal(again.motion.rotations, solved.motion.rotations)
+    assert np.array_equal(again.motion.translations, solved.motion.translations)
+    assert [c.name for c in again.constraints] == [c.name for c in solved.constraints]
+    save_project(again.project, tmp_path / "again.mcp")
+    assert (tmp_path / "again.mcp").read_bytes() == path.read_bytes()
+
+
+def test_an_offset_edit_binds_again_and_undoing_it_hits_the_cache():
+    scene = _scene(("bundled", "cmu_131_01_walk.bvh"), ("bundled", "cmu_rest_tpose.bvh"),
+                   BindOptions())
+    base = scene.motion
+    assert scene.derived.computed["binding"] == 1
+    q = tuple(euler_to_offset([0, 0, 10]))
+    posed = scene.replace(bind_options=scene.bind_options.with_offset("LeftArm", q))
+    assert not np.array_equal(posed.motion.rotations, base.rotations)
+    assert scene.derived.computed["binding"] == 2
+    back = posed.replace(bind_options=posed.bind_options.without_offsets())
+    assert back.motion is base and scene.derived.computed["binding"] == 2

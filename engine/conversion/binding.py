@@ -17,6 +17,11 @@ bone* in the performer's reference pose. Its steps:
 * rest alignment (section 2.1.4, on by default): root to leaves, each target bone turned onto
   its virtual bone and rolled to match the other bones of a branching joint; off keeps the
   target's own initial posture.
+* pose offsets (:attr:`BindOptions.pose_offsets`, the animator's retarget pose): each turns
+  its joint in its binding frame after the alignment; ``rest_local``/``rest_world``/
+  ``rest_positions`` are the binding pose with them, ``aligned_*`` the posture before them
+  (what the converter turns, see :mod:`engine.conversion`), and the root figures below come
+  from the latter.
 * the root: the hip-height ratio (target hips over performer hips, each above its lowest
   point, in the bound and the reference pose), the default scale of the root's translation,
   and the joints whose position follows their performer joint's (``driven``).

@@ -27,11 +27,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from .automap import SIDES, identify
+from .automap import FINGERS, SIDES, identify
 from ..errors import MappingError, MotionComposerError
-from ..quaternions import qconj, qmul
+from ..quaternions import from_euler, qconj, qmul
+from ..rotations import quat_to_euler
 from ..skeleton import Skeleton
 
 __all__ = ["ChainSettings", "ChainSettingsError", "CHAINS", "DISTRIBUTIONS", "chains_of",
@@ -155,7 +155,7 @@ def chains_of(skeleton: Skeleton, positions=None) -> Chains:
                                          if f"{r}_{s}" in roles)
         base = roles.get(f"hand_{s}", roles.get(f"forearm_{s}"))
         fingers = [idx[v] for k, v in roles.items() if k.endswith(f"_{s}") and
-                   k[:-2].rstrip("0123456789") in ("thumb", "index", "middle", "ring", "pinky")]
+                   k[:-2].rstrip("0123456789") in FINGERS]
         if base is not None and fingers:
             joints: set[int] = set()
             for f in fingers:
@@ -261,7 +261,7 @@ def euler_to_offset(degrees_xyz) -> np.ndarray:
     if angles.shape != (3,) or not np.all(np.isfinite(angles)):
         raise MotionComposerError(f"pose offset angles are three finite numbers (X, Y, Z "
                                   f"degrees), not {degrees_xyz!r}")
-    q = Rotation.from_euler("XYZ", angles, degrees=True).as_quat()
+    q = from_euler(angles, "XYZ")
     return -q if q[3] < 0 else q
 
 
@@ -269,4 +269,4 @@ def offset_to_euler(quat) -> np.ndarray:
     """The typed angles ``(X, Y, Z)`` [deg] of an offset ``(4,)`` (the inverse of
     :func:`euler_to_offset` away from gimbal lock, Y within (-90, 90))."""
     q = np.asarray(quat, dtype=float)
-    return Rotation.from_quat(q / np.linalg.norm(q)).as_euler("XYZ", degrees=True)
+    return quat_to_euler((q / np.linalg.norm(q))[None], "XYZ", unwrap=False)[0]

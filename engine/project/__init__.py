@@ -75,8 +75,9 @@ from .migrations import MIGRATIONS, migrate, migrator
 from .model import (FORMAT, ROLES, SKELETONS, SUFFIX, VERSION, MissingSourceError,
                     OpenedProject, Project, ProjectError, Source, ViewerState)
 from .profile import (PROFILE_FORMAT, PROFILE_SUFFIX, PROFILE_VERSION, Profile, ProfileError,
-                      apply_profile, profile_from_json, profile_of, profile_to_json,
-                      read_profile, save_profile)
+                      SettingsFileError, apply_profile, profile_from_json, profile_of,
+                      profile_to_json, read_chain_settings, read_pose_offsets, read_profile,
+                      save_profile)
 
 __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceError",
            "OpenedProject", "FORMAT", "VERSION", "SUFFIX", "ROLES",
@@ -87,4 +88,5 @@ __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceErr
            "discard_autosave", "remove_autosave_file", "new_session", "backup_path",
            "Profile", "ProfileError", "profile_of", "apply_profile", "save_profile",
            "read_profile", "profile_to_json", "profile_from_json", "PROFILE_FORMAT",
-           "PROFILE_VERSION", "PROFILE_SUFFIX"]
+           "PROFILE_VERSION", "PROFILE_SUFFIX", "SettingsFileError", "read_pose_offsets",
+           "read_chain_settings"]

@@ -28,19 +28,23 @@ import dataclasses
 import os
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..conversion.binding import BindOptions
 from ..conversion.converter import RootOptions
 from ..conversion.correspondence import Correspondence
 from ..correction.contacts import ContactOptions
 from ..correction.ik import IKOptions
 from ..fileio import atomic_write, read_regular_file, reading
-from .json import (_contacts, _correspondence, _encode, _ik, _obj, _parse, _root, _binding,
-                   binding_dict, ik_dict)
+from ..conversion.chains import ChainSettings, euler_to_offset
+from .json import (_binding, _chains, _contacts, _correspondence, _encode, _ik, _list, _num,
+                   _obj, _parse, _root, _sub, binding_dict, ik_dict)
 from .model import Project, ProjectError, _Invalid, _show
 
 __all__ = ["Profile", "ProfileError", "profile_of", "apply_profile", "save_profile",
            "read_profile", "profile_to_json", "profile_from_json", "PROFILE_FORMAT",
-           "PROFILE_VERSION", "PROFILE_SUFFIX"]
+           "PROFILE_VERSION", "PROFILE_SUFFIX", "SettingsFileError", "read_pose_offsets",
+           "read_chain_settings"]
 
 PROFILE_FORMAT = "motion-composer-profile"
 #: the profile format version this module writes (and the newest it reads)
@@ -142,13 +146,60 @@ def save_profile(path, profile: Profile) -> None:
 def read_profile(path) -> Profile:
     """The profile in the file at ``path``; raises :class:`ProfileError` naming the file and
     the field of any bad value."""
-    with reading(path, ProfileError, "a profile file", missing="no such profile file"):
+    return profile_from_json(_read_text(path, ProfileError, "profile"), path)
+
+
+def _read_text(path, error, kind: str) -> str:
+    """The text of the ``kind`` file at ``path`` (UTF-8, a BOM allowed); ``error`` (a
+    :class:`ProjectError` class) when it cannot be read, is empty or is not text."""
+    with reading(path, error, f"a {kind} file", missing=f"no such {kind} file"):
         data = read_regular_file(path)
     if not data.strip():
-        raise ProfileError("the file is empty (a profile is a JSON object)", path)
+        raise error(f"the file is empty (a {kind} file is a JSON object)", path)
     try:
-        text = data.decode("utf-8-sig")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise ProfileError(f"not a profile file: byte {exc.start} is not UTF-8 text",
-                           path) from None
-    return profile_from_json(text, path)
+        raise error(f"not a {kind} file: byte {exc.start} is not UTF-8 text", path) from None
+
+
+# --------------------------------------------------------------------------- settings files
+class SettingsFileError(ProjectError):
+    """A pose-offsets or chain-settings file (``retarget --pose-offsets`` / ``--chain-settings``)
+    that cannot be used (``path``, ``field`` and ``problem`` as for :class:`ProjectError`)."""
+
+
+def read_pose_offsets(path) -> dict[str, np.ndarray]:
+    """The pose offsets of a JSON file ``{"LeftArm": [x, y, z], ...}``: typed angles in degrees
+    about each joint's binding-frame axes (intrinsic XYZ, :func:`euler_to_offset`), as unit
+    quaternions ``(4,)`` by joint. Raises :class:`SettingsFileError` naming the field."""
+    text = _read_text(path, SettingsFileError, "pose-offsets")
+    try:
+        out = {}
+        for joint, value in _obj(_parse(text), "").items():
+            where = _sub("", joint)
+            if not joint:
+                raise _Invalid(where, "expected a target joint's name, not an empty string")
+            angles = [_num(x, f"{where}[{i}]") for i, x in enumerate(_list(value, where))]
+            if len(angles) != 3:
+                raise _Invalid(where, f"expected [x, y, z] angles in degrees, not "
+                                      f"{_show(value)}")
+            out[joint] = euler_to_offset(angles)
+        return out
+    except _Invalid as exc:
+        raise SettingsFileError(exc.problem, path, exc.field) from None
+
+
+def read_chain_settings(path, base: BindOptions | None = None) -> dict[str, ChainSettings]:
+    """The chain settings of a JSON file ``{"arm_l": {"weight": 0.5, "twist": false,
+    "distribute": "first", "ik_blend": 1.0}, ...}`` by chain; a setting a chain leaves out
+    keeps ``base``'s (default: the defaults). Raises :class:`SettingsFileError` naming the
+    field."""
+    text = _read_text(path, SettingsFileError, "chain-settings")
+    base = base or BindOptions()
+    try:
+        data = _obj(_parse(text), "")
+        given = dict(_chains(data, ""))
+        return {name: dataclasses.replace(base.chain(name), **{
+            key: getattr(given[name], key) for key in data[name]}) for name in given}
+    except _Invalid as exc:
+        raise SettingsFileError(exc.problem, path, exc.field) from None
