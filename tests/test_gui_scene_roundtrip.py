@@ -15,8 +15,7 @@ import pytest
 from motion_composer.app.gui.qt import QtCore
 from gui_support import quiet_window
 from conftest import clip_path
-from motion_composer.engine.conversion import BindOptions, RootOptions
-from motion_composer.engine.conversion.chains import ChainSettings
+from motion_composer.engine.conversion import BindOptions, ChainSettings, RootOptions
 from motion_composer.engine.conversion.correspondence import BY_HAND, Correspondence
 from motion_composer.engine.correction.constraints import KINDS, Constraint
 from motion_composer.engine.correction.contacts import ContactOptions
@@ -69,11 +68,11 @@ def full_project() -> Project:
                                                       "LeftHand": "hand L (auto-mapped)"}),
         bind_options=BindOptions(performer_reference="rest", target_reference=0,
                                  rest_alignment=False, distribute="first",
-                                 pose_offsets=(("LeftArm", (0.0, 0.0, 0.25881904510252074,
-                                                            0.9659258262890683)),),
-                                 chains=(("arm_l", ChainSettings(weight=0.7, twist=False,
-                                                                 distribute="even",
-                                                                 ik_blend=0.4)),)),
+                                 pose_offsets={"LeftArm": (0.0, 0.0, 0.0871557427,
+                                                           0.9961946981)},
+                                 chains={"arm_r": ChainSettings(weight=0.5, twist=False,
+                                                                distribute="even",
+                                                                ik_blend=0.25)}),
         root=RootOptions(mode="absolute", scale=(1.05, 0.98)),
         auto_contacts=True,
         contact_options=ContactOptions(height=0.04, speed=0.3, min_duration=0.1,

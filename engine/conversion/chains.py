@@ -209,7 +209,8 @@ def mirror_joint(skeleton: Skeleton, joint: str, positions=None) -> str | None:
 def left_axis(binding) -> np.ndarray:
     """``(3,)`` the character's left in its bound rest posture before the pose offsets (unit):
     the mean of its left-minus-right joint positions (thighs, upper arms, hands, feet), the
-    normal of its sagittal plane. Raises :class:`MotionComposerError` when no left/right pair is known."""
+    normal of its sagittal plane. Raises :class:`MotionComposerError` when no left/right
+    pair is known."""
     sk = binding.target
     try:
         roles = identify(sk, binding.aligned_positions)
