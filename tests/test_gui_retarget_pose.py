@@ -334,7 +334,11 @@ def test_the_binding_pose_is_shown_beside_the_reference_pose(view):
     np.testing.assert_allclose(target.points - target.offset, to_view(b.rest_positions),
                                atol=1e-9)
     assert not any(r.visible() for r in v.rings)         # no joint selected: no gizmo
+    # a performer joint puts the gizmo on the target joint mapped to it
+    doc.select("performer", doc.scene.correspondence.pairs["LeftArm"])
+    assert v.gizmo()[0] == "LeftArm" and all(r.visible() for r in v.rings)
     v.set_option("pose_edit", False)
+    assert not any(r.visible() for r in v.rings)
     np.testing.assert_allclose(v.figures["target"].points - v.figures["target"].offset,
                                to_view(doc.pose("target").positions[600]), atol=1e-9)
 

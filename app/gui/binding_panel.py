@@ -454,16 +454,9 @@ class BindingPanel(QtWidgets.QWidget):
 
     @property
     def pose_target(self) -> str | None:
-        """The target joint the retarget pose controls act on: the selected target joint, or
-        the target joint mapped to the selected performer joint; None without one."""
-        side, joint = self.doc.selection
-        target = self.doc.scene.target
-        if target is None or not joint:
-            return None
-        if side == "performer":
-            joint = next((t for t, p in self.doc.scene.correspondence.pairs.items()
-                          if p == joint), None)
-        return joint if joint in target.skeleton.index else None
+        """The target joint the retarget pose controls act on
+        (:attr:`~app.gui.document.Document.selected_target_joint`)."""
+        return self.doc.selected_target_joint
 
     def _refresh_pose(self) -> None:
         d = self.doc

@@ -887,17 +887,15 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         return fk_arrays(b.target, local[None], b.root_translation[None])
 
     def gizmo(self) -> tuple | None:
-        """The pose gizmo on the selected target joint while editing the binding pose:
-        ``(joint, index, centre (3,), ring normals (3, 3) one a row, radius)`` in view space,
-        or None. The normals are the axes of the joint's binding frame."""
+        """The pose gizmo on the selected target joint (or the one mapped to the selected
+        performer joint) while editing the binding pose: ``(joint, index, centre (3,), ring
+        normals (3, 3) one a row, radius)`` in view space, or None. The normals are the axes
+        of the joint's binding frame."""
         layout = self._layout()
-        side, joint = self.doc.selection
-        if not self.pose_editing or "target" not in layout or side != "target":
+        joint = self.doc.selected_target_joint
+        if not self.pose_editing or "target" not in layout or joint is None:
             return None
-        sk = self.doc.scene.target.skeleton
-        if joint not in sk.index:
-            return None
-        j = sk.index[joint]
+        j = self.doc.scene.target.skeleton.index[joint]
         center = to_view(self.binding_pose("target").positions[0, j]) + layout["target"]
         frame = pose_gizmo.binding_frame(self.doc.scene.binding.rest_world[j],
                                          self.doc.scene.bind_options.offset(joint))
