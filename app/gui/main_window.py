@@ -1,6 +1,7 @@
 """The composer window: viewport, correspondence editor, binding panel, playback, menus."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
@@ -602,7 +603,6 @@ class MainWindow(QtWidgets.QMainWindow):
         have, is shown in a dialog and changes nothing."""
         from motion_composer.engine.project import (Profile, apply_profile, check_project,
                                                     read_profile)
-        import dataclasses
 
         def load():
             project = apply_profile(self.doc.scene.project, read_profile(path))
