@@ -616,3 +616,18 @@ def test_the_window_shares_the_joint_and_the_mode_between_its_panels(qtbot, tmp_
     assert panel.pose_edit.isChecked() and w.viewport.option("pose_edit")
     panel.pose_edit.setChecked(False)
     assert not action.isChecked() and not w.viewport.option("pose_edit")
+
+
+def test_two_slider_drags_in_a_row_are_two_steps(panel, doc):
+    count = doc.undo_stack.count()
+    for name, values in (("arm_l", (90, 80, 70)), ("arm_r", (95, 85, 75)),
+                         ("arm_l", (60, 50))):
+        for value in values:
+            panel.chain_rows[name]["weight"].slider.setValue(value)
+    assert doc.undo_stack.count() == count + 3
+    assert doc.undo_stack.undoText() == "Set left arm weight to 0.50"
+    doc.undo_stack.undo()
+    assert doc.scene.bind_options.chain("arm_l").weight == 0.7
+    doc.undo_stack.undo()
+    assert doc.scene.bind_options.chain("arm_r").weight == 1.0
+    assert doc.undo_stack.undoText() == "Set left arm weight to 0.70"

@@ -173,8 +173,6 @@ class BindingPanel(QtWidgets.QWidget):
     def __init__(self, document, parent=None):
         super().__init__(parent)
         self.doc = document
-        self._merge_key: str | None = None
-        self._merge_cmd = None
         self._build()
         self._connect()
         self.refresh()
@@ -527,31 +525,12 @@ class BindingPanel(QtWidgets.QWidget):
     def _push(self, text: str, bind: BindOptions | None = None,
               root: RootOptions | None = None, merge_key: str | None = None,
               solve: bool = False) -> None:
-        """One command; with ``merge_key``, consecutive pushes with the same key (and nothing
-        else pushed in between) are one undo step named after the last one; ``solve``: the
-        new scene is solved in the background."""
-        stack = self.doc.undo_stack
-        top = stack.command(stack.index() - 1) if stack.index() > 0 else None
-        continuing = (merge_key is not None and merge_key == self._merge_key
-                      and top is not None and top is self._merge_cmd)
-        # push_options merges every mergeable options command with the one before; never
-        # start a new run on top of someone else's mergeable command
-        foreign_mergeable = top is not None and top.id() != -1 and not continuing
-        merge = merge_key is not None and not foreign_mergeable
-        index = stack.index()
-        push_options(self.doc, bind_options=bind, root_options=root, text=text, merge=merge,
-                     solve=solve)
-        new_top = stack.command(stack.index() - 1) if stack.index() > 0 else None
-        merged = continuing and stack.index() == index and new_top is top
-        if merged:
-            # name the step after the latest value (the stack keeps the first one's text)
-            new_top.setText(text)
-            stack.undoTextChanged.emit(stack.undoText())
-        if (merge_key is not None and new_top is not None and new_top.id() != -1
-                and (merged or new_top is not top)):
-            self._merge_key, self._merge_cmd = merge_key, new_top
-        else:
-            self._merge_key, self._merge_cmd = None, None
+        """One command; with ``merge_key`` (naming the control), consecutive pushes with the
+        same key (nothing else pushed in between) are one undo step named after the last one
+        (:meth:`~app.gui.commands.SceneCommand.mergeWith`): a spin box's run, a slider's
+        drag. ``solve``: the new scene is solved in the background."""
+        push_options(self.doc, bind_options=bind, root_options=root, text=text,
+                     merge=merge_key or False, solve=solve)
         # a refused change (push_options ignores no-ops) must not leave the widgets wrong
         self.refresh()
 
