@@ -119,7 +119,12 @@ def test_weight_zero_keeps_the_binding_pose_of_the_chain(performer, target):
     arm = [t.skeleton.index[n] for n in chains_of(t.skeleton, binding.aligned_positions)
            ["arm_l"]]
     moved = transfer(binding, p)
-    assert _same_rotation(moved.rotations[:, arm], binding.rest_local[arm]).max() < 1e-12
+    assert list(binding.held) == arm
+    assert np.array_equal(moved.rotations[:, arm],
+                          np.broadcast_to(binding.rest_local[arm], moved.rotations[:, arm].shape))
+    from motion_composer.engine.conversion import compose, convert
+    composed = compose(binding, convert(binding, p), p.frame_time)  # the scene's stages
+    assert np.array_equal(composed.rotations, moved.rotations)
     # the rest of the body is what it is without the setting (offset included)
     full = retarget(p, t, corr, bind_options=options.with_chain("arm_l", None))
     others = np.setdiff1d(np.arange(t.skeleton.num_joints), arm)

@@ -42,7 +42,7 @@ Per-chain settings act on the same local rotations, before the offset: with ``tw
 chain joint's rotation relative to its bound rest one loses its twist about the joint's bone
 (towards its child with the largest subtree: swing-twist relative to the binding); the
 ``weight`` slerps each chain joint's local rotation from its bound rest value (0: exactly the
-binding pose on every frame) to the converted one (1); a chain's own ``distribute`` replaces
+binding pose on every frame, bit for bit: ``Binding.held``) to the converted one (1); a chain's own ``distribute`` replaces
 the global one for the unmapped joints below its mapped ones. Defaults change nothing, bit
 for bit. A chain's ``ik_blend`` is not the converter's: it adds a reach goal to the IK
 (:mod:`engine.correction.reach`).

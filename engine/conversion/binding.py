@@ -261,6 +261,8 @@ class Binding:
         chain_of: target joint index -> the name of its chain
             (:func:`~engine.conversion.chains.chains_of`), for the chains whose settings
             differ from the defaults; empty without such settings.
+        held: ``(H,)`` the joints of chains with weight 0, whose local rotation is their
+            binding-pose one on every frame (the composer writes ``rest_local`` there).
         performer_rest_world: ``(Jp, 4)`` performer world rotations in its reference pose.
         performer_rest_positions: ``(Jp, 3)`` [m] performer positions in its reference pose.
         bones: per mapped target joint, its virtual bones (see :class:`_Bones`).
@@ -291,6 +293,7 @@ class Binding:
     aligned_positions: np.ndarray
     offsets: np.ndarray
     chain_of: dict
+    held: np.ndarray
     performer_rest_world: np.ndarray
     performer_rest_positions: np.ndarray
     bones: dict
@@ -416,6 +419,8 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                    rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
                    aligned_world=aligned_world, aligned_local=aligned_local,
                    aligned_positions=aligned_positions, offsets=offsets, chain_of=chain_of,
+                   held=np.array(sorted(j for j, name in chain_of.items()
+                                        if options.chain(name).weight == 0.0), dtype=np.intp),
                    performer_rest_world=p_ref.world, performer_rest_positions=p_ref.positions,
                    bones=bones, chains=chains, body_root=body_root,
                    driven=_driven(tsk, mapped, body_root, p_moving),

@@ -69,6 +69,11 @@ def _compose_into(binding: Binding, world: np.ndarray, positions: dict, known: n
     local[:, ~top] = cmul(cconj(world[:, parents[~top]]), world[:, known[~top]])
     rotations[:, known] = local.T
     rows = {int(j): local[:, k] for k, j in enumerate(known)}
+    # weight-0 chains: exactly the binding pose (the converter's value to rounding)
+    rotations[:, binding.held] = binding.rest_local[binding.held]
+    for j in binding.held:
+        if j in rows:
+            rows[int(j)] = np.broadcast_to(binding.rest_local[j][:, None], (4, F))
     moved = np.empty((3, len(tsk.translated), F))
     moved[:] = binding.root_translation.T[:, :, None]
     slot = {int(j): k for k, j in enumerate(tsk.translated)}
