@@ -97,16 +97,20 @@ def push_pair(doc, target_joint: str, performer_joint: str | None) -> None:
 
 
 def push_options(doc, bind_options=None, root_options=None, text: str = "Change binding",
-                 merge: bool | str = False) -> None:
+                 merge: bool | str = False, solve: bool = False) -> None:
     """Set binding and root options. ``merge``: a key naming the control (or True for a
-    generic one); consecutive pushes with the same key become one undo step."""
+    generic one); consecutive pushes with the same key become one undo step. ``solve``: the
+    new scene's correction is solved in the background (a chain's IK blend, whose reach
+    goals only a solve meets)."""
     changes = {}
     if bind_options is not None:
         changes["bind_options"] = bind_options
     if root_options is not None:
         changes["root"] = root_options
     key = merge if isinstance(merge, str) else ("options" if merge else None)
-    doc.edit(text, merge=key, **changes)
+    if solve and all(getattr(doc.scene.project, k) == v for k, v in changes.items()):
+        return                                  # nothing changes: no step, no solve
+    doc.edit(text, merge=key, solve=solve, **changes)
 
 
 def push_constraints(doc, constraints: list, displacement=None, text: str = "Edit constraints",

@@ -311,6 +311,21 @@ class Document(QtCore.QObject):
             self.selection = (side, joint)
             self.selectionChanged.emit(side, joint)
 
+    @property
+    def selected_target_joint(self) -> str | None:
+        """The target joint the selection names: the selected target joint, or the target
+        joint mapped to the selected performer joint; None without one."""
+        side, joint = self.selection
+        target = self._scene.target
+        if target is None or not joint:
+            return None
+        if side == "performer":
+            joint = next((t for t, p in self._scene.correspondence.pairs.items()
+                          if p == joint), None)
+        elif side != "target":
+            return None
+        return joint if joint in target.skeleton.index else None
+
     # ------------------------------------------------------------------ files
     def open(self, path, locate=None) -> None:
         """Open the project at ``path``. A clip that has moved is asked for through

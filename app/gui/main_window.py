@@ -1,6 +1,7 @@
 """The composer window: viewport, correspondence editor, binding panel, playback, menus."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
@@ -172,6 +173,14 @@ class MainWindow(QtWidgets.QMainWindow):
         elif name == "binding_panel":
             from motion_composer.app.gui.binding_panel import BindingPanel
             panel = BindingPanel(self.doc)
+            page = QtWidgets.QScrollArea()            # taller than the dock: it scrolls
+            page.setWidget(panel)
+            page.setWidgetResizable(True)
+            page.setFrameShape(QtWidgets.QFrame.Shape.NoFrame)
+            page.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+            page.setMinimumWidth(panel.minimumSizeHint().width() +
+                                 page.verticalScrollBar().sizeHint().width())
+            return panel, page
         elif name == "inspector":
             from motion_composer.app.gui.inspector import ConstraintInspector
             panel = ConstraintInspector(self.doc, self.timeline)
@@ -220,6 +229,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self._action(file, "Import &Target...", lambda: self.import_dialog("target"))
         self._action(file, "&Export BVH or glTF...", self.export_dialog, "Ctrl+E")
         file.addSeparator()
+        self._action(file, "Save Retarget Pro&file...", self.save_profile_dialog)
+        self._action(file, "&Load Retarget Profile...", self.load_profile_dialog)
+        file.addSeparator()
         self._action(file, "&Quit", self.close, QtGui.QKeySequence.StandardKey.Quit)
         self._refresh_recent()
 
@@ -252,7 +264,8 @@ class MainWindow(QtWidgets.QMainWindow):
                                shortcut, checkable=True, checked=self.viewport.option(name))
             for name, text, shortcut in (("follow_root", "Follow &Root", "Shift+F"),
                                          ("onion_skin", "&Onion Skin", "O"),
-                                         ("foot_trails", "Foot Trai&ls", "T"))}
+                                         ("foot_trails", "Foot Trai&ls", "T"),
+                                         ("pose_edit", "Edit &Binding Pose", "B"))}
         self.doc.viewerChanged.connect(self._show_view_options)
 
         tools = bar.addMenu("&Tools")
@@ -558,6 +571,50 @@ class MainWindow(QtWidgets.QMainWindow):
         ok = self._guard(write)
         if ok:
             self.statusBar().showMessage(f"Exported {path}", 5000)
+        return ok
+
+    # ------------------------------------------------------------------ retarget profiles
+    def save_profile_dialog(self) -> None:
+        from motion_composer.engine.project import PROFILE_SUFFIX
+        path = self.ask_save_path("Save retarget profile",
+                                  f"Retarget profiles (*{PROFILE_SUFFIX})")
+        if path:
+            self.save_profile(path if path.endswith(PROFILE_SUFFIX) else path + PROFILE_SUFFIX)
+
+    def save_profile(self, path) -> bool:
+        """Write the session's retarget profile (map, binding with its pose offsets and chain
+        settings, root, IK and contact settings) to ``path``."""
+        from motion_composer.engine.project import profile_of, save_profile
+        ok = self._guard(lambda: save_profile(path, profile_of(self.doc.scene.project)))
+        if ok:
+            self.statusBar().showMessage(f"Saved retarget profile {path}", 5000)
+        return ok
+
+    def load_profile_dialog(self) -> None:
+        from motion_composer.engine.project import PROFILE_SUFFIX
+        path = self.ask_open_path("Load retarget profile",
+                                  f"Retarget profiles (*{PROFILE_SUFFIX});;All (*)")
+        if path:
+            self.load_profile(path)
+
+    def load_profile(self, path) -> bool:
+        """Put the profile at ``path`` in place of the session's settings: one undoable
+        command. A profile that cannot be read, or that names joints the clips loaded do not
+        have, is shown in a dialog and changes nothing."""
+        from motion_composer.engine.project import (Profile, apply_profile, check_project,
+                                                    read_profile)
+
+        def load():
+            project = apply_profile(self.doc.scene.project, read_profile(path))
+            scene = self.doc.scene
+            if scene.performer is not None and scene.target is not None:
+                check_project(project, scene.performer, scene.target, path=Path(path))
+            fields = [f.name for f in dataclasses.fields(Profile)]
+            self.doc.edit(f"Load retarget profile {Path(path).name}",
+                          **{name: getattr(project, name) for name in fields})
+        ok = self._guard(load)
+        if ok:
+            self.statusBar().showMessage(f"Loaded retarget profile {path}", 5000)
         return ok
 
     def offer_recovery(self, project_path=None) -> bool:

@@ -5,7 +5,10 @@ The figures are the ``"quality"`` part of a solve's report, made by one engine f
 They come from the document's last solve (Tools > Solve, foot contacts, an edit that solves),
 or from **Measure**, which solves the current project as ``motion-composer retarget`` does
 (its automatic constraints made again from the project's settings) in the document's job
-runner, without changing the scene. An edit that changes the motion clears them.
+runner, without changing the scene. Figures shown follow the scene: after an edit that changes
+the motion (a pose offset, a chain setting, a key) they are measured again on the motion as
+edited, without solving (:meth:`engine.scene.Scene.quality`: no residuals), so the bone
+directions show an edit's effect at once; while nothing was measured, nothing is.
 
 Rows, worst first within each group: per constraint its residual (max, mean); per contact the
 foot's drift, direct conversion and corrected; per joint its worst angular-speed ratio against
@@ -123,11 +126,16 @@ class QualityPanel(QtWidgets.QWidget):
         self.show_quality(quality)
 
     def _motion_changed(self) -> None:
-        if self.quality is not None:            # the figures were of another motion
-            self.show_quality(None)
+        """The figures were of another motion: measure the scene's again (a live preview or
+        a solve still running keeps them until its edit lands)."""
+        doc = self.doc
+        if self.quality is None or doc.pending or doc.motion is not doc.scene.motion:
+            return
+        self.show_quality(doc.scene.quality(), note="measured after the edit, not solved")
 
-    def show_quality(self, quality: dict | None) -> None:
-        """Show ``report["quality"]`` (None: nothing measured for this motion)."""
+    def show_quality(self, quality: dict | None, note: str = "") -> None:
+        """Show ``report["quality"]`` (None: nothing measured for this motion); ``note`` says
+        where the figures come from when not from a solve."""
         self.quality = quality
         self.tree.clear()
         if quality is None:
@@ -151,7 +159,8 @@ class QualityPanel(QtWidgets.QWidget):
                 self.tree.resizeColumnToContents(column)
             slide = max(quality["per_frame"]["foot_slide_m"], default=0.0)
             self.status.setText(f"Largest foot slide {_length(slide)}; "
-                                f"{sum(p['ratio'] > 1 for p in quality['pops'])} joints pop.")
+                                f"{sum(p['ratio'] > 1 for p in quality['pops'])} joints pop"
+                                + (f" ({note})." if note else "."))
         self.qualityChanged.emit(quality)
 
     def rows(self, key: str) -> list[QtWidgets.QTreeWidgetItem]:

@@ -14,6 +14,13 @@ what changed is sent: bone and joint positions, the skinned vertices and their n
 Mouse, as in Blender and Maya: left click selects a joint; left drag (or Alt + left, or middle
 drag) orbits; Shift + drag or middle + Shift pans; the wheel or right drag zooms. Keys: F frames
 all (from a sensible height), 1 / 3 / 7 front, side and top views.
+
+Binding-pose editing (the viewer option ``pose_edit``, :meth:`Viewport.set_option`): the
+target stands in its binding pose (the bound rest posture with its pose offsets,
+:class:`~engine.conversion.binding.Binding`'s ``rest_*``) beside the performer in its reference
+pose, and the selected target joint carries a rotation gizmo (:mod:`app.gui.pose_gizmo`):
+dragging a ring turns the joint about that binding-frame axis, shown live, one command on
+release; Esc or a right click during the drag cancels it.
 """
 from __future__ import annotations
 
@@ -23,12 +30,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from motion_composer.app.gui import pose_gizmo
 from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
+from motion_composer.engine.kinematics import WorldPose, fk_arrays
 from motion_composer.engine.quaternions import to_matrix
 
 import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
 from pyqtgraph.opengl import shaders  # noqa: E402
 from pyqtgraph.opengl.GLViewWidget import GLViewMixin  # noqa: E402
+from OpenGL import GL  # noqa: E402
 from PySide6 import QtOpenGL  # noqa: E402
 
 __all__ = ["Viewport", "to_view", "bone_mesh", "gl_possible", "GHOST_OFFSETS"]
@@ -58,6 +68,14 @@ FRAME_ELEVATION = 12.0
 VIEWS = {"front": (-90.0, 5.0), "side": (0.0, 5.0), "top": (-90.0, 89.9)}
 #: the fraction of the view's smaller field of view the framed figure fills
 FILL = 0.8
+#: the pose gizmo: its rings' radius as a fraction of the stature, the ring being dragged's
+#: colour, and how near [px] the pointer must be to a ring to grab it
+GIZMO_RADIUS = 0.09
+GIZMO_ACTIVE = (1.0, 0.95, 0.3, 1.0)
+GIZMO_PICK_PX = 9.0
+#: drawn over everything (the skinned mesh hides no ring)
+ON_TOP = {GL.GL_DEPTH_TEST: False, GL.GL_BLEND: True,
+          "glBlendFunc": (GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA)}
 
 #: two-sided lighting, from the camera (eye space): a face seen from behind is lit as its front,
 #: so thin or inverted parts of a character's mesh are never black
@@ -305,6 +323,22 @@ class FootTrails:
     floor: float                 # [m]
 
 
+@dataclass
+class _PoseDrag:
+    """A pose gizmo ring being dragged: the joint (name and index), the ring (binding-frame
+    axis 0, 1 or 2), its centre and normal (view space), the point grabbed on its plane, the
+    joint's pose offset at the press and the one the drag has reached."""
+
+    joint: str
+    index: int
+    axis: int
+    center: np.ndarray
+    normal: np.ndarray
+    grabbed: np.ndarray
+    start: np.ndarray
+    offset: np.ndarray
+
+
 class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     """The document's skeletons at its current frame. Put :attr:`widget` in a layout."""
 
@@ -316,6 +350,11 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     def __init__(self, document, parent=None):
         super().__init__()
         self.doc = document
+        # a depth buffer, asked for: left unspecified, Mesa under X may give a window none,
+        # and a skinned mesh then shows whichever of its faces was drawn last (its back)
+        surface = QtGui.QSurfaceFormat.defaultFormat()
+        surface.setDepthBufferSize(24)
+        self.setFormat(surface)
         if gl_possible():
             self.widget = QtWidgets.QWidget.createWindowContainer(self, parent)
             self.widget.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
@@ -371,6 +410,19 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._trails: FootTrails | None = None
         self.active_constraint: int | None = None   # the constraint whose goal can be dragged
         self._goal_drag = None
+        # the pose gizmo's rings (x, y, z), the drag of one (a _PoseDrag) and the binding
+        # poses drawn while editing, cached per binding
+        self.rings = []
+        for color in pose_gizmo.RING_COLORS:
+            ring = gl.GLLinePlotItem(pos=np.zeros((2, 3)), color=color, width=3,
+                                     mode="line_strip", antialias=True, glOptions=ON_TOP)
+            ring.setDepthValue(50)
+            ring.setVisible(False)
+            self.rings.append(ring)
+            self.addItem(ring)
+        self._pose_drag: _PoseDrag | None = None
+        self._drag_cancelled = False      # a cancelled drag's button is still held
+        self._binding_poses: tuple | None = None
         self._press = None
         self.mousePos = QtCore.QPointF()
         self._framed = False
@@ -390,7 +442,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     # ------------------------------------------------------------------ display options
     def option(self, name: str) -> bool:
         """A display toggle kept in the project's viewer options: ``"follow_root"``,
-        ``"onion_skin"``, ``"foot_trails"`` (all off by default)."""
+        ``"onion_skin"``, ``"foot_trails"``, ``"pose_edit"`` (all off by default)."""
         return bool(self.doc.scene.viewer.options.get(name, False))
 
     def set_option(self, name: str, on: bool) -> None:
@@ -412,16 +464,20 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     def _layout(self) -> dict[str, np.ndarray]:
         """View-space offsets of the shown skeletons (side by side along X, or overlaid)."""
         v = self.doc.scene.viewer
-        shown = [k for k, on in (("performer", v.show_performer),
-                                 ("intermediate", v.show_intermediate),
-                                 ("target", v.show_target)) if on]
+        editing = self.pose_editing
+        if editing:             # the binding pose beside the performer's reference pose
+            shown = ["performer", "target"]
+        else:
+            shown = [k for k, on in (("performer", v.show_performer),
+                                     ("intermediate", v.show_intermediate),
+                                     ("target", v.show_target)) if on]
         gap = 1.2 * self._size()
         out = {}
         # every skeleton starts where the performer starts (its root over the performer's at
         # frame 0), then travels as it travels; side by side, each is moved along the view's x
         anchor = self._root_start("performer")
         for i, k in enumerate(shown):
-            x = (i - (len(shown) - 1) / 2) * gap if v.side_by_side else 0.0
+            x = (i - (len(shown) - 1) / 2) * gap if v.side_by_side or editing else 0.0
             start = self._root_start(k)
             shift = np.zeros(3) if anchor is None or start is None else anchor - start
             shift[2] = 0.0
@@ -433,7 +489,10 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         return None if pose is None else to_view(pose.positions[0, 0])
 
     def _pose(self, which: str):
-        """The world pose over frames drawn for ``which`` skeleton, or None."""
+        """The world pose over frames drawn for ``which`` skeleton, or None (while editing
+        the binding pose, :meth:`binding_pose`'s single frame)."""
+        if which != "intermediate" and self.pose_editing:
+            return self.binding_pose(which)
         return {"performer": lambda: self.doc.pose("performer"),
                 "intermediate": lambda: self.doc.pose("composed"),
                 "target": lambda: self.doc.pose("target") or self.doc.pose("character")
@@ -470,10 +529,12 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
 
     def _label(self, which: str) -> str:
         scene = self.doc.scene
+        editing = self.pose_editing
         if which == "performer":
-            return f"performer: {scene.performer.name}"
+            return f"performer: {scene.performer.name}" + (" (reference pose)" if editing
+                                                            else "")
         if which == "target":
-            return f"target: {scene.target.name}"
+            return f"target: {scene.target.name}" + (" (binding pose)" if editing else "")
         return "intermediate"
 
     def refresh(self) -> None:
@@ -510,7 +571,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._refresh_goals(layout)
         self._refresh_ghosts(layout)
         self._refresh_trails(layout)
-        if self.option("follow_root"):
+        self._refresh_gizmo(layout)
+        if self.option("follow_root") and not self.pose_editing:
             self._follow(layout)
         self.update()
 
@@ -544,7 +606,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         on. Lines, not shaded bones: light to draw, and legible beside a skinned mesh."""
         pose = self._pose("target") if "target" in layout and self.doc.motion is not None \
             else None
-        on = self.option("onion_skin") and pose is not None
+        on = self.option("onion_skin") and pose is not None and not self.pose_editing
         offsets = self.ghost_offsets if on else ()
         while len(self.ghosts) < len(offsets):
             ghost = gl.GLLinePlotItem(pos=np.zeros((2, 3)), width=2, mode="lines",
@@ -647,7 +709,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         range, its planted frames marked on it, and the contacts active at the current frame
         drawn on the floor (a square under the planted joint)."""
         trails = self.foot_trails() if self.option("foot_trails") and "target" in layout \
-            else None
+            and not self.pose_editing else None
         for item in (self.trail, self.planted, self.contacts):
             item.setVisible(trails is not None)
         if trails is None:
@@ -722,7 +784,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         says (:attr:`~engine.correction.constraints.ConstraintKind.draw`), and those of the
         selected constraint (:attr:`active_constraint`) at every frame."""
         doc = self.doc
-        if "target" not in layout or not doc.scene.constraints:
+        if "target" not in layout or not doc.scene.constraints or self.pose_editing:
             for item in (self.goals, self.paths, self.planes, self.axes):
                 item.setVisible(False)
             return
@@ -799,6 +861,115 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         corners = [p + r * (a * u + b * w) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         return to_view(np.array(corners)) + off
 
+
+    # ------------------------------------------------------------------ binding pose editing
+    @property
+    def pose_editing(self) -> bool:
+        """The binding pose is shown for editing: the ``pose_edit`` option is on and the
+        scene has a binding."""
+        return self.option("pose_edit") and self.doc.scene.binding is not None
+
+    def binding_pose(self, which: str) -> WorldPose:
+        """The single-frame world pose drawn while editing: for ``"target"`` the binding pose
+        (the bound rest posture with its pose offsets; during a gizmo drag, with the offset
+        the drag has reached), for ``"performer"`` its reference pose."""
+        b = self.doc.scene.binding
+        cached = self._binding_poses
+        if cached is None or cached[0] is not b:
+            target = fk_arrays(b.target, b.rest_local[None], b.root_translation[None])
+            performer = WorldPose(b.performer_rest_world[None],
+                                  b.performer_rest_positions[None], np.zeros((1, 0, 3)))
+            self._binding_poses = cached = (b, target, performer)
+        drag = self._pose_drag
+        if which == "performer" or drag is None:
+            return cached[2] if which == "performer" else cached[1]
+        local = pose_gizmo.with_turn(b.rest_local, drag.index, drag.start, drag.offset)
+        return fk_arrays(b.target, local[None], b.root_translation[None])
+
+    def gizmo(self) -> tuple | None:
+        """The pose gizmo on the selected target joint (or the one mapped to the selected
+        performer joint) while editing the binding pose: ``(joint, index, centre (3,), ring
+        normals (3, 3) one a row, radius)`` in view space, or None. The normals are the axes
+        of the joint's binding frame."""
+        layout = self._layout()
+        joint = self.doc.selected_target_joint
+        if not self.pose_editing or "target" not in layout or joint is None:
+            return None
+        j = self.doc.scene.target.skeleton.index[joint]
+        center = to_view(self.binding_pose("target").positions[0, j]) + layout["target"]
+        frame = pose_gizmo.binding_frame(self.doc.scene.binding.rest_world[j],
+                                         self.doc.scene.bind_options.offset(joint))
+        normals = to_view(pose_gizmo.ring_axes(frame))
+        return joint, j, center, normals, GIZMO_RADIUS * self._size()
+
+    def _refresh_gizmo(self, layout) -> None:
+        """The rings around the selected target joint (the one dragged highlighted)."""
+        gizmo = self.gizmo() if "target" in layout else None
+        drag = self._pose_drag
+        for k, ring in enumerate(self.rings):
+            ring.setVisible(gizmo is not None)
+            if gizmo is None:
+                continue
+            _joint, _j, center, normals, radius = gizmo
+            active = drag is not None and drag.axis == k
+            ring.setData(pos=pose_gizmo.ring_points(center, normals[k], radius),
+                         color=GIZMO_ACTIVE if active else pose_gizmo.RING_COLORS[k],
+                         width=5 if active else 3)
+
+    def _ring_hit(self, x: float, y: float, center: np.ndarray,
+                  normal: np.ndarray) -> np.ndarray:
+        """The view-space point under pixel (x, y) on the plane of the ring through
+        ``center`` normal to ``normal``; for a ring seen edge-on, the point on the plane
+        through the centre facing the camera (the angle is read about the normal anyway)."""
+        origin, direction = self._ray(x, y)
+        if not pose_gizmo.grazing(direction, normal):
+            hit = pose_gizmo.plane_hit(origin, direction, center, normal)
+            if hit is not None:
+                return hit
+        return self._unproject(x, y, center)
+
+    def _grab_ring(self, x: float, y: float) -> _PoseDrag | None:
+        """The drag of the gizmo ring under pixel (x, y), or None."""
+        gizmo = self.gizmo()
+        if gizmo is None:
+            return None
+        joint, j, center, normals, radius = gizmo
+        pixels = [self.project(pose_gizmo.ring_points(center, n, radius)) for n in normals]
+        k = pose_gizmo.nearest_ring(pixels, x, y, GIZMO_PICK_PX)
+        if k is None:
+            return None
+        offset = np.asarray(self.doc.scene.bind_options.offset(joint), dtype=float)
+        return _PoseDrag(joint, j, k, center, normals[k], self._ring_hit(x, y, center,
+                                                                         normals[k]),
+                         offset, offset)
+
+    def _drag_ring(self, x: float, y: float) -> None:
+        d = self._pose_drag
+        angle = pose_gizmo.turn_angle(d.center, d.normal, d.grabbed,
+                                      self._ring_hit(x, y, d.center, d.normal))
+        d.offset = pose_gizmo.turned(d.start, d.axis, angle)
+
+    def cancel_pose_drag(self) -> bool:
+        """Drop a gizmo drag in progress (Esc, right click): the binding pose stays as it
+        was, and the pointer does nothing more until the left button is released. False when
+        there was none."""
+        if self._pose_drag is None:
+            return False
+        self._pose_drag = None
+        self._press = None
+        self._drag_cancelled = True
+        self.refresh()
+        return True
+
+    def _commit_pose_drag(self) -> None:
+        """One command setting the dragged joint's pose offset (none for a click)."""
+        from motion_composer.app.gui.commands import push_options
+        d, self._pose_drag = self._pose_drag, None
+        self._press = None
+        options = self.doc.scene.bind_options.with_offset(d.joint, d.offset)
+        push_options(self.doc, bind_options=options,
+                     text=f"Turn {d.joint} in the binding pose")
+        self.refresh()
 
     # ------------------------------------------------------------------ camera
     def _shown_box(self) -> np.ndarray | None:
@@ -938,16 +1109,17 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         with a ``drag_key``: a position), or None."""
         i = self.active_constraint
         cons = self.doc.scene.constraints
-        if i is None or not 0 <= i < len(cons) or cons[i].kind_object.drag_key is None:
+        if i is None or not 0 <= i < len(cons) or cons[i].kind_object.drag_key is None \
+                or self.pose_editing:
             return None
         off = self._layout().get("target")
         if off is None:
             return None
         return i, cons[i], to_view(cons[i].goal[cons[i].kind_object.drag_key]) + off, off
 
-    def _unproject(self, x: float, y: float, through: np.ndarray) -> np.ndarray:
-        """The view-space point under pixel (x, y) on the plane through ``through`` facing
-        the camera."""
+    def _ray(self, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
+        """The view-space ray under pixel (x, y): its point on the near plane and its
+        direction (to the far plane's point)."""
         viewport = (0, 0, self.width(), self.height())
         m = np.array(self.projectionMatrix(viewport, viewport).data()).reshape(4, 4).T @ \
             np.array(self.viewMatrix().data()).reshape(4, 4).T
@@ -956,7 +1128,12 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         near = inv @ np.array([ndc[0], ndc[1], -1.0, 1.0])
         far = inv @ np.array([ndc[0], ndc[1], 1.0, 1.0])
         near, far = near[:3] / near[3], far[:3] / far[3]
-        direction = far - near
+        return near, far - near
+
+    def _unproject(self, x: float, y: float, through: np.ndarray) -> np.ndarray:
+        """The view-space point under pixel (x, y) on the plane through ``through`` facing
+        the camera."""
+        near, direction = self._ray(x, y)
         eye = np.array(self.cameraPosition())
         normal = np.asarray(through) - eye
         normal /= np.linalg.norm(normal)
@@ -964,8 +1141,20 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         return near + t * direction
 
     def mousePressEvent(self, ev):
+        left = ev.button() == QtCore.Qt.MouseButton.LeftButton
+        if self._pose_drag is not None:
+            if not left:                          # a right click cancels the gizmo's drag
+                self.cancel_pose_drag()
+            return
+        if self._drag_cancelled:
+            return
         self._press = ev.position()
         self.mousePos = ev.position()
+        if left:
+            self._pose_drag = self._grab_ring(ev.position().x(), ev.position().y())
+            if self._pose_drag is not None:
+                self.refresh()
+                return
         goal = self._active_goal()
         if goal is not None and ev.button() == QtCore.Qt.MouseButton.LeftButton:
             i, c, point, off = goal
@@ -987,6 +1176,13 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         return constraints, engine
 
     def mouseMoveEvent(self, ev):
+        if self._drag_cancelled:
+            return
+        if self._pose_drag is not None:
+            self._drag_ring(ev.position().x(), ev.position().y())
+            self.mousePos = ev.position()
+            self.refresh()
+            return
         if self._goal_drag is not None:
             constraints, _ = self._dragged_goal(ev.position())
             self._goal_drag[3].request(constraints)
@@ -1010,6 +1206,14 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self.update()
 
     def mouseReleaseEvent(self, ev):
+        if self._drag_cancelled:
+            self._drag_cancelled = ev.buttons() != QtCore.Qt.MouseButton.NoButton
+            return
+        if self._pose_drag is not None:
+            if ev.button() == QtCore.Qt.MouseButton.LeftButton:
+                self._drag_ring(ev.position().x(), ev.position().y())
+                self._commit_pose_drag()
+            return
         if self._goal_drag is not None:
             constraints, point = self._dragged_goal(ev.position())
             solver = self._goal_drag[3]
@@ -1034,6 +1238,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                   QtCore.Qt.Key.Key_7: "top"}
 
     def keyPressEvent(self, ev):
+        if ev.key() == QtCore.Qt.Key.Key_Escape and self.cancel_pose_drag():
+            return
         if ev.key() == QtCore.Qt.Key.Key_F:
             self.frame_all()
             return
