@@ -212,6 +212,9 @@ class _Problem:
     cancel: object
     chunk_frames: int = CHUNK_FRAMES
     locked: frozenset = frozenset()
+    #: ``(F,)`` per frame the frame a warm start begins from (-1: none); ``None``: ``f - 1``
+    #: (over virtual frames: the previous clip frame's posture with the same tasks held)
+    previous: np.ndarray | None = None
 
     @property
     def skeleton(self):
@@ -342,11 +345,15 @@ def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_
     is one; ``rot`` and ``tra`` are updated in place. Returns residuals and iterations."""
     res = np.zeros((len(frames), len(tasks)))
     it = np.zeros(len(frames), dtype=np.intp)
+    previous = (np.arange(problem.num_frames) - 1 if problem.previous is None
+                else problem.previous)
+    solved = np.zeros(problem.num_frames, dtype=bool)
     for k, f in enumerate(frames):
-        if k and frames[k - 1] == f - 1:
-            r0 = rot[f - 1:f].copy()
+        p = previous[f]
+        if p >= 0 and solved[p]:
+            r0 = rot[p:p + 1].copy()
             t0 = tra[f:f + 1].copy()
-            t0[:, 0] = tra[f - 1, 0]
+            t0[:, 0] = tra[p, 0]
         else:
             r0, t0 = rot[f:f + 1], tra[f:f + 1]
         r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
@@ -354,6 +361,7 @@ def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_
             attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options,
             problem.locked)
         rot[f], tra[f] = r[0], t[0]
+        solved[f] = True
         if problem.cancel is not None and k % 64 == 0:
             problem.check_cancel()
         if problem.progress is not None and k % 64 == 0:
@@ -496,12 +504,17 @@ def _blend(problem: _Problem, rot_v, tra_v, src, weight, single):
     return rot, tra, blended
 
 
-def _virtual(problem: _Problem, src) -> _Problem:
-    """The problem over virtual frames (the composed motion's frames ``src``)."""
+def _virtual(problem: _Problem, src, extra) -> _Problem:
+    """The problem over virtual frames (the composed motion's frames ``src``, each adding the
+    constraints ``extra``); a warm start begins from the previous clip frame's virtual frame
+    that adds the same constraints."""
     composed = problem.composed
     motion = Motion._trusted(composed.skeleton, composed.rotations[src],
                              composed.translations[src], composed.frame_time, composed.name)
-    return dataclasses.replace(problem, composed=motion)
+    index = {(int(t), frozenset(added)): v for v, (t, added) in enumerate(zip(src, extra))}
+    previous = np.array([index.get((int(t) - 1, frozenset(added)), -1)
+                         for t, added in zip(src, extra)], dtype=np.intp)
+    return dataclasses.replace(problem, composed=motion, previous=previous)
 
 
 def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals:
@@ -522,7 +535,7 @@ def _pass_one(problem: _Problem):
     and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
     src, weight, single, extra = _virtual_frames(problem, _ramp_units(problem.cons))
-    virtual = _virtual(problem, src)
+    virtual = _virtual(problem, src, extra)
     entries = _where_needed(virtual, _virtual_entries(problem, src, extra),
                             virtual.composed.rotations, virtual.composed.translations)
     rot_v, tra_v, residual_v, iters_v = _solve(virtual, entries, virtual.composed.rotations,
