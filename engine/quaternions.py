@@ -23,7 +23,7 @@ import numpy as np
 __all__ = ["qmul", "qconj", "qrot", "from_euler", "axis_angle", "qnormalize", "quat_between",
            "twist_about", "qpow", "about_axis", "qpow_many", "qslerp", "to_matrix",
            "from_matrix", "from_rotvec", "components", "interleaved", "cmul", "cconj", "crot",
-           "cquat_between", "ctwist_about", "cfrom_euler"]
+           "cquat_between", "ctwist_about", "cfrom_euler", "cto_matrix"]
 
 
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -253,9 +253,14 @@ def qpow_many(q: np.ndarray, fractions: np.ndarray) -> np.ndarray:
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``."""
-    q = np.asarray(q, dtype=float)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    out = np.empty(q.shape[:-1] + (3, 3))
+    return cto_matrix(np.moveaxis(np.asarray(q, dtype=float), -1, 0))
+
+
+def cto_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions as component arrays
+    ``(4, ...)`` (:func:`components`)."""
+    x, y, z, w = q
+    out = np.empty(q.shape[1:] + (3, 3))
     out[..., 0, 0] = 1 - 2 * (y * y + z * z)
     out[..., 0, 1] = 2 * (x * y - z * w)
     out[..., 0, 2] = 2 * (x * z + y * w)

@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import cmul, crot, qconj, qmul, qnormalize
+from ..quaternions import cmul, crot, cto_matrix, qconj, qmul, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -371,22 +371,6 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra:
     return wq, wp
 
 
-def _matrices(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of component quaternions ``q (4, ...)``."""
-    x, y, z, w = q
-    out = np.empty(q.shape[1:] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
-
-
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
               slot: dict, select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
@@ -399,7 +383,7 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
     parent = structure.unknown_parent
     frames = np.empty((len(parent), B, 3, 3))
     frames[parent < 0] = np.eye(3)
-    frames[parent >= 0] = _matrices(wq[:, parent[parent >= 0]])
+    frames[parent >= 0] = cto_matrix(wq[:, parent[parent >= 0]])
     err = np.empty((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
     on = np.empty((B, len(structure.tasks)), dtype=bool)
