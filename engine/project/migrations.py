@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from .model import FORMAT, ROLES, SOLVED_LAYER, VERSION, _Invalid, _kind, _show
+from .model import (FORMAT, ROLES, SOLVED_LAYER, VERSION, _Invalid, _checked_version, _kind,
+                    _show)
 
 __all__ = ["MIGRATIONS", "migrator", "migrate"]
 
@@ -29,14 +30,8 @@ def migrate(data) -> dict:
     if data.get("format") != FORMAT:
         raise _Invalid("format", f"not a Motion Composer project (expected \"format\": "
                                  f"\"{FORMAT}\")")
-    version = data.get("version")
-    if isinstance(version, bool) or not isinstance(version, int) or version < 0:
-        raise _Invalid("version", f"expected a format version (a whole number), not "
-                                  f"{_show(version)}")
-    if version > VERSION:
-        raise _Invalid("version", f"this project was written by a newer Motion Composer "
-                                  f"(format version {version}; this one reads up to "
-                                  f"{VERSION}); update Motion Composer to open it")
+    version = _checked_version(data.get("version"), first=0, newest=VERSION, kind="project",
+                               label="format version", verb="open")
     while version < VERSION:
         step = MIGRATIONS.get(version)
         if step is None:

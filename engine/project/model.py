@@ -112,6 +112,21 @@ def _show(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+def _checked_version(version, *, first: int, newest: int, kind: str, label: str,
+                     verb: str) -> int:
+    """A file's format ``version``: a whole number from ``first`` up to ``newest`` (this
+    program's); ``kind`` ("project"), ``label`` ("format version") and ``verb`` ("open") word
+    the error a newer file gives."""
+    if isinstance(version, bool) or not isinstance(version, int) or version < first:
+        raise _Invalid("version", f"expected a format version (a whole number from {first}), "
+                                  f"not {_show(version)}")
+    if version > newest:
+        raise _Invalid("version", f"this {kind} was written by a newer Motion Composer "
+                                  f"({label} {version}; this one reads up to {newest}); "
+                                  f"update Motion Composer to {verb} it")
+    return version
+
+
 # --------------------------------------------------------------------------- the data
 @dataclass(frozen=True)
 class Source:

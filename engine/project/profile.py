@@ -39,7 +39,7 @@ from ..fileio import atomic_write, read_regular_file, reading
 from ..conversion.chains import ChainSettings, euler_to_offset
 from .json import (_binding, _chains, _contacts, _correspondence, _encode, _ik, _list, _num,
                    _obj, _parse, _root, _sub, binding_dict, ik_dict)
-from .model import Project, ProjectError, _Invalid, _show
+from .model import Project, ProjectError, _Invalid, _checked_version, _show
 
 __all__ = ["Profile", "ProfileError", "profile_of", "apply_profile", "save_profile",
            "read_profile", "profile_to_json", "profile_from_json", "PROFILE_FORMAT",
@@ -121,14 +121,8 @@ def profile_from_json(text: str, path=None) -> Profile:
         if data["format"] != PROFILE_FORMAT:
             raise _Invalid("format", f"not a Motion Composer profile (expected \"format\": "
                                      f"\"{PROFILE_FORMAT}\", not {_show(data['format'])})")
-        version = data["version"]
-        if isinstance(version, bool) or not isinstance(version, int) or version < 1:
-            raise _Invalid("version", f"expected a format version (a whole number from 1), "
-                                      f"not {_show(version)}")
-        if version > PROFILE_VERSION:
-            raise _Invalid("version", f"this profile was written by a newer Motion Composer "
-                                      f"(profile version {version}; this one reads up to "
-                                      f"{PROFILE_VERSION}); update Motion Composer to use it")
+        _checked_version(data["version"], first=1, newest=PROFILE_VERSION, kind="profile",
+                         label="profile version", verb="use")
         auto_contacts, contact_options = _contacts(data.get("contacts", {}))
         return Profile(correspondence=_correspondence(data["correspondence"]),
                        bind_options=_binding(data.get("binding", {})),
