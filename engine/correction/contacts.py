@@ -19,7 +19,7 @@ import numpy as np
 from .constraints import Constraint
 from ..kinematics import fk_arrays
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qrot
+from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
@@ -280,12 +280,76 @@ def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
     return Ground(ground if floor is None else float(floor), heights, flat)
 
 
-def _heading(converted: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """The turn (x, y, z, w) about +Y from the rest foot's heading (the ankle-to-toe vector
-    ``rest`` (3,)) to the converted foot's (``converted`` (n, 3), its median)."""
-    d = np.median(converted[:, [0, 2]], axis=0)
-    angle = np.arctan2(d[0], d[1]) - np.arctan2(rest[0], rest[2])
-    return np.array([0.0, np.sin(angle / 2), 0.0, np.cos(angle / 2)])
+@dataclass(frozen=True)
+class _FlatFeet:
+    """Where one contact holds its foot: ``ankles`` (the goal of each heel run), ``toes`` (of
+    each ball run) and ``turns`` (the ankle's world rotation on each flat ``(first, last)``:
+    the frames where heel and ball are both held)."""
+
+    ankles: list
+    toes: list
+    turns: dict
+
+
+def _flat_turn(rot: np.ndarray, rest_turn: np.ndarray, rest_toe: np.ndarray):
+    """The foot held flat over frames whose converted ankle world rotations are ``rot (n, 4)``:
+    their mean, pitched about a horizontal axis (the smallest turn) so that the toe stands as
+    high above the ankle as in the rest pose (``rest_turn``, ``rest_toe``: the rest pose's
+    ankle rotation and ankle-to-toe vector). The converted foot's heading and roll are kept,
+    so that a foot the performer turns out or rolls stays so; only what the character's other
+    ankle height needs changes. Returns the rotation and its ankle-to-toe vector."""
+    q = rot * np.where(rot @ rot[len(rot) // 2] < 0.0, -1.0, 1.0)[:, None]
+    mean = q.sum(axis=0)
+    mean /= np.linalg.norm(mean)
+    toe = qrot(qmul(mean, qconj(rest_turn)), rest_toe)
+    length = float(np.linalg.norm(toe))
+    flat = np.hypot(toe[0], toe[2])
+    if flat < 1e-9 * max(length, 1e-12):
+        return mean, toe                            # a foot along the vertical: no heading
+    rise = float(np.clip(rest_toe[1] / max(length, 1e-12), -1.0, 1.0))
+    goal = np.array([toe[0] / flat * np.sqrt(1.0 - rise * rise) * length, rise * length,
+                     toe[2] / flat * np.sqrt(1.0 - rise * rise) * length])
+    pitch = quat_between(toe, goal)
+    return qmul(pitch, mean), goal
+
+
+def _flat_feet(heel_runs, ball_runs, rot, ankle, toe, rest_turn, rest_toe,
+               heights) -> _FlatFeet:
+    """The goals of one contact's heel and ball runs (see :class:`_FlatFeet`), from the
+    converted ankle's world rotations ``rot (F, 4)``, the converted ankle and toe positions
+    ``(F, 3)`` and the planted ``heights`` (ankle, toe) [m].
+
+    Each flat holds the foot as :func:`_flat_turn` turns it there. The runs are placed in
+    time order: a part that comes down while the other is held is placed from it through
+    the flat foot (a heel strike puts the toe, a toe that holds while the heel lifts and
+    the foot pivots puts the heel where it comes down again, turned as the foot then is);
+    a part that comes down alone is placed at its converted median, at its planted height.
+    """
+    flats = sorted({(max(bs, hs), min(be, he)) for bs, be in ball_runs for hs, he in heel_runs
+                    if hs <= be and bs <= he})
+    turns, reach = {}, {}
+    for fs, fe in flats:
+        turns[(fs, fe)], reach[(fs, fe)] = _flat_turn(rot[fs:fe + 1], rest_turn, rest_toe)
+    ankles, toes = [None] * len(heel_runs), [None] * len(ball_runs)
+    order = sorted([(s, 0, i) for i, (s, _) in enumerate(heel_runs)] +
+                   [(s, 1, k) for k, (s, _) in enumerate(ball_runs)])
+    for _, part, n in order:
+        s, e = (heel_runs if part == 0 else ball_runs)[n]
+        other, placed = (ball_runs, toes) if part == 0 else (heel_runs, ankles)
+        # the other part held since before (or, for a toe, since as) this one comes down
+        held = [m for m, (os_, oe) in enumerate(other) if placed[m] is not None and
+                os_ <= s <= oe and (os_ < s or part == 1)]
+        if held:
+            m = held[-1]
+            first = (max(s, other[m][0]), min(e, other[m][1]))
+            offset = reach[first] if part == 1 else -reach[first]
+            goal = placed[m] + offset
+        else:
+            goal = np.median((ankle if part == 0 else toe)[s:e + 1], axis=0)
+        goal = np.array(goal, dtype=float)
+        goal[1] = heights[part]
+        (ankles if part == 0 else toes)[n] = goal
+    return _FlatFeet(ankles, toes, turns)
 
 
 def _spans(runs: list[tuple[str, int, int]], ramp: int, F: int) -> list[tuple[int, int]]:
@@ -314,14 +378,18 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     ``pairs``: target joint -> performer joint (the correspondence). The foot is held whole
     while flat and by its toe while it pivots:
 
-    * a heel run pins the target ankle at its planted height above the floor, horizontally
-      at the converted ankle's median position over the run; where the target has no mapped
-      toe the ankle is pinned over the whole contact and its world orientation is held too
-      (the converted orientation at the contact's middle frame);
-    * a ball run pins the target toe at its planted height: where the run overlaps a heel run
-      (the flat foot), at the flat foot's toe (the ankle's goal plus the foot's horizontal
-      length along the converted foot's heading), so that it stays there while the heel
-      rises; else at the converted toe's median position;
+    * each flat (a heel run and a ball run overlapping) holds the ankle's world orientation:
+      the converted foot's mean orientation over the flat, pitched so that the toe stands as
+      high above the ankle as in the rest pose (the converted heading and roll kept: a foot
+      turned out, or turned between two flats of one contact as it pivots, stays so);
+    * a heel run pins the target ankle at its planted height above the floor; a ball run pins
+      the target toe at its planted height. A part that comes down while the other is held
+      is placed from it through the flat foot's orientation (a heel strike places the toe
+      where the flat foot puts it, and it stays there while the heel rises; a heel that comes
+      down again about a held toe lands where the foot's new heading puts it); a part that
+      comes down alone is held at its converted median position. Where the target has no
+      mapped toe the ankle is pinned over the whole contact and its world orientation is
+      held too (the converted orientation at the contact's middle frame);
     * on every frame each held foot joint stays at or above its planted height (a one-sided
       plane: the floor rule).
 
@@ -357,33 +425,21 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal, 0),
                      (ankle, "turn", c.start, c.end, None, None, c, turn, 1)]
             continue
-        t = sk.index[toe]
         rest_turn, rest_toe = ground.flat[ankle]
-        # the flat foot's placement: the ankle at its planted height where the converted heel
-        # stands, turned from the rest pose's flat foot to the converted foot's heading; the
-        # toe where that puts it (a tiptoe contact: where the converted toe stands)
-        turn = qmul(_heading(t_pos[t][frames] - t_pos[a][frames],
-                             rest_toe), rest_turn)
-        offset = qrot(qmul(turn, qconj(rest_turn)), rest_toe)
-        heel_frames = np.concatenate([np.arange(s, e + 1) for s, e in c.heel]) if c.heel \
-            else np.arange(c.start, c.end + 1)
-        if c.heel:
-            ankle_at = np.median(t_pos[a][heel_frames], axis=0)
-            ankle_at[1] = ground.floor + ground.heights[ankle]
-            toe_at = ankle_at + offset
-        else:
-            toe_at = np.median(t_pos[t][frames], axis=0)
-            toe_at[1] = ground.floor + ground.heights[toe]
-        toe_first = False
-        pins = []
         # a heel that comes down within a ramp after the toe is taken as down with it: the
         # flat foot is held from the toe's landing on
         heel_runs = [(min(hs, next((bs for bs, be in c.ball if 0 < hs - bs < ramp and
                                     hs <= be), hs)), he) for hs, he in c.heel]
-        for s, e in c.ball:
+        feet = _flat_feet(heel_runs, c.ball, t_rot[a], t_pos[a], t_pos[sk.index[toe]],
+                          rest_turn, rest_toe, (ground.floor + ground.heights[ankle],
+                                                ground.floor + ground.heights[toe]))
+        toe_first = False
+        pins = []
+        for k, (s, e) in enumerate(c.ball):
             flats = [(max(s, hs), min(e, he)) for hs, he in heel_runs if hs <= e and s <= he]
-            for fs, fe in flats:
-                runs.append((ankle, "turn", fs, fe, None, None, c, turn, 1))
+            for flat in flats:
+                runs.append((ankle, "turn", flat[0], flat[1], None, None, c,
+                             feet.turns[flat], 1))
             first = flats[0][0] if flats else None
             if first is not None and first - s >= ramp:
                 # the toe lands first: it is held from then on, and the heel comes down
@@ -394,8 +450,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             # else from the flat foot on, the toe is where the flat foot puts it: held from
             # there, it needs no ramp in (a ramp in would pull it against the flat foot's)
             pins.append((toe, "pin", s if first is None else first, e, first, "toe", c,
-                         toe_at, 0))
-        for s, e in heel_runs:
+                         feet.toes[k], 0))
+        for i, (s, e) in enumerate(heel_runs):
             # a heel coming down after the toe took off eases in once the toe is let go
             # (easing in against the held toe would pull the foot apart)
             after = max((be for bs, be in c.ball if be < s), default=None)
@@ -404,7 +460,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                 # turn easing in brings it down about the toe, onto its goal at ``s`` (a
                 # straight ramp would pull the ankle off the circle the held toe allows)
                 after = s
-            runs.append((ankle, "pin", s, e, after, "heel", c, ankle_at, int(toe_first)))
+            runs.append((ankle, "pin", s, e, after, "heel", c, feet.ankles[i], int(toe_first)))
         runs += pins
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
     out = []
