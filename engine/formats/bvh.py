@@ -30,7 +30,7 @@ from ..fileio import atomic_write, reading
 from ..kinematics import WorldPose, fk_components
 from ..motion import Motion
 from ..quaternions import cfrom_euler, from_matrix, qmul
-from ..rotations import euler_to_quat, quat_to_euler
+from ..rotations import euler_to_quat, euler_with_bound, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
 
@@ -994,7 +994,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                                   "channels to write the rotation in")
             continue
         flat = q.transpose(1, 0, 2).reshape(-1, 4)                 # joint-major for unwrap
-        angles = quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order))
+        angles = (_euler_angles(q, order, decimals) if len(order) == 3 else
+                  quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order)))
         # unwrapping changes nothing in a curve where no step reaches half a turn (but the
         # sign of zeros, which the rows do not write): only the curves that jump are unwrapped
         if F > 1:
@@ -1075,6 +1076,48 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     else:
         out.extend("" for _ in range(F))
     return "\n".join(out) + "\n"
+
+
+#: [deg] a step of a joint's angle curve from which the writer takes scipy's values for the
+#: whole joint: unwrapping looks for steps of half a turn (180), and where no angle is in
+#: doubt ours lie within half a degree of scipy's (see :func:`_euler_angles`)
+_NEAR_HALF_TURN = 179.0
+
+
+def _euler_angles(q: np.ndarray, order: str, decimals: int) -> np.ndarray:
+    """``quat_to_euler(q[:, g], order, unwrap=False)`` of each joint ``g`` of ``q`` ``(F, Jg,
+    4)``, as ``(Jg, F, 3)``, for a three-axis ``order``, the rows written at ``decimals``
+    digits after the point the same, character for character, as with scipy's values.
+
+    The angles are :func:`~engine.rotations.euler_with_bound`'s, within its bound of scipy's
+    per quaternion. scipy's own values are taken where that cannot give the same text: the
+    rows it doubts, and every angle within the bound of a rounding tie at ``decimals`` (the
+    same test as :func:`_format_rows`', its margin widened by the bound; also values beyond
+    2^52 at that precision, which are written with ``%``); a bound of half a degree or more
+    is a tie at any number of decimals, so the angles left differ from scipy's by less. A
+    joint with a step of :data:`_NEAR_HALF_TURN` in one of its curves, which may be unwrapped
+    by its steps of half a turn, gets scipy's values in all its frames: the unwrapping then
+    sees what it saw before.
+    """
+    F, G = q.shape[:2]
+    comps = np.ascontiguousarray(q.transpose(2, 1, 0)).reshape(4, G * F)  # joint-major
+    angles, bound, doubt = euler_with_bound(comps, order)
+    scale = 10.0 ** decimals
+    with np.errstate(over="ignore", invalid="ignore"):
+        mag = np.abs(angles) * scale
+        near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51 + bound * scale)
+                | ~(mag < 2.0 ** 52))
+    doubt |= near.any(axis=0) | (decimals > 22)
+    angles = np.ascontiguousarray(angles.T).reshape(G, F, 3)
+    redo = np.flatnonzero(doubt)
+    if len(redo):
+        g, f = np.divmod(redo, F)
+        angles[g, f] = quat_to_euler(q[f, g], order, unwrap=False)
+    if F > 1:
+        steps = np.abs(np.diff(angles, axis=1)) >= _NEAR_HALF_TURN
+        for g in np.flatnonzero(steps.any(axis=(1, 2))):
+            angles[g] = quat_to_euler(q[:, g], order, unwrap=False)
+    return angles
 
 
 def _slots(texts) -> np.ndarray:
