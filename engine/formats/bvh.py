@@ -30,7 +30,7 @@ from ..fileio import atomic_write, reading
 from ..kinematics import WorldPose, fk_components
 from ..motion import Motion
 from ..quaternions import cfrom_euler, from_matrix, qmul
-from ..rotations import euler_to_quat, euler_with_bound, quat_to_euler
+from ..rotations import euler_to_quat, quat_to_euler
 from ..skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, EndSite, Skeleton
 from ..units import UNITS, AXES, SourceFrame, detect_units, nearest_axis
 
@@ -993,18 +993,15 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                 raise ExportError(f"joint {sk.names[j]!r} rotates, but it has no rotation "
                                   "channels to write the rotation in")
             continue
-        flat = q.transpose(1, 0, 2).reshape(-1, 4)                 # joint-major for unwrap
-        angles = (_euler_angles(q, order, decimals) if len(order) == 3 else
-                  quat_to_euler(flat, order, unwrap=False).reshape(len(joints), F, len(order)))
+        angles = _joint_angles(q, order)                           # (Jg, F, n)
         # unwrapping changes nothing in a curve where no step reaches half a turn (but the
         # sign of zeros, which the rows do not write): only the curves that jump are unwrapped
-        if F > 1:
-            jumps = np.any(np.abs(np.diff(angles, axis=1)) >= 180.0, axis=1)    # (Jg, n)
-            g, k = np.nonzero(jumps)
-            if len(g):
-                angles[g, :, k] = np.unwrap(angles[g, :, k], period=360.0, axis=1)
+        g, k = _jumps(angles)
+        if len(g):
+            angles[g, :, k] = np.unwrap(angles[g, :, k], period=360.0, axis=1)
         if len(order) < 3:
             back = euler_to_quat(angles.reshape(-1, len(order)), order).reshape(len(joints), F, 4)
+            flat = q.transpose(1, 0, 2).reshape(-1, 4)
             err = np.abs(np.sum(back * flat.reshape(len(joints), F, 4), axis=-1))
             if np.any(err < np.cos(0.5e-5)):
                 j = joints[int(np.argmin(err.min(axis=1)))]
@@ -1078,46 +1075,36 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
     return "\n".join(out) + "\n"
 
 
-#: [deg] a step of a joint's angle curve from which the writer takes scipy's values for the
-#: whole joint: unwrapping looks for steps of half a turn (180), and where no angle is in
-#: doubt ours lie within half a degree of scipy's (see :func:`_euler_angles`)
-_NEAR_HALF_TURN = 179.0
-
-
-def _euler_angles(q: np.ndarray, order: str, decimals: int) -> np.ndarray:
-    """``quat_to_euler(q[:, g], order, unwrap=False)`` of each joint ``g`` of ``q`` ``(F, Jg,
-    4)``, as ``(Jg, F, 3)``, for a three-axis ``order``, the rows written at ``decimals``
-    digits after the point the same, character for character, as with scipy's values.
-
-    The angles are :func:`~engine.rotations.euler_with_bound`'s, within its bound of scipy's
-    per quaternion. scipy's own values are taken where that cannot give the same text: the
-    rows it doubts, and every angle within the bound of a rounding tie at ``decimals`` (the
-    same test as :func:`_format_rows`', its margin widened by the bound; also values beyond
-    2^52 at that precision, which are written with ``%``); a bound of half a degree or more
-    is a tie at any number of decimals, so the angles left differ from scipy's by less. A
-    joint with a step of :data:`_NEAR_HALF_TURN` in one of its curves, which may be unwrapped
-    by its steps of half a turn, gets scipy's values in all its frames: the unwrapping then
-    sees what it saw before.
-    """
+def _joint_angles(q: np.ndarray, order: str) -> np.ndarray:
+    """The Euler angles ``(Jg, F, len(order))`` of joints' rotations ``q`` ``(F, Jg, 4)``
+    (``quat_to_euler`` of each joint's, not unwrapped). A joint whose rotation never changes
+    (bit for bit) is turned once, its angles copied to every frame: the same values, the
+    decomposition being value by value (a CC3 figure's fingers mostly never move)."""
     F, G = q.shape[:2]
-    comps = np.ascontiguousarray(q.transpose(2, 1, 0)).reshape(4, G * F)  # joint-major
-    angles, bound, doubt = euler_with_bound(comps, order)
-    scale = 10.0 ** decimals
-    with np.errstate(over="ignore", invalid="ignore"):
-        mag = np.abs(angles) * scale
-        near = ((np.abs(mag - np.floor(mag) - 0.5) <= mag * 2.0 ** -51 + bound * scale)
-                | ~(mag < 2.0 ** 52))
-    doubt |= near.any(axis=0) | (decimals > 22)
-    angles = np.ascontiguousarray(angles.T).reshape(G, F, 3)
-    redo = np.flatnonzero(doubt)
-    if len(redo):
-        g, f = np.divmod(redo, F)
-        angles[g, f] = quat_to_euler(q[f, g], order, unwrap=False)
-    if F > 1:
-        steps = np.abs(np.diff(angles, axis=1)) >= _NEAR_HALF_TURN
-        for g in np.flatnonzero(steps.any(axis=(1, 2))):
-            angles[g] = quat_to_euler(q[:, g], order, unwrap=False)
+    bits = np.ascontiguousarray(q).view(np.int64).reshape(F, G * 4)
+    still = (np.equal(bits, bits[:1]).all(axis=0).reshape(G, 4).all(axis=1) if F
+             else np.zeros(G, dtype=bool))
+    angles = np.empty((G, F, len(order)))
+    for joints, frames in ((np.flatnonzero(still), slice(0, 1)),
+                           (np.flatnonzero(~still), slice(None))):
+        if len(joints):
+            part = q[frames, joints].transpose(1, 0, 2).reshape(-1, 4)      # joint-major
+            angles[joints] = quat_to_euler(part, order, unwrap=False).reshape(
+                len(joints), -1, len(order))
     return angles
+
+
+def _jumps(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The curves ``(g, k)`` of ``angles`` ``(Jg, F, n)`` with a step of half a turn or more
+    (those ``np.unwrap`` may change), in order; found on the joint-major rows, the steps from
+    one joint's last frame to the next one's first left out."""
+    G, F, n = angles.shape
+    if F < 2:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    at, k = np.nonzero(np.abs(np.diff(angles.reshape(G * F, n), axis=0)) >= 180.0)
+    inside = at % F != F - 1
+    curves = np.unique(at[inside] // F * n + k[inside])
+    return curves // n, curves % n
 
 
 def _slots(texts) -> np.ndarray:
