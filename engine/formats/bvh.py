@@ -1159,8 +1159,7 @@ def _format_rows(values: np.ndarray, decimals: np.ndarray) -> str:
 
 
 #: values formatted at a time by :func:`_format_rows`: the temporaries of a block stay small
-#: (a whole large clip's would be hundreds of MB, the dropping of NULs building an index of
-#: every character)
+#: (a whole large clip's would be hundreds of MB) and in the caches
 _FORMAT_VALUES = 1 << 16
 
 
@@ -1230,8 +1229,8 @@ def _fixed_rows(number: np.ndarray, negative: np.ndarray, decimals: np.ndarray) 
             out[:, :, -1] |= separator
         if not one:
             slots[:, cols] = out
-    flat = slots.view(np.uint8).reshape(-1)
-    return np.compress(flat != 0, flat).tobytes()[:-1].decode("ascii")
+    # the NULs dropped by bytes.translate: a third faster than numpy's compress with its mask
+    return slots.tobytes().translate(None, b"\0")[:-1].decode("ascii")
 
 
 def _check_range(sk: Skeleton, offsets: np.ndarray, values: np.ndarray, scale: float) -> None:
