@@ -149,6 +149,11 @@ def run_child(script: Path, args: list[str], *, timeout: float = 600) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+#: MiB in a MB: a target in MB (10^6 bytes, as the issue states them) compared with a figure in
+#: MiB (2^20 bytes, what ru_maxrss gives) is ``figure <= target_mb * MIB_PER_MB``
+MIB_PER_MB = 1e6 / 2**20
+
+
 def max_rss_mib() -> float:
     """This process's peak resident set size so far, in MiB (``ru_maxrss``, KiB on Linux).
 

@@ -38,15 +38,16 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import tempfile  # noqa: E402
 
-from _common import (Row, data_file, environment, fmt_seconds, max_rss_mib,  # noqa: E402
-                     print_table, proc_status_mib, ratio_row, run_child, time_interleaved)
+from _common import (MIB_PER_MB, Row, data_file, environment, fmt_seconds,  # noqa: E402
+                     max_rss_mib, print_table, proc_status_mib, ratio_row, run_child,
+                     time_interleaved)
 
 FILE = "cc3_cmu_02_06_pickup.bvh"
 FALLBACK = "cmu_131_01_walk.bvh"
 READ_TARGET = 2.0           # read + FK / loadtxt
 WRITE_RATIO_TARGET = 1.5    # write / loadtxt
 WRITE_TARGET = 0.2          # [s]
-MEMORY_TARGET = 200.0       # [MB], taken as MiB: the stricter reading
+MEMORY_TARGET = 200.0       # [MB]: 190.7 MiB
 BIG_TARGET = 3.0            # peak memory of a read / file size
 BVHIO_TARGET = 30.0
 
@@ -125,6 +126,8 @@ def main(argv=None) -> int:
                         help="size of the tiled file for the memory of a large read (MB)")
     parser.add_argument("--bvhio", action="store_true",
                         help="also time bvhio.readAsHierarchy (~3 s a run)")
+    parser.add_argument("--no-reference", action="store_true",
+                        help="do not time bvhio even with --bvhio (the default without it)")
     parser.add_argument("--child-memory", choices=["rss", "tracemalloc", "big"],
                         help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -182,7 +185,7 @@ def main(argv=None) -> int:
         Row("  of which format_bvh (the text)", fmt_seconds(timed["format"].median),
             note=f"{timed['format'].median / ref.median:.2f}x the reference"),
     ]
-    if args.bvhio:
+    if args.bvhio and not args.no_reference:
         import bvhio
         bv = time_interleaved({"bvhio": (lambda: bvhio.readAsHierarchy(str(path)), 3),
                                "read": (lambda: read_and_fk(path), 3)}, rounds=3)
@@ -190,7 +193,7 @@ def main(argv=None) -> int:
                                BVHIO_TARGET, at_most=False))
 
     table.append(Row("peak RSS of read + FK, above baseline", f"{rss['delta_mib']:.1f} MiB",
-                     f"< {MEMORY_TARGET:.0f} MB", rss["delta_mib"] < MEMORY_TARGET,
+                     f"< {MEMORY_TARGET:.0f} MB", rss["delta_mib"] < MEMORY_TARGET * MIB_PER_MB,
                      f"ru_maxrss: peak {rss['peak_mib']:.1f} - {rss['baseline_peak_mib']:.1f} "
                      f"MiB after imports" + ("" if rss["hwm_delta_mib"] is None else
                                              f"; VmHWM says {rss['hwm_delta_mib']:.1f} MiB")))
@@ -198,7 +201,8 @@ def main(argv=None) -> int:
         table[-1].note += (f" (UNRELIABLE: the child's baseline is the parent's "
                            f"{parent_peak:.1f} MiB)")
     table.append(Row("tracemalloc peak of read + FK", f"{traced['peak_mib']:.1f} MiB",
-                     f"< {MEMORY_TARGET:.0f} MB", traced["peak_mib"] < MEMORY_TARGET,
+                     f"< {MEMORY_TARGET:.0f} MB",
+                     traced["peak_mib"] < MEMORY_TARGET * MIB_PER_MB,
                      "numpy buffers and Python objects; "
                      f"{traced['numpy_live_mib']:.1f} MiB of numpy buffers live at the end "
                      f"(result arrays {traced['result_mib']:.1f} MiB)"))

@@ -43,15 +43,15 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _common import (Row, environment, fmt_seconds, max_rss_mib, print_table,  # noqa: E402
-                     proc_status_mib, run_child, time_runs, SHARED_DATA)
+from _common import (MIB_PER_MB, Row, environment, fmt_seconds, max_rss_mib,  # noqa: E402
+                     print_table, proc_status_mib, run_child, time_runs, SHARED_DATA)
 
 FPS_TARGET = 1000.0
 EDIT_TARGET = 0.1           # [s]
 SCALING_TARGET = 4.4        # 40k/10k time ratio of contact building
 SCALING_FRAMES = (10_000, 40_000)
 MEMORY_FRAMES = 100_000
-MEMORY_TARGET = 1024.0      # [MiB] peak above baseline
+MEMORY_TARGET = 1000.0      # [MB] peak above baseline (the 1 GB): 953.7 MiB
 WALK = SHARED_DATA / "cmu_max_131_01_walk.bvh"
 BANDAI = SHARED_DATA / "bandai1_walk_normal_001.bvh"
 
@@ -195,8 +195,8 @@ def main() -> None:
         Row(f"  ratio {SCALING_FRAMES[1] // 1000}k/{SCALING_FRAMES[0] // 1000}k", f"{ratio:.2f}",
             f"<= {SCALING_TARGET}", ratio <= SCALING_TARGET),
         Row(f"IK with automatic contacts, {MEMORY_FRAMES:,} frames: peak memory",
-            f"{memory['peak_above_mib']:,.0f} MiB", f"< {MEMORY_TARGET:,.0f} MiB",
-            memory["peak_above_mib"] < MEMORY_TARGET,
+            f"{memory['peak_above_mib']:,.0f} MiB", f"<= {MEMORY_TARGET / 1000:g} GB",
+            memory["peak_above_mib"] <= MEMORY_TARGET * MIB_PER_MB,
             note=f"above a baseline of {memory['baseline_mib']:,.0f} MiB; "
                  f"{memory['constraints']:,} constraints in {fmt_seconds(memory['seconds'])}"),
     ], loaded=load > 1)

@@ -32,15 +32,15 @@ ALLOCATOR = prepare(one_core=True)    # as motion-composer sets itself up
 import argparse  # noqa: E402
 import json  # noqa: E402
 
-from _common import (Row, SHARED_DATA, environment, fmt_seconds, max_rss_mib,  # noqa: E402
-                     print_table, ratio_row, run_child, time_interleaved)
+from _common import (MIB_PER_MB, Row, SHARED_DATA, environment, fmt_seconds,  # noqa: E402
+                     max_rss_mib, print_table, ratio_row, run_child, time_interleaved)
 
 CLIP = SHARED_DATA / "cmu_mb_01_01_jumps.bvh"
 TARGETS = {"Bandai": "bandai1_walk_normal_001.bvh", "CC3": "cc3_cmu_02_06_pickup.bvh"}
 RATIO_TARGET = 3.0            # conversion / one FK pass of the performer
 FPS_TARGET = 100_000.0
 MEMORY_FRAMES = 100_000
-MEMORY_TARGET = 600.0         # [MB], taken as MiB: the stricter reading
+MEMORY_TARGET = 600.0         # [MB]: 572.2 MiB
 
 
 def _job(target_name: str):
@@ -119,7 +119,7 @@ def main() -> None:
         above = m["peak_mib"] - m["imported_mib"]
         rows.append(Row(f"retarget of {MEMORY_FRAMES:,} frames onto {label}: peak memory",
                         f"{above:,.0f} MiB", f"<= {MEMORY_TARGET:,.0f} MB",
-                        above <= MEMORY_TARGET,
+                        above <= MEMORY_TARGET * MIB_PER_MB,
                         note=f"ru_maxrss above {m['imported_mib']:,.0f} MiB after imports; "
                              f"{m['peak_mib'] - m['inputs_mib']:,.0f} MiB above the inputs; "
                              f"the result is {m['result_mib']:,.0f} MiB"))
