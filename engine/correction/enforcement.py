@@ -459,10 +459,13 @@ def _virtual_frames(problem: _Problem, units):
 def _virtual_entries(problem: _Problem, src, removed) -> list:
     """Entries over virtual frames: each constraint where it is active at the clip frame (its
     goal there), unless the virtual frame leaves it out."""
+    F = problem.num_frames
+    keys = np.arange(F, len(src))                # the key frames' postures without ramps
     entries = []
     for i, c in enumerate(problem.cons):
-        held = np.flatnonzero((src >= c.start) & (src <= c.end))
-        held = np.array([v for v in held if i not in removed[v]], dtype=np.intp)
+        more = keys[(src[keys] >= c.start) & (src[keys] <= c.end)]
+        more = more[[i not in removed[v] for v in more]] if len(more) else more
+        held = np.concatenate([np.arange(c.start, c.end + 1), more]).astype(np.intp)
         entries.append((i, held, c.kind_object.task_goals(c, src[held])))
     return entries
 
