@@ -444,9 +444,17 @@ def _virtual_frames(problem: _Problem, units):
     groups: dict[tuple, list] = {}
     for k, (lo, hi, rising, _) in enumerate(units):
         groups.setdefault((hi if rising else lo, rising), []).append(k)
-    for (key, _), ks in sorted(groups.items()):
+    cons = problem.cons
+    for (key, rising), ks in sorted(groups.items()):
         ks.sort(key=lambda k: (units[k][1] - units[k][0], k))
-        before, gone = key, ()
+        # constraints that switch on (off) at the key frame without a ramp of their own (a
+        # toe held from the flat foot on) go with the shortest ramp keyed there: the posture
+        # without the ramps is then the one inside them
+        inner = key - 1 if rising else key + 1
+        eased = {i for k in ks for i in units[k][3]}
+        switch = tuple(i for i, c in enumerate(cons) if i not in eased and
+                       c.start <= key <= c.end and not c.start <= inner <= c.end)
+        before, gone = key, switch
         for k in ks:
             gone = gone + tuple(units[k][3])
             src.append(key)
