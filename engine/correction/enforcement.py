@@ -17,7 +17,9 @@ that frame) times ``s`` (input) or ``1 - s`` (output). A ramp alone gives ``exp(
 direct`` with ``r`` the key posture's correction, the form the no-pop rule of issue 14 is
 built on: no joint turns faster than the direct conversion plus 1.5 times the correction
 over the ramp. Ramps keyed on the same frame are taken off it one at a time, shortest first,
-so that their corrections add up to the key posture's. The sum meets the tasks held on those
+so that their corrections add up to the key posture's (with the first go the constraints
+that switch on or off there without a ramp of their own, such as a toe held from the flat
+foot on: the posture without the ramps is the one inside them). The sum meets the tasks held on those
 frames (another foot's contact) only nearly; they are solved again from it (pass two), the
 posture each frame starts from and is pulled towards.
 
