@@ -15,7 +15,8 @@ for at least 3 frames. Then:
   and End Sites for a BVH), minus 1 mm;
 * around every ramp every joint turns no faster than max(1.2 x the direct conversion's fastest
   turn at that joint within 0.25 s of the ramp, that turn + what a smoothstep over the ramp
-  needs for the correction's size there).
+  needs for the correction's size there); where ramps overlap, a frame around several has the
+  sum of their smoothsteps' needs, since they ease the correction together.
 
 Each clip and character pair is solved once (module-scoped fixture).
 """
@@ -209,13 +210,9 @@ def test_planted_feet_stay_on_or_above_the_floor(solved):
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
-    "walk-cmumax-ely": "2.0: mixamorig:LeftLeg at frame 840, 14 deg/s over a limit of 7 (ramp "
-                       "840-854): the other foot's ramps move the hips under this planted leg "
-                       "faster than this ramp's own small correction allows",
-    "run-bandai-mannequin": "1.04: mixamorig:RightLeg at frame 10 (a one-frame switch 10-11 "
-                            "beside the ramp 7-11)",
-    "kick-bandai-cmutpose": "1.2: LeftUpLeg at frame 74 (ramp 71-75)",
-    "jumps-cmumb-holden": "1.5: RightLeg at frame 1062 (ramp 1061-1073)",
+    "jumps-cmumb-holden": "1.46: LeftFoot at frame 975, 377 deg/s over a limit of 258 (ramp "
+                          "965-979): the capture shifts the whole body 6 mm for one frame at "
+                          "975 and 980, and the pinned toe turns the foot to absorb it",
 }
 
 
@@ -244,23 +241,30 @@ def test_no_joint_pops_around_a_ramp(solved, request):
         elif c.end < F - 1:
             spans.add((c.end, c.end + 1))
     assert spans
-    worst = (0.0, "")
+    # per frame: the fastest direct turn within 0.25 s of the ramps around it and the sum of
+    # their smoothsteps' needs (overlapping ramps ease the correction together: judged against
+    # one ramp alone, a joint eased by another ramp that overlaps it would be held to the
+    # first one's need only)
+    J = speed_d.shape[1]
+    base = np.zeros((F, J))
+    need = np.zeros((F, J))
+    around = np.zeros(F, dtype=bool)
     for a, b in sorted(spans):
-        base = speed_d[max(0, a - window):b + window + 1].max(axis=0)
         here = slice(a, b + 1)
         # the correction's own turn over the ramp: from its value at either end
         off = _offsets(direct.rotations[here], corrected.rotations[here])
         size = np.maximum(relative_angle(off, off[:1]), relative_angle(off, off[-1:])).max(0)
-        limit = np.maximum(1.2 * base, base + 1.5 * size * fps / (b - a))
-        limit = np.maximum(limit, np.radians(1.0))
-        seen = speed_c[max(1, a):min(F, b + 2)]
-        ratio = (seen / limit).max()
-        if ratio > worst[0]:
-            k, j = np.unravel_index(np.argmax(seen / limit), seen.shape)
-            worst = (ratio, f"{corrected.skeleton.names[j]} at frame {max(1, a) + k}: "
-                            f"{np.degrees(seen[k, j]):.0f} deg/s, limit "
-                            f"{np.degrees(limit[j]):.0f} (ramp {a}-{b})")
-    assert worst[0] <= 1.0, worst[1]
+        seen = slice(max(1, a), min(F, b + 2))
+        base[seen] = np.maximum(base[seen],
+                                speed_d[max(0, a - window):b + window + 1].max(axis=0))
+        need[seen] += 1.5 * size * fps / (b - a)
+        around[seen] = True
+    limit = np.maximum(np.maximum(1.2 * base, base + need), np.radians(1.0))
+    ratio = np.where(around[:, None], speed_c / limit, 0.0)
+    k, j = np.unravel_index(np.argmax(ratio), ratio.shape)
+    assert ratio[k, j] <= 1.0, (f"{ratio[k, j]:.2f}: {corrected.skeleton.names[j]} at frame {k}: "
+                                f"{np.degrees(speed_c[k, j]):.0f} deg/s, limit "
+                                f"{np.degrees(limit[k, j]):.0f}")
 
 
 def _offsets(direct: np.ndarray, corrected: np.ndarray) -> np.ndarray:

@@ -258,8 +258,9 @@ def test_several_selected_keys_move_together(editor, doc, qtbot):
     vp = editor.plot_widget.viewport()
     rx = doc.scene.displacement.curves[(JOINT, "rx")]
     ry = doc.scene.displacement.curves[(JOINT, "ry")]
-    a = _roomy_key(rx)
-    b = _roomy_key(ry)
+    # not on the playhead's frame, whose line a press there grabs
+    a = _roomy_key(rx, avoid=doc.scene.viewer.current_frame)
+    b = _roomy_key(ry, avoid=doc.scene.viewer.current_frame)
     qtbot.mouseClick(vp, LEFT, NOMOD, _pixel(editor, "rx", a))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "rx", a + 1))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "ry", b))
@@ -312,8 +313,11 @@ def test_rubber_band_selects_the_keys_inside(editor, doc, qtbot):
     assert len(inside) >= 2
     # a band around those rz keys (in view coordinates, then pixels)
     vals = rz.values[inside] * DEG
-    tl = editor.view_box.mapViewToScene(QtCore.QPointF(294.5, vals.max() + 0.02))
-    br = editor.view_box.mapViewToScene(QtCore.QPointF(320.5, vals.min() - 0.02))
+    # a margin of a few pixels above and below (pixels round the band's edges)
+    (_, _), (bottom, top) = editor.view_box.viewRange()
+    margin = 3 * (top - bottom) / editor.view_box.height()
+    tl = editor.view_box.mapViewToScene(QtCore.QPointF(294.5, vals.max() + margin))
+    br = editor.view_box.mapViewToScene(QtCore.QPointF(320.5, vals.min() - margin))
     start, end = editor.plot_widget.mapFromScene(tl), editor.plot_widget.mapFromScene(br)
     count = doc.undo_stack.count()
     _drag(qtbot, editor, start, end)
@@ -344,8 +348,8 @@ def test_snapping_to_5_frame_steps_and_value_steps(editor, doc, qtbot):
     editor.snap_value_check.setChecked(True)
     editor.value_step.setValue(0.25)
     curve = doc.scene.displacement.curves[(JOINT, "ry")]
-    # a key with room to move by whole 5-frame steps
-    i = _roomy_key(curve)
+    # a key with room to move by whole 5-frame steps, not on the playhead's frame
+    i = _roomy_key(curve, avoid=doc.scene.viewer.current_frame)
     start = _pixel(editor, "ry", i)
     end = start + QtCore.QPoint(3, 23)
     _drag(qtbot, editor, start, end)

@@ -41,9 +41,6 @@ def _reaches(composed, joints, ramps):
             for k, j in enumerate(joints)]
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 14 point 2): three reaches whose ramps all "
-                   "overlap turn Spine1 1.23 times the limit at frame 239, where the blend's "
-                   "held tasks are solved again (pass two) from the blend")
 def test_overlapping_ramps_ease_together_without_a_pop():
     performer, _, _, composed = walk_on_holden()
     cons = _reaches(composed, ["LeftHand", "RightHand", "Head"], 20)

@@ -9,19 +9,26 @@ translation) that, added to the composed motion, meets the constraints, with res
 Every frame is solved from the composed motion with the tasks active there (``[start, end]``
 of each constraint, and the one-sided planes such as the floor where they are needed): the
 key postures. A ramp eases its constraints' correction in and out along a smoothstep ``s``
-of the ramp's fraction (zero slope at both ends): on a frame of an input ramp
-``(smooth_in, start)`` the posture is the blend ``(1 - s) X0 + s X1`` of the corrections of
-that frame solved without the constraint (``X0``) and with its goal at ``start`` held
-(``X1``); an output ramp ``(end, smooth_out)`` likewise with the goal at ``end`` and ``1 - s``.
-Where ramps overlap, every subset of them is solved and the blend weighs each by the product
-of its ramps' shares (multilinear in the shares), so the posture is continuous in time however
-ramps lie (a ramp alone gives ``exp(s r) direct``, what the no-pop rule of issue 14 allows:
-no joint turns faster than the direct conversion plus 1.5 times the correction over the
-ramp). The blend meets the tasks held on those frames only nearly; they are solved again
-from it (pass two), the posture each frame starts from and is pulled towards. (The paper
-moves the goal along a straight line over the input ramp and interpolates the joint values
-over the output ramp; solved from the converted motion the line's postures can turn a
-stretched knee or shift the compromise between the root and the hips from frame to frame.)
+of the ramp's fraction (zero slope at both ends): the correction they make at the ramp's key
+frame (``start`` of an input ramp ``(smooth_in, start)``, ``end`` of an output ramp
+``(end, smooth_out)``), the posture solved there with them less the posture solved there
+without them, is added to each ramp frame's own posture (solved with the tasks active on
+that frame) times ``s`` (input) or ``1 - s`` (output). A ramp alone gives ``exp(s r)
+direct`` with ``r`` the key posture's correction, the form the no-pop rule of issue 14 is
+built on: no joint turns faster than the direct conversion plus 1.5 times the correction
+over the ramp. Ramps keyed on the same frame are taken off it one at a time, shortest first,
+so that their corrections add up to the key posture's (with the first go the constraints
+that switch on or off there without a ramp of their own, such as a toe held from the flat
+foot on: the posture without the ramps is the one inside them). The sum meets the tasks held on those
+frames (another foot's contact) only nearly; they are solved again from it (pass two), the
+posture each frame starts from and is pulled towards.
+
+(The paper moves the goal along a straight line over the input ramp and interpolates the
+joint values over the output ramp; solved from the converted motion the line's postures can
+turn a stretched knee or shift the compromise between the root and the hips from frame to
+frame. Holding the goal at its key frame on every ramp frame instead, and blending those
+postures, still pops: the converted joint runs away from the held goal, so the held posture's
+correction grows or shrinks within the ramp faster than the ramp eases it.)
 
 Frames that share the same set of tasks are solved together as one vectorised batch, each
 starting from its attraction posture (the converted motion). With ``warm_start=True`` frames
@@ -32,9 +39,10 @@ tasks (a test checks it), and the batch is many times faster.
 Outside every range ``[smooth_in, smooth_out]`` the displacement is exactly zero.
 
 The steps, in order: :func:`_check` (the constraints that apply), :func:`_ramp_units` and
-:func:`_virtual_frames` (the postures to solve), :func:`_pass_one` (solving them and
-:func:`_blend`), :func:`_pass_two` (the held tasks again on the blended frames) and
-:func:`_correction` (the displacement and the corrected motion).
+:func:`_virtual_frames` (the postures to solve: the clip's frames and the key frames without
+their ramps), :func:`_pass_one` (solving them and :func:`_blend`), :func:`_pass_two` (the
+held tasks again on the blended frames) and :func:`_correction` (the displacement and the
+corrected motion).
 """
 from __future__ import annotations
 
@@ -64,9 +72,9 @@ CHUNK_FRAMES = 2048
 #: first frame's is held still by the conversion (rounding aside)
 STILL = 1e-12
 
-#: ramps (of distinct frames or direction) that may overlap on one frame at most: a frame
-#: inside k of them is solved for each of their 2^k subsets (automatic contacts overlap two
-#: or three; a tangle of more is refused by name rather than solved for minutes)
+#: ramps (of distinct frames or direction) that may overlap on one frame at most (automatic
+#: contacts overlap two or three; a tangle of more is refused by name: a user's handles
+#: moved by mistake, whose corrections would pile up)
 MAX_OVERLAPPING_RAMPS = 8
 
 
@@ -399,121 +407,138 @@ def _ramp_units(cons) -> list:
     return [(lo, hi, rising, idx) for (lo, hi, rising), idx in sorted(units.items())]
 
 
-def _virtual_frames(problem: _Problem, units):
-    """The postures to solve: each frame once with the tasks held there, and each frame inside
-    ramps once more for every other subset of its ramps, their constraints held at full
-    strength at their goal at ``start`` (input) or ``end`` (output).
-
-    Returns ``src (V,)`` each virtual frame's clip frame, ``weight (V,)`` its share in the
-    blend of its clip frame (the products of the ramps' shares in the subset and one minus
-    those outside it), ``single (V,)`` whether it is its frame's only one, and per virtual
-    frame the constraint indices it adds."""
+def _check_overlaps(problem: _Problem, units) -> None:
+    """Refuse a frame inside more than :data:`MAX_OVERLAPPING_RAMPS` ramps, by name."""
     F = problem.num_frames
-    cover = [[] for _ in range(F)]
+    count = np.zeros(F + 1, dtype=np.intp)
+    for lo, hi, _, _ in units:
+        if hi - lo >= 2:
+            count[lo + 1] += 1
+            count[hi] -= 1
+    count = np.cumsum(count)[:F]
+    if len(count) and count.max() > MAX_OVERLAPPING_RAMPS:
+        t = int(np.argmax(count > MAX_OVERLAPPING_RAMPS))
+        here = [k for k, (lo, hi, _, _) in enumerate(units) if lo < t < hi]
+        names = sorted({problem.cons[i].name or problem.cons[i].joint
+                        for k in here for i in units[k][3]})
+        raise ConstraintError(
+            f"{len(here)} ramps overlap at frame {t} (constraints {', '.join(names)}); "
+            f"at most {MAX_OVERLAPPING_RAMPS} can be eased together: shorten or move some "
+            "of their smooth_in/smooth_out handles", "range")
+
+
+def _virtual_frames(problem: _Problem, units):
+    """The postures to solve: each clip frame once with the tasks active there, then at each
+    ramp's key frame (``start`` of an input ramp, ``end`` of an output one) the same frame
+    again without its ramps' constraints, removed one ramp at a time.
+
+    The ramps keyed on one frame and side are removed shortest first: each one's correction
+    (:func:`_pass_one`) is then what its constraints add given the longer ramps' still held,
+    as they mostly are while the shorter one eases.
+
+    Returns ``src (V,)`` each virtual frame's clip frame (the first ``F`` are the clip's
+    frames), per virtual frame the constraint indices it leaves out, and per ramp ``(unit,
+    virtual frame with its constraints, virtual frame without)``."""
+    F = problem.num_frames
+    src = list(range(F))
+    removed: list[tuple] = [()] * F
+    deltas = []
+    groups: dict[tuple, list] = {}
     for k, (lo, hi, rising, _) in enumerate(units):
-        for t in range(lo + 1, hi):
-            cover[t].append(k)
-    src, weight, single, extra = [], [], [], []
-    for t in range(F):
-        here = cover[t]
-        if len(here) > MAX_OVERLAPPING_RAMPS:
-            names = sorted({problem.cons[i].name or problem.cons[i].joint
-                            for k in here for i in units[k][3]})
-            raise ConstraintError(
-                f"{len(here)} ramps overlap at frame {t} (constraints {', '.join(names)}); "
-                f"at most {MAX_OVERLAPPING_RAMPS} can be eased together: shorten or move some "
-                "of their smooth_in/smooth_out handles", "range")
-        if not here:
-            src.append(t)
-            weight.append(1.0)
-            single.append(True)
-            extra.append(())
-            continue
-        share = []
-        for k in here:
-            lo, hi, rising, _ = units[k]
-            s = float(smoothstep(np.array((t - lo) / (hi - lo))))
-            share.append(s if rising else 1.0 - s)
-        for m in range(1 << len(here)):
-            w = 1.0
-            added = []
-            for b, k in enumerate(here):
-                if m >> b & 1:
-                    w *= share[b]
-                    added += units[k][3]
-                else:
-                    w *= 1.0 - share[b]
-            src.append(t)
-            weight.append(w)
-            single.append(False)
-            extra.append(tuple(added))
-    return (np.array(src, dtype=np.intp), np.array(weight), np.array(single, dtype=bool),
-            extra)
-
-
-def _virtual_entries(problem: _Problem, src, extra) -> list:
-    """Entries over virtual frames: each constraint where it is active at the clip frame
-    (its goal there) or added (its goal at ``start`` or ``end``, whichever its ramp there
-    leads to)."""
+        groups.setdefault((hi if rising else lo, rising), []).append(k)
     cons = problem.cons
-    added = [[] for _ in cons]
-    for v, idx in enumerate(extra):
-        for i in idx:
-            added[i].append(v)
+    for (key, rising), ks in sorted(groups.items()):
+        ks.sort(key=lambda k: (units[k][1] - units[k][0], k))
+        # constraints that switch on (off) at the key frame without a ramp of their own (a
+        # toe held from the flat foot on) go with the shortest ramp keyed there: the posture
+        # without the ramps is then the one inside them
+        inner = key - 1 if rising else key + 1
+        eased = {i for k in ks for i in units[k][3]}
+        switch = tuple(i for i, c in enumerate(cons) if i not in eased and
+                       c.start <= key <= c.end and not c.start <= inner <= c.end)
+        before, gone = key, switch
+        for k in ks:
+            gone = gone + tuple(units[k][3])
+            src.append(key)
+            removed.append(gone)
+            deltas.append((k, before, len(src) - 1))
+            before = len(src) - 1
+    return np.array(src, dtype=np.intp), removed, deltas
+
+
+def _virtual_entries(problem: _Problem, src, removed) -> list:
+    """Entries over virtual frames: each constraint where it is active at the clip frame (its
+    goal there), unless the virtual frame leaves it out."""
+    F = problem.num_frames
+    keys = np.arange(F, len(src))                # the key frames' postures without ramps
     entries = []
-    for i, c in enumerate(cons):
-        held = np.flatnonzero((src >= c.start) & (src <= c.end))
-        goals = c.kind_object.task_goals(c, src[held])
-        more = np.array(added[i], dtype=np.intp)
-        if len(more):
-            key = np.where(src[more] < c.start, c.start, c.end)
-            goals = np.concatenate([goals, c.kind_object.task_goals(c, key)])
-            held = np.concatenate([held, more])
-        order = np.argsort(held, kind="stable")
-        entries.append((i, held[order], goals[order]))
+    for i, c in enumerate(problem.cons):
+        more = keys[(src[keys] >= c.start) & (src[keys] <= c.end)]
+        more = more[[i not in removed[v] for v in more]] if len(more) else more
+        held = np.concatenate([np.arange(c.start, c.end + 1), more]).astype(np.intp)
+        entries.append((i, held, c.kind_object.task_goals(c, src[held])))
     return entries
 
 
-def _blend(problem: _Problem, rot_v, tra_v, src, weight, single):
-    """The clip's posture: a frame's only virtual frame as it is, else the weighted sum of
-    its virtual frames' corrections (rotation vectors per joint and the root's offset)."""
+def _offsets(rot, base):
+    """Rotation vectors ``(n, J, 3)`` of ``rot * base^-1``: exactly zero where a joint's
+    rotation is its base's bit for bit."""
+    moved = np.any(rot != base, axis=-1)
+    out = np.zeros(moved.shape + (3,))
+    out[moved] = quat_to_rotvec(qmul(rot[moved], qconj(base[moved])))
+    return out
+
+
+def _blend(problem: _Problem, rot_v, tra_v, src, units, deltas):
+    """The clip's posture: each frame as solved with the tasks active there, plus on the
+    frames inside ramps each ramp's correction at its key frame (the posture with its
+    constraints less the posture without, as rotation vectors per joint and the root's
+    offset) times its share, a smoothstep over the ramp. Returns rot, tra and the frames
+    inside ramps."""
     composed = problem.composed
-    base_rot, base_tra = composed.rotations, composed.translations
-    rot, tra = base_rot.copy(), base_tra.copy()
-    one = np.flatnonzero(single)
-    rot[src[one]], tra[src[one]] = rot_v[one], tra_v[one]
-    many = np.flatnonzero(~single)
-    blended = np.zeros(problem.num_frames, dtype=bool)
-    if not len(many):
+    F = problem.num_frames
+    base_rot = composed.rotations
+    rot, tra = rot_v[:F].copy(), tra_v[:F].copy()
+    blended = np.zeros(F, dtype=bool)
+    if not deltas:
         return rot, tra, blended
-    t = src[many]
-    moved = np.any(rot_v[many] != base_rot[t], axis=-1)                          # (n, J)
-    offset = np.zeros(moved.shape + (3,))
-    offset[moved] = quat_to_rotvec(qmul(rot_v[many][moved], qconj(base_rot[t][moved])))
-    frames, first = np.unique(t, return_index=True)
-    total = np.add.reduceat(offset * weight[many, None, None], first, axis=0)     # (f, J, 3)
-    shift = np.add.reduceat((tra_v[many, 0] - base_tra[t, 0]) * weight[many, None], first,
-                            axis=0)
-    turned = np.add.reduceat(moved, first, axis=0) > 0
+    J = base_rot.shape[1]
+    total = np.zeros((F, J, 3))
+    shift = np.zeros((F, 3))
+    for k, with_, without in deltas:
+        lo, hi, rising, _ = units[k]
+        t = np.arange(lo + 1, hi)
+        if not len(t):
+            continue
+        key = src[with_]
+        pair = _offsets(rot_v[[with_, without]], base_rot[[key, key]])
+        s = smoothstep((t - lo) / (hi - lo))
+        share = s if rising else 1.0 - s
+        total[t] += share[:, None, None] * (pair[0] - pair[1])[None]
+        shift[t] += share[:, None] * (tra_v[with_, 0] - tra_v[without, 0])[None]
+        blended[t] = True
     from .ik import rotvec_to_quat
+    frames = np.flatnonzero(blended)
     r = rot[frames]
-    r[turned] = qnormalize(qmul(rotvec_to_quat(total[turned]), base_rot[frames][turned]))
+    turned = np.any(total[frames] != 0.0, axis=-1)
+    if turned.any():
+        offset = _offsets(r, base_rot[frames]) + total[frames]
+        r[turned] = qnormalize(qmul(rotvec_to_quat(offset[turned]), base_rot[frames][turned]))
     rot[frames] = r
-    tra[frames, 0] = base_tra[frames, 0] + shift
-    blended[frames] = True
+    tra[frames, 0] += shift[frames]
     return rot, tra, blended
 
 
-def _virtual(problem: _Problem, src, extra) -> _Problem:
-    """The problem over virtual frames (the composed motion's frames ``src``, each adding the
-    constraints ``extra``); a warm start begins from the previous clip frame's virtual frame
-    that adds the same constraints."""
+def _virtual(problem: _Problem, src, removed) -> _Problem:
+    """The problem over virtual frames (the composed motion's frames ``src``, each leaving out
+    the constraints ``removed``); a warm start begins from the previous clip frame's virtual
+    frame that leaves out the same constraints."""
     composed = problem.composed
     motion = Motion._trusted(composed.skeleton, composed.rotations[src],
                              composed.translations[src], composed.frame_time, composed.name)
-    index = {(int(t), frozenset(added)): v for v, (t, added) in enumerate(zip(src, extra))}
-    previous = np.array([index.get((int(t) - 1, frozenset(added)), -1)
-                         for t, added in zip(src, extra)], dtype=np.intp)
+    index = {(int(t), frozenset(gone)): v for v, (t, gone) in enumerate(zip(src, removed))}
+    previous = np.array([index.get((int(t) - 1, frozenset(gone)), -1)
+                         for t, gone in zip(src, removed)], dtype=np.intp)
     return dataclasses.replace(problem, composed=motion, previous=previous)
 
 
@@ -530,35 +555,42 @@ def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals
 
 def _pass_one(problem: _Problem):
     """The key postures and the blend over the ramps: every virtual frame
-    (:func:`_virtual_frames`) solved from the composed motion, then blended per clip frame.
-    Returns rot, tra, residuals (of the frames solved once), iterations, the frames solved
-    and the frames blended (both ``(F,)``)."""
+    (:func:`_virtual_frames`) solved from the composed motion, then each ramp's correction
+    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's
+    frames), iterations, the frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
-    src, weight, single, extra = _virtual_frames(problem, _ramp_units(problem.cons))
-    virtual = _virtual(problem, src, extra)
-    entries = _where_needed(virtual, _virtual_entries(problem, src, extra),
+    units = _ramp_units(problem.cons)
+    _check_overlaps(problem, units)
+    src, removed, deltas = _virtual_frames(problem, units)
+    virtual = _virtual(problem, src, removed)
+    entries = _where_needed(virtual, _virtual_entries(problem, src, removed),
                             virtual.composed.rotations, virtual.composed.translations)
     rot_v, tra_v, residual_v, iters_v = _solve(virtual, entries, virtual.composed.rotations,
                                                virtual.composed.translations)
-    rot, tra, blended = _blend(problem, rot_v, tra_v, src, weight, single)
+    rot, tra, blended = _blend(problem, rot_v, tra_v, src, units, deltas)
     iters = np.zeros(F, dtype=np.intp)
     np.maximum.at(iters, src, iters_v)
     solved = np.zeros(F, dtype=bool)
     for _, frames, _ in entries:
         solved[src[frames]] = True
-    return rot, tra, _map_residuals(residual_v, src, single, F), iters, solved, blended
+    clip = np.arange(len(src)) < F
+    return rot, tra, _map_residuals(residual_v, src, clip, F), iters, solved, blended
 
 
 def _pass_two(problem: _Problem, rot, tra, blended):
     """The tasks held on the ``blended`` frames solved again from the blend ``rot``, ``tra``
-    (a weighted sum of postures that each meet them meets them only nearly). Those frames
+    (the key postures' corrections added up meet them only nearly). Those frames
     start next to their solution, so they settle to a tenth of the usual step: their tasks
     end as close as a solve from afar brings them. Returns rot, tra, residuals, iterations."""
     options = problem.options
     entries = _where_needed(problem, _restricted(_active_entries(problem.cons), blended), rot,
                             tra)
+    # each from its blend, with a warm start too: the blend is next to the solution, and a
+    # start from the frame before's could keep a one-sided task (a floor) holding a joint
+    # the blend lifts off it
     closer = dataclasses.replace(problem, options=dataclasses.replace(
-        options, settle=options.settle * 0.1))
+        options, settle=options.settle * 0.1),
+        previous=np.full(problem.num_frames, -1, dtype=np.intp))
     return _solve(closer, entries, rot, tra)
 
 

@@ -279,13 +279,37 @@ POLISH_SETTLE = 1e-6
 #: when it would be done)
 RELEASE_EVERY = 4
 
+#: how many times stiffer each joint is than its children in the weighted least-norm step
+#: (after Baerlocher and Boulic's joint weights): the step turns the joints near the
+#: constrained joint most and those towards the root least, and a root translation of one
+#: stature (``IKOptions.scale``) weighs as a turn of one radian of the topmost joint moved.
+#: Weighed alike (``None``: the plain least norm, metres as radians), a foot's turn to flat
+#: is spread over the whole leg and the hips, and the root's translation makes up for the
+#: ankle they move: 20-30 cm on a walk, which a ramp of a few frames eases in as a jump
+STIFFNESS: float | None = 2.0
+
+
+def column_scale(skeleton: Skeleton, joints: np.ndarray, scale: float) -> np.ndarray:
+    """``(3 + 3 len(joints),)`` the weight of each unknown (the root translation's three,
+    then three per joint of ``joints``): the square root of its compliance, :data:`STIFFNESS`
+    to the power of the joint's depth below the topmost of ``joints``, ``scale`` for the root
+    translation (all ones with ``STIFFNESS`` ``None``)."""
+    if STIFFNESS is None:
+        return np.ones(3 + 3 * len(joints))
+    depth = skeleton.depth[joints].astype(float)
+    below = depth - depth.min(initial=0.0)
+    return np.concatenate([np.full(3, float(scale)),
+                           np.repeat(STIFFNESS ** (0.5 * below), 3)])
+
 
 class _Structure:
-    """What a task set needs from the skeleton: the unknown joints, each task's chain, and the
+    """What a task set needs from the skeleton: the unknown joints, each task's chain, the
     index arrays that evaluate every task at once (the joints forward kinematics places,
-    level by level, and where each task's joints and columns are among them)."""
+    level by level, and where each task's joints and columns are among them), and each
+    column's weight (``colscale``, see :func:`solve_frames`)."""
 
-    def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset()):
+    def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset(),
+                 options: IKOptions | None = None):
         self.tasks = tasks
         moving: set[int] = set()
         chains = []
@@ -307,6 +331,11 @@ class _Structure:
         self.row0 = np.cumsum([0] + [t.rows for t in tasks])
         self.k = int(self.row0[-1])
         self._index(skeleton)
+        # the weighted least norm: the unknowns are solved as y = q / colscale, so that the
+        # least-norm step in y is the step of least sum((q / colscale)^2) (a plain least norm
+        # without options: the Jacobian as it is)
+        self.colscale = (column_scale(skeleton, self.joints, options.scale)
+                         if options is not None else np.ones(self.n))
 
     def _index(self, skeleton: Skeleton) -> None:
         """Positions among ``fk_joints`` ("local"): FK levels ``(joints, parents)`` by depth
@@ -403,7 +432,8 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
         on[:, ti] = weight > 0
         acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
         err[:, rows] = task.kind.error(goal, state)
-        jac[:, rows, structure.task_cols[ti]] = task.kind.jacobian(goal, state)
+        cols = structure.task_cols[ti]
+        jac[:, rows, cols] = task.kind.jacobian(goal, state) * structure.colscale[cols]
     return err, jac, on, acting
 
 
@@ -455,6 +485,11 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     through (:func:`_pushed_through`) leave the batch; the step is applied
     (:func:`_apply_step`).
 
+    The step is the least-norm step in weighted unknowns (:data:`STIFFNESS`): each
+    Jacobian column is scaled by its joint's ``colscale`` and the step found for the scaled
+    unknowns is scaled back, so that the solution is the posture nearest the attraction in
+    that weighted norm (joints towards the root stiffer; the root translation in statures).
+
     Args:
         rot: ``(B, J, 4)`` starting local rotations (the attraction posture, or the solution
             of the previous frame for a warm start).
@@ -476,7 +511,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     # by priority, so that each level's rows are one slice
     order = sorted(range(len(tasks)), key=lambda i: tasks[i].priority)
     tasks = [tasks[i] for i in order]
-    structure = _Structure(skeleton, tasks, locked)
+    structure = _Structure(skeleton, tasks, locked, options)
     rows = _Rows(tasks, structure, options)
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints
@@ -524,7 +559,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                     continue
                 out[sel] = _step(err[f], jac[f], rows_on[sel], rows, active[f], structure.n,
                                  options, polish, t[f, 0], cur[f], home_root[f], home[f],
-                                 0.0 if polish else options.attraction)
+                                 0.0 if polish else options.attraction, structure.colscale)
             return out
 
         # one-sided tasks (a floor) act where violated; once they have acted they hold their
@@ -538,7 +573,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         # those are released and it goes on (so that the result is the posture nearest the
         # attraction that meets the tasks, whatever the start). Held tasks are checked so
         # then, and every few iterations (a hold may keep a lower level from being met)
-        size = np.abs(dq).max(axis=1)
+        size = np.abs(dq * structure.colscale).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
         frames = np.flatnonzero(check & held.any(axis=1))
@@ -584,7 +619,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         keep = ~settled
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
-        r, t = _apply_step(dq, r, t, cur, structure, attraction_rot[active], options)
+        r, t = _apply_step(dq * structure.colscale, r, t, cur, structure,
+                           attraction_rot[active], options)
         rot[active] = r
         tra[active] = t
     unsorted = np.empty_like(residual)
@@ -616,14 +652,16 @@ def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
 
 def _step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
           active: np.ndarray, n: int, options: IKOptions, polishing: bool, root: np.ndarray,
-          cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float) -> np.ndarray:
+          cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float,
+          colscale: np.ndarray) -> np.ndarray:
     """The step ``(b, N)`` of the ``active`` frames: the levels restored in turn
     (:func:`_levels_step`) plus the attraction's pull with ``gain`` in the null space of every
     task (:func:`_attraction_step`)."""
     dq, stacked, gram = _levels_step(err, jac, rows_on, rows, active, n, options, polishing)
     if gain == 0.0:
         return dq
-    return dq + _attraction_step(stacked, gram, root, cur, home_root, home, gain, options)
+    return dq + _attraction_step(stacked, gram, root, cur, home_root, home, gain, options,
+                                 colscale)
 
 
 def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _Rows,
@@ -700,18 +738,19 @@ def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float,
 
 def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
                      cur: np.ndarray, home_root: np.ndarray, home: np.ndarray, gain: float,
-                     options: IKOptions) -> np.ndarray:
+                     options: IKOptions, colscale: np.ndarray) -> np.ndarray:
     """The pull ``(b, N)`` towards the attraction posture, in the null space of every task.
 
     ``root (b, 3)`` and ``cur (b, C, 4)`` are the current root translation and rotations of
     the unknown joints, ``home_root`` and ``home`` the attraction posture's; ``stacked``
-    ``(b, K, N)`` the tasks' weighted Jacobian and ``gram (b, K, K)`` its Gram matrix.
+    ``(b, K, N)`` the tasks' weighted Jacobian and ``gram (b, K, K)`` its Gram matrix. The
+    pull and the step are in the weighted unknowns (``q / colscale (N,)``).
     """
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
     dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
-    dz *= gain
+    dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
     coef = np.linalg.solve(gram + ns_lam2 * np.eye(gram.shape[1]), stacked @ dz[..., None])
     return dz - (stacked.transpose(0, 2, 1) @ coef)[..., 0]

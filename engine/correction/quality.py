@@ -68,30 +68,41 @@ def ramps(constraints, num_frames: int) -> list[tuple[int, int]]:
     return sorted(out)
 
 
-def pop_limits(direct: Motion, corrected: Motion, spans) -> list[tuple[slice, np.ndarray]]:
-    """Per ramp span ``(a, b)``: the frames the no-pop rule checks (those turned into from
-    ``a - 1`` to ``b + 1``) and ``(J,)`` [rad/s] each joint's limit there.
+def pop_limits(direct: Motion, corrected: Motion, spans) -> np.ndarray:
+    """``(F, J)`` [rad/s] each joint's limit on the frames around the ramp spans ``(a, b)``
+    (those turned into from ``a - 1`` to ``b + 1``), ``inf`` on frames around none.
 
     The limit (issue 14 point 2) is the larger of :data:`POP_FACTOR` times the direct
     conversion's fastest turn at the joint within :data:`POP_WINDOW` of the ramp, and that turn
     plus what a smoothstep over the ramp needs for the correction's size there (the largest
-    turn of the joint's correction from its value at either end of the ramp).
+    turn of the joint's correction from its value at either end of the ramp). Where ramps
+    overlap, the correction is eased by all of them at once: a frame around several has the
+    sum of their smoothsteps' needs (and the fastest of their direct turns). Judged against
+    each ramp alone, a joint eased by one ramp while another begins would be held to the
+    other's need only, which no easing meets (a foot's ramp out moving the hips under the
+    other foot, planted and about to ease out itself).
     """
     F = direct.num_frames
     fps = direct.fps
     speed = angular_speed(direct)
+    J = speed.shape[1]
     offset = qmul(corrected.rotations, qconj(direct.rotations))          # (F, J, 4)
     w = int(round(POP_WINDOW * fps))
-    out = []
+    base = np.zeros((F, J))
+    need = np.zeros((F, J))
+    around = np.zeros(F, dtype=bool)
     for a, b in spans:
-        base = speed[max(0, a - w):min(F, b + w + 1)].max(axis=0)
+        fastest = speed[max(0, a - w):min(F, b + w + 1)].max(axis=0)
         part = offset[a:b + 1]
         size = np.maximum(_angle(qmul(part, qconj(part[:1]))),
                           _angle(qmul(part, qconj(part[-1:])))).max(axis=0)
-        need = base + SMOOTHSTEP_PEAK * size * fps / (b - a)
-        limit = np.maximum(np.maximum(POP_FACTOR * base, need), _SPEED_FLOOR)
-        out.append((slice(max(1, a), min(F, b + 2)), limit))
-    return out
+        frames = slice(max(1, a), min(F, b + 2))
+        base[frames] = np.maximum(base[frames], fastest)
+        need[frames] += SMOOTHSTEP_PEAK * size * fps / (b - a)
+        around[frames] = True
+    limit = np.maximum(np.maximum(POP_FACTOR * base, base + need), _SPEED_FLOOR)
+    limit[~around] = np.inf
+    return limit
 
 
 def _residuals(constraints, residual) -> list[dict]:
@@ -138,28 +149,18 @@ def _contacts(constraints, direct_pos, corrected_pos, index) -> tuple[list[dict]
 def _pops(direct: Motion, corrected: Motion, constraints) -> list[dict]:
     names = corrected.skeleton.names
     speed = angular_speed(corrected)
+    limit = pop_limits(direct, corrected, ramps(constraints, direct.num_frames))
+    around = np.isfinite(limit)
+    # -1 off the ramps: the worst frame of a joint is always one around a ramp
+    ratio = np.where(around, speed / np.where(around, limit, 1.0), -1.0)
+    where = ratio.argmax(axis=0)
     J = len(names)
-    worst = np.zeros(J)
-    where = np.zeros(J, dtype=np.intp)
-    at_speed = np.zeros(J)
-    at_limit = np.full(J, np.nan)
-    for frames, limit in pop_limits(direct, corrected, ramps(constraints, direct.num_frames)):
-        s = speed[frames]
-        if not len(s):
-            continue
-        ratio = s / limit
-        k = ratio.argmax(axis=0)
-        r = ratio[k, np.arange(J)]
-        better = r > worst
-        worst[better] = r[better]
-        where[better] = frames.start + k[better]
-        at_speed[better] = s[k, np.arange(J)][better]
-        at_limit[better] = limit[better]
+    worst = ratio[where, np.arange(J)]
     order = np.argsort(-worst, kind="stable")
     return [{"joint": names[j], "ratio": float(worst[j]), "frame": int(where[j]),
-             "speed_deg_s": float(np.degrees(at_speed[j])),
-             "limit_deg_s": float(np.degrees(at_limit[j]))}
-            for j in order if np.isfinite(at_limit[j])]
+             "speed_deg_s": float(np.degrees(speed[where[j], j])),
+             "limit_deg_s": float(np.degrees(limit[where[j], j]))}
+            for j in order if around[:, j].any()]
 
 
 def _bone_directions(binding, performer: Motion, corrected_pos) -> list[dict]:

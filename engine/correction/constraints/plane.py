@@ -19,6 +19,12 @@ __all__ = ["PlaneKind", "KIND", "SIDES"]
 #: a plane's sides and their sign in the task goal
 SIDES = {"above": 1.0, "on": 0.0, "below": -1.0}
 
+#: [m] a joint this little on the wrong side of a one-sided plane is on it: a posture solved
+#: with the plane holding the joint leaves it there to rounding, and a solve that starts from
+#: that posture (a warm start) must be free to lift it off, as one from elsewhere would
+#: (the plane acting would hold it: the pull to the attraction moves only along the plane)
+SLACK = 1e-7
+
 
 class PlaneKind(ConstraintKind):
     """The signed distance of the joint to a plane: zero (on), or not negative (above) or not
@@ -110,7 +116,7 @@ class PlaneKind(ConstraintKind):
     def active(self, goal, state):
         s = self._distance(goal, state)
         side = goal[:, 6]
-        return (side == 0) | ((side > 0) & (s < 0)) | ((side < 0) & (s > 0))
+        return (side == 0) | ((side > 0) & (s < -SLACK)) | ((side < 0) & (s > SLACK))
 
     def acts(self, goal, error):
         side = goal[:, 6]
@@ -121,7 +127,7 @@ class PlaneKind(ConstraintKind):
 
     def violated(self, goal, position):
         distance = np.sum((position - goal[:, 0:3]) * goal[:, 3:6], axis=1)
-        return distance * goal[:, 6] < 0.0             # on the wrong side (never for "on")
+        return distance * goal[:, 6] < -SLACK          # on the wrong side (never for "on")
 
     def error(self, goal, state):
         return -self._distance(goal, state)[:, None]
