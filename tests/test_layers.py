@@ -134,12 +134,13 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
         window[c.smooth_in:c.smooth_out + 1] = True
     composed = solution.scene.composed
     np.testing.assert_array_equal(keyed.rotations[~window], composed.rotations[~window])
-    # the keys turn no joint faster around a ramp than the dense solve does (the no-pop
-    # rule of issue 14 is the dense solve's to meet; the keys must not break it further)
+    # the keys keep the no-pop rule of issue 14 where the dense solve keeps it, and break it
+    # no further where it does not
     dense_pops = quality(solution.scene.performer, composed, dense, solution.constraints,
                          None)["pops"]
     keyed_pops = solution.report["quality"]["pops"]
-    assert max(p["ratio"] for p in keyed_pops) <= 1.02 * max(p["ratio"] for p in dense_pops)
+    assert max(p["ratio"] for p in keyed_pops) <= max(1.0, 1.02 * max(p["ratio"]
+                                                                      for p in dense_pops))
 
 
 @pytest.mark.xfail(strict=True, reason="open (issue 15 point 1): the fitted keys are 28 % (demo, "

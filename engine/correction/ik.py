@@ -280,25 +280,36 @@ POLISH_SETTLE = 1e-6
 RELEASE_EVERY = 4
 
 #: how many times stiffer each joint is than its children in the weighted least-norm step
-#: (after Baerlocher and Boulic's joint weights): the step turns the joints near the
-#: constrained joint most and those towards the root least, and a root translation of one
-#: stature (``IKOptions.scale``) weighs as a turn of one radian of the topmost joint moved.
-#: Weighed alike (``None``: the plain least norm, metres as radians), a foot's turn to flat
-#: is spread over the whole leg and the hips, and the root's translation makes up for the
-#: ankle they move: 20-30 cm on a walk, which a ramp of a few frames eases in as a jump
-STIFFNESS: float | None = 2.0
+#: (after Baerlocher and Boulic's joint weights); 1 weighs every joint's turn alike.
+#: Measured with 2 (each joint twice as stiff as its parent's other children, the
+#: compliance growing with the depth below the hips): the light distal joints took the
+#: corrections, so that on the demo's reach the elbow and shoulder traded 70 degrees within
+#: five frames of a stretched arm (the forearm at 2,800 deg/s against the conversion's 470),
+#: and a capture's one-frame 6 mm shift was absorbed by a planted foot's turn (341 deg/s at
+#: frame 975 of the CMU jumps onto Holden). ``None``: the plain least norm of the first
+#: projects (every unknown alike, the root's metres as radians).
+STIFFNESS: float | None = 1.0
+
+#: [statures] the root translation that weighs as much as a turn of one radian. Weighed as
+#: radians (the plain least norm) the root is cheap next to the joints: on the Bandai walk onto
+#: the CMU skeleton it slid 30 cm to make up for the feet, and a ramp of four frames at 30 fps
+#: eased in 15 cm in one frame; at 0.3 the largest correction is 14 cm and its largest step
+#: 6.8 cm, and no pair of test_foot_contacts nor the demo turns a joint visibly faster (0.5: 24
+#: and 11 cm; 1, the stature: 37 and 19 cm).
+ROOT_TRANSLATION = 0.3
 
 
 def column_scale(skeleton: Skeleton, joints: np.ndarray, scale: float) -> np.ndarray:
     """``(3 + 3 len(joints),)`` the weight of each unknown (the root translation's three,
     then three per joint of ``joints``): the square root of its compliance, :data:`STIFFNESS`
-    to the power of the joint's depth below the topmost of ``joints``, ``scale`` for the root
-    translation (all ones with ``STIFFNESS`` ``None``)."""
+    to the power of half the joint's depth below the topmost of ``joints``, and
+    :data:`ROOT_TRANSLATION` times ``scale`` (the stature) for the root translation (all ones
+    with ``STIFFNESS`` ``None``)."""
     if STIFFNESS is None:
         return np.ones(3 + 3 * len(joints))
     depth = skeleton.depth[joints].astype(float)
     below = depth - depth.min(initial=0.0)
-    return np.concatenate([np.full(3, float(scale)),
+    return np.concatenate([np.full(3, ROOT_TRANSLATION * float(scale)),
                            np.repeat(STIFFNESS ** (0.5 * below), 3)])
 
 
@@ -488,7 +499,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     The step is the least-norm step in weighted unknowns (:data:`STIFFNESS`): each
     Jacobian column is scaled by its joint's ``colscale`` and the step found for the scaled
     unknowns is scaled back, so that the solution is the posture nearest the attraction in
-    that weighted norm (joints towards the root stiffer; the root translation in statures).
+    that weighted norm (the root translation in statures, see :data:`ROOT_TRANSLATION`).
 
     Args:
         rot: ``(B, J, 4)`` starting local rotations (the attraction posture, or the solution
