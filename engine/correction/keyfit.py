@@ -92,6 +92,8 @@ ANGLE_LEVER = 0.1
 #: damped Gauss-Newton iterations per fit at most, and rounds of added keys at most
 ITERATIONS = 8
 ROUNDS = 12
+#: rounds of a costlier speed where the keys pop, at most
+CALMING = 4
 #: keys added per miss (a run of frames where a task misses) and round, on as many channels
 PER_MISS = 2
 
@@ -272,6 +274,8 @@ class _Tasks:
             entry[2].append(frames)
             entry[3].append(c.kind_object.task_goals(c, frames))
         self.items = []
+        #: per item, its metric error [m] per frame in the dense solve (None: not known yet)
+        self.floor = None
         for kind, c, frames, goals in batches.values():
             frames = np.concatenate(frames)
             task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
@@ -322,30 +326,43 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     held = _held(cons, sk, F)
     scale = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
         held[jt.index][jt.frames], pull, PULL_FREE), 3) for jt in joints])
-    speed = _speeds(layout, edited.fps) if SPEED or SPEED_HELD else None
     speed_w = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
         held[jt.index][jt.frames], SPEED_HELD, SPEED), 3) for jt in joints])
+    _linearised(tasks, _keyed(edited, layout, dense), layout, dense, tolerance)  # the floor
     x = _least_squares(layout.basis, dense)
-    total = rounds = 0
+    reg_pull = sparse.diags(scale)
+    dense_pop = _worst_pop(edited, _keyed(edited, layout, dense), cons)
+    boost = {}                    # (joint index, frame) -> how much more its speed costs
+    total = rounds = calming = 0
     while True:
-        reg = sparse.diags(scale) @ layout.basis
-        target = scale * dense
-        if speed is not None:
-            reg = sparse.vstack([reg, sparse.diags(abs(speed) @ speed_w / (2 * edited.fps))
-                                 @ speed @ layout.basis])
-            target = np.r_[target, np.zeros(speed.shape[0])]
-        x, worst, misses, used = _gauss_newton(tasks, edited, layout, x, reg.tocsr(), target,
+        speed, at = _speeds(layout, edited.fps)
+        weights = abs(speed) @ speed_w / (2 * edited.fps)
+        weights *= np.array([boost.get(key, 1.0) for key in at]) if boost else 1.0
+        reg = sparse.vstack([reg_pull @ layout.basis,
+                             sparse.diags(weights) @ speed @ layout.basis]).tocsr()
+        target = np.r_[scale * dense, np.zeros(speed.shape[0])]
+        x, worst, misses, used = _gauss_newton(tasks, edited, layout, x, reg, target,
                                                tolerance)
         total += used
-        if not misses or rounds == ROUNDS or not _add_keys(joints, misses):
+        if misses and rounds < ROUNDS and _add_keys(joints, misses):
+            rounds += 1
+            # the new key set fitted to the curves as they are, then Gauss-Newton again
+            values = layout.values(x)
+            layout = _Layout(joints, F)
+            x = _least_squares(layout.basis, values)
+            continue
+        popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons,
+                           max(dense_pop, 1.0))
+        if not popping or calming == CALMING:
             break
-        rounds += 1
-        # the new key set fitted to the curves as they are, then Gauss-Newton again
-        values = layout.values(x)
-        layout = _Layout(joints, F)
-        x = _least_squares(layout.basis, values)
+        # where a joint turns faster than the no-pop rule (as the dense solve meets it)
+        # allows, its curves' speed costs more, and the fit runs again
+        calming += 1
+        for key in popping:
+            boost[key] = boost.get(key, 1.0) * 4.0
     if stats is not None:
-        stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds})
+        stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
+                      "calming": calming})
     return _as_map(sk, layout, x)
 
 
@@ -390,39 +407,52 @@ def _add_keys(joints: list[_Joint], misses: list) -> int:
 
 
 def _speeds(layout: _Layout, fps: float):
-    """Sparse ``(rows, m)``: per joint channel and pair of consecutive keyed frames, the
-    curve's change between them times ``fps`` (its speed)."""
-    rows, cols, vals = [], [], []
+    """Sparse ``(rows, m)``: per joint channel and pair of consecutive keyed frames (and
+    between a span's end frame and the zero beyond it), the curve's change times ``fps`` (its
+    speed); and per row ``(joint index, frame)``, the later frame of the pair."""
+    rows, cols, vals, at = [], [], [], []
     n = 0
     for jt, row_of in zip(layout.joints, layout.row_of):
         f = jt.frames
         pair = np.flatnonzero(np.diff(f) == 1)
-        # a span's first and last frames, next to the zero outside (the clip's ends aside)
-        edges = np.r_[f[np.r_[0, np.flatnonzero(np.diff(f) > 1) + 1]],
-                      f[np.r_[np.flatnonzero(np.diff(f) > 1), len(f) - 1]]]
-        edges = edges[(edges > 0) & (edges < layout.num_frames - 1)]
+        breaks = np.flatnonzero(np.diff(f) > 1)
+        first = f[np.r_[0, breaks + 1]]
+        last = f[np.r_[breaks, len(f) - 1]]
+        first = first[first > 0]
+        last = last[last < layout.num_frames - 1]
         for c in range(3):
-            a = row_of[f[pair]] + c
-            b = row_of[f[pair + 1]] + c
             r = n + np.arange(len(pair))
-            e = n + len(pair) + np.arange(len(edges))
+            e = n + len(pair) + np.arange(len(first) + len(last))
             rows += [r, r, e]
-            cols += [a, b, row_of[edges] + c]
+            cols += [row_of[f[pair]] + c, row_of[f[pair + 1]] + c, row_of[np.r_[first, last]] + c]
             vals += [np.full(len(pair), -fps), np.full(len(pair), fps),
-                     np.full(len(edges), fps)]
-            n += len(pair) + len(edges)
-    return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                                     np.concatenate(cols))),
-                             shape=(n, layout.m))
+                     np.r_[np.full(len(first), fps), np.full(len(last), -fps)]]
+            at += [(jt.index, int(t)) for t in np.r_[f[pair + 1], first, last + 1]]
+            n += len(pair) + len(first) + len(last)
+    matrix = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                       np.concatenate(cols))),
+                               shape=(n, layout.m))
+    return matrix, at
+
+
+def _popping(direct: Motion, keyed: Motion, constraints, allowed: float) -> set:
+    """``(joint index, frame)`` where ``keyed`` turns a joint faster than ``allowed`` times
+    its no-pop limit around a ramp (:func:`~.quality.pop_limits`)."""
+    from .quality import angular_speed, pop_limits, ramps
+    speed = angular_speed(keyed)
+    out = set()
+    for frames, limit in pop_limits(direct, keyed, ramps(constraints, direct.num_frames)):
+        f, j = np.nonzero(speed[frames] > allowed * limit)
+        out.update(zip(j.tolist(), (f + frames.start).tolist()))
+    return out
 
 
 def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, target,
                   tolerance: float):
     """Key values and slopes ``x`` improved by damped Gauss-Newton (Levenberg-Marquardt)
-    steps on the held tasks' errors plus the ``pull`` (per row) towards the ``dense`` curves;
-    returns ``x``, the largest metric task error, the misses and the evaluations used."""
-    pull_rows = reg
-
+    steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
+    the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
+    misses and the evaluations used."""
     def state(x):
         values = layout.values(x)
         err, jac, worst, misses = _linearised(tasks, _keyed(edited, layout, values), layout,
@@ -435,7 +465,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     used = 1
     for _ in range(ITERATIONS):
         err, jac, _, _, rest = now
-        a = sparse.vstack([jac, pull_rows]).tocsc()
+        a = sparse.vstack([jac, reg]).tocsc()
         normal = (a.T @ a).tocsc()
         diag = normal.diagonal()
         g = a.T @ np.concatenate([err, rest])
@@ -499,7 +529,8 @@ def _solve_spd(normal, rhs: np.ndarray) -> np.ndarray:
             return solveh_banded(band, rhs, check_finite=False)
         except LinAlgError:
             pass
-    return splu(sparse.csc_matrix(normal), permc_spec="MMD_AT_PLUS_A").solve(rhs)
+    return splu(sparse.csc_matrix(normal), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                options={"SymmetricMode": True}).solve(rhs)
 
 
 def _keyed(edited: Motion, layout: _Layout, values: np.ndarray) -> Motion:
@@ -539,7 +570,8 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     r0 = 0
     worst = 0.0
     misses = []
-    for frames, structure, weight, angular in tasks.items:
+    floors = {}
+    for item, (frames, structure, weight, angular) in enumerate(tasks.items):
         err, jac = task_error_and_jacobian(sk, structure, motion.rotations[frames],
                                            motion.translations[frames], slot)
         B, K = err.shape
@@ -551,7 +583,13 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
                   [(-1, 0)] + [(int(a), 3 + 3 * k) for k, a in enumerate(structure.joints)]
                   if a in group]
         if not angular:
+            # how much further from its goal than the dense solve (which may miss an
+            # unreachable goal) the task is
             size = np.linalg.norm(err, axis=1)
+            if tasks.floor is not None:
+                size = size - tasks.floor[item]
+            else:
+                floors[item] = size
             worst = max(worst, float(size.max(initial=0.0)))
             bad = size > tolerance
             if bad.any():
@@ -578,6 +616,8 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
                               np.concatenate(cols) if cols else np.zeros(0, np.intp))),
                             shape=(r0, layout.m))
     err = np.concatenate(errs) if errs else np.zeros(0)
+    if tasks.floor is None:
+        tasks.floor = floors
     return err, big @ layout.basis, worst, misses
 
 
