@@ -1,5 +1,5 @@
 """Sparse solved keys fitted to the constraints' tasks, not to the dense curves (issue 15
-point 1; NOT yet used by :meth:`~engine.scene.Scene.solve`, see "Status" below).
+point 1).
 
 The IK's dense result moves every corrected channel on every frame of its windows, and a fit
 of each channel to that curve within a fraction of a millimetre follows every wiggle of it
@@ -35,26 +35,34 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   Steps are Levenberg-Marquardt (a step that does not lower the cost is damped and tried
   again).
 * **Keys where a task misses.** Where a metric task still misses by more than
-  :data:`TASK_TOLERANCE`, per run of missing frames, the worst frame gets a key on the
-  :data:`PER_MISS` channels of the chain whose key interval there is the longest (room in
-  their budget permitting, a quarter of it per round), and the fit runs again, for
-  :data:`ROUNDS` rounds at most.
+  :data:`TASK_TOLERANCE` beyond what the dense solve misses (an unreachable goal is missed by
+  both), per run of missing frames, the worst frame gets a key on the :data:`PER_MISS`
+  channels of the chain whose key interval there is the longest (room in their budget
+  permitting, a quarter of it per round), and the fit runs again, :data:`ROUNDS` rounds at
+  most.
+* **No pops.** Then where the keyed motion turns a joint faster around a ramp than the
+  no-pop rule allows (:func:`~.quality.pop_limits`, at the dense solve's own worst ratio),
+  that joint's curve speed there costs 4 times more and the fit runs again,
+  :data:`CALMING` times at most.
 
-The unknowns are numbered in key order, so the normal equations are banded in time; they are
-solved banded when narrow, else by sparse LU (the cost per iteration stays linear in frames).
+The unknowns are numbered in key order, so the normal equations are banded in time and are
+factorised in that order (no fill outside the band): each iteration is linear in the frames,
+and the rounds are bounded (``benchmarks/bench_keys.py``).
 
-:func:`solved_keys` is what a solve would call: the task-fitted keys when they hold every
-held task within :data:`TASK_LIMIT` and pop no more than the dense solve, else ``None`` (keep
-the dense-following keys of :func:`~.displacement.fit_keys`).
+:func:`solved_keys` is what :meth:`~engine.scene.Scene.solve` stores: the task-fitted keys
+when they hold every task within :data:`TASK_LIMIT` (beyond the dense solve's own miss) and
+pop no more than the dense solve (the worst ratio, :data:`POP_MARGIN`), else ``None``: the
+solve keeps the keys fitted to the dense curves (:func:`~.displacement.fit_keys`), so a solve
+never holds its constraints worse than before.
 
-Status (measured on the two cases of ``tests/test_layers.py``, at most 10 % keys per
-channel): the Bandai walk onto the CMU skeleton (195 frames at 30 fps) reaches 0.9 to 1.2 mm
-with 9.7 % keys per channel only after 100 to 700 Gauss-Newton evaluations (15 to 130 s),
-and the demo (994 frames at 120 fps) either meets 1 mm (0.49 mm, 6.8 % median, 9.9 % worst)
-with pops 1.9 times the dense solve's, or holds the pops with 3 mm misses. The fit is
-therefore not wired into the solve yet; what stands in the way is the speed of convergence
-(the problem is ill-conditioned: a weak pull leaves a large null space, in which steps are
-nonlinear) and pops where a held stretch meets a ramp.
+Measured (``tests/test_layers.py``): the demo (994 frames at 120 fps) is stored as task
+keys, 6.3 % of the window frames per channel (median; 7.4 % the worst), every goal within
+0.49 mm, no joint popping more than the dense solve, joints up to 77 mm from the dense solve
+(the null space and the ramps, which no task holds). The Bandai walk onto the CMU skeleton
+(195 frames at 30 fps) is not: at 10 % the fit misses a contact by 2.3 mm (0.72 mm at 12.8 %),
+because within each contact the direct conversion's foot wobbles by about 1 mm from frame to
+frame (a quintic over a 15-frame contact leaves 1 to 1.7 mm), which the keys of 12 channels
+over 15 frames only nearly follow; the solve keeps its dense-following keys there.
 """
 from __future__ import annotations
 
@@ -116,7 +124,10 @@ class _Joint:
             keys, pinned = [], []
             for lo, hi, a, b in ends:
                 inner = lo + (phase + np.arange(int((hi - lo) / spacing) + 1)) * spacing
-                k = np.unique(np.r_[lo, np.round(inner[inner < hi - 1]).astype(np.intp), hi])
+                inner = np.round(inner[inner < hi - 1]).astype(np.intp)
+                if not len(inner) and hi - lo >= 2:
+                    inner = np.array([(lo + hi) // 2])        # a short span: one free key
+                k = np.unique(np.r_[lo, inner, hi])
                 keys.append(k)
                 pin = np.zeros(len(k), dtype=bool)
                 pin[0] = lo < a
@@ -648,7 +659,7 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction):
     miss a held task by more than :data:`TASK_LIMIT` or turn a joint faster around a ramp
     than the dense solve does (the no-pop rule's worst ratio against ``direct``, the direct
     conversion): the caller then keeps keys fitted to the dense curves."""
-    if correction is None:
+    if correction is None or edited.num_frames < 3:
         return None
     stats: dict = {}
     keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root, stats=stats)
