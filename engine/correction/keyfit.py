@@ -29,7 +29,8 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   orientation tasks the logarithm's), plus a pull towards the dense correction (metres at the
   joint's lever: :data:`PULL` on frames where a task is held through the joint, so that the
   null space stays near the dense solve; :data:`PULL_FREE` on the others, the ramps) and a
-  cost on the curves' speed on the ramps (:data:`SPEED`, against pops). Metric tasks weigh
+  cost on the curves' speed (:data:`SPEED` on the ramps, :data:`SPEED_HELD` on held frames,
+  against pops). Metric tasks weigh
   1 whatever their priority (each is held within 1 mm); an angle counts at
   :data:`ANGLE_LEVER` metres per radian, :data:`LEVEL_WEIGHT` less per level below the first.
   Steps are Levenberg-Marquardt (a step that does not lower the cost is damped and tried
@@ -59,7 +60,7 @@ Measured (``tests/test_layers.py``): the demo (994 frames at 120 fps) is stored 
 keys, 6.3 % of the window frames per channel (median; 7.4 % the worst), every goal within
 0.49 mm, no joint popping more than the dense solve, joints up to 77 mm from the dense solve
 (the null space and the ramps, which no task holds). The Bandai walk onto the CMU skeleton
-(195 frames at 30 fps) is not: at 10 % the fit misses a contact by 2.3 mm (0.72 mm at 12.8 %),
+(195 frames at 30 fps) is not: at 10 % the fit misses a contact by 2.3 mm (0.87 mm at 12.8 %),
 because within each contact the direct conversion's foot wobbles by about 1 mm from frame to
 frame (a quintic over a 15-frame contact leaves 1 to 1.7 mm), which the keys of 12 channels
 over 15 frames only nearly follow; the solve keeps its dense-following keys there.
