@@ -68,8 +68,6 @@ over 15 frames only nearly follow; the solve keeps its dense-following keys ther
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sparse
-from scipy.sparse.linalg import splu
 
 from ..motion import Motion
 from ..quaternions import qmul
@@ -78,6 +76,10 @@ from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
 from .ik import Task, _Structure, rotvec_to_quat, task_error_and_jacobian
 
 __all__ = ["fit_to_tasks", "solved_keys", "KEY_BUDGET", "TASK_TOLERANCE", "TASK_LIMIT"]
+
+# scipy (sparse) is imported where a fit needs it: opening a project stays off scipy, which
+# costs about half a second to import
+
 
 #: keys per frame of a channel's constraint windows, at most
 KEY_BUDGET = 0.1
@@ -196,6 +198,7 @@ class _Layout:
     ``(joint, keyed frame, channel)`` -> the curve there, linear in the unknowns."""
 
     def __init__(self, joints: list[_Joint], num_frames: int):
+        import scipy.sparse as sparse
         self.joints = joints
         self.num_frames = num_frames
         owner, when = [], []
@@ -306,6 +309,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
     the fit's figures (largest held-task error [m], iterations, rounds)."""
+    import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
     cons = [c for c in constraints if c.enabled]
@@ -422,6 +426,7 @@ def _speeds(layout: _Layout, fps: float):
     """Sparse ``(rows, m)``: per joint channel and pair of consecutive keyed frames (and
     between a span's end frame and the zero beyond it), the curve's change times ``fps`` (its
     speed); and per row ``(joint index, frame)``, the later frame of the pair."""
+    import scipy.sparse as sparse
     rows, cols, vals, at = [], [], [], []
     n = 0
     for jt, row_of in zip(layout.joints, layout.row_of):
@@ -465,6 +470,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
     misses and the evaluations used."""
+    import scipy.sparse as sparse
     def state(x):
         values = layout.values(x)
         err, jac, worst, misses = _linearised(tasks, _keyed(edited, layout, values), layout,
@@ -517,6 +523,7 @@ def _stacked(layout: _Layout, rotvecs: np.ndarray, root: np.ndarray) -> np.ndarr
 def _least_squares(a, rhs: np.ndarray) -> np.ndarray:
     """The least-squares solution of ``a x = rhs`` (sparse ``a``) by its normal equations,
     with a tiny ridge (keys a frame apart have more unknowns than frames)."""
+    import scipy.sparse as sparse
     a = sparse.csc_matrix(a)
     n = a.shape[1]
     return _solve_spd(a.T @ a + sparse.identity(n) * 1e-12, a.T @ rhs)
@@ -530,6 +537,7 @@ def _solve_spd(normal, rhs: np.ndarray) -> np.ndarray:
     """``normal^-1 rhs`` for a sparse symmetric positive definite ``normal`` whose unknowns
     are numbered in time: banded (Cholesky in time linear in the unknowns), else a sparse
     LU."""
+    import scipy.sparse as sparse
     from scipy.linalg import LinAlgError, solveh_banded
     coo = sparse.triu(normal).tocoo()
     width = int((coo.col - coo.row).max(initial=0))
@@ -541,6 +549,7 @@ def _solve_spd(normal, rhs: np.ndarray) -> np.ndarray:
             return solveh_banded(band, rhs, check_finite=False)
         except LinAlgError:
             pass
+    from scipy.sparse.linalg import splu
     return splu(sparse.csc_matrix(normal), permc_spec="NATURAL", diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True}).solve(rhs)
 
@@ -567,6 +576,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     ``(R, n)``), the largest metric task error [m] and the misses: per task missing its goal
     by more than ``tolerance`` somewhere, ``(its chain's joints (layout indices), frames,
     errors there)``."""
+    import scipy.sparse as sparse
     sk = motion.skeleton
     slot = {int(j): k for k, j in enumerate(sk.translated)}
     group = {jt.index: g for g, jt in enumerate(layout.joints)}
