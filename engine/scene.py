@@ -446,7 +446,7 @@ class Scene:
         # the solved layer: keys fitted to the tasks where they hold them and pop no more
         # than the dense solve, else keys fitted to the dense curves
         t0 = time.perf_counter()
-        keys = solved_keys(composed, self.edited, chosen, correction)
+        keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel)
         timings["keys_s"] = time.perf_counter() - t0
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))

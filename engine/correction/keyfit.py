@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import MotionComposerError
 from ..motion import Motion
 from ..quaternions import qmul
 from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
@@ -304,11 +305,13 @@ class _Tasks:
 
 def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndarray, *,
                  budget: float = KEY_BUDGET, tolerance: float = TASK_TOLERANCE,
-                 pull: float = PULL, stats: dict | None = None) -> DisplacementMap:
+                 pull: float = PULL, stats: dict | None = None,
+                 cancel=None) -> DisplacementMap:
     """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
-    the fit's figures (largest held-task error [m], iterations, rounds)."""
+    the fit's figures (largest held-task error [m], iterations, rounds); ``cancel()``
+    returning True stops it (:class:`~engine.errors.MotionComposerError`)."""
     import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
@@ -357,6 +360,8 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         reg = sparse.vstack([reg_pull @ layout.basis,
                              sparse.diags(weights) @ speed @ layout.basis]).tocsr()
         target = np.r_[scale * dense, np.zeros(speed.shape[0])]
+        if cancel is not None and cancel():
+            raise MotionComposerError("the correction was cancelled")
         x, worst, misses, used = _gauss_newton(tasks, edited, layout, x, reg, target,
                                                tolerance)
         total += used
@@ -665,15 +670,17 @@ TASK_LIMIT = 1e-3
 POP_MARGIN = 1.02
 
 
-def solved_keys(direct: Motion, edited: Motion, constraints, correction):
+def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None):
     """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), or None when they
     miss a held task by more than :data:`TASK_LIMIT` or turn a joint faster around a ramp
     than the dense solve does (the no-pop rule's worst ratio against ``direct``, the direct
-    conversion): the caller then keeps keys fitted to the dense curves."""
+    conversion): the caller then keeps keys fitted to the dense curves. ``cancel()``
+    returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
     if correction is None or edited.num_frames < 3:
         return None
     stats: dict = {}
-    keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root, stats=stats)
+    keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root, stats=stats,
+                        cancel=cancel)
     if stats.get("worst_task_m", 0.0) > TASK_LIMIT:
         return None
     cons = [c for c in constraints if c.enabled]
