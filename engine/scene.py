@@ -42,6 +42,7 @@ from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
+from .correction.keyfit import solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
 from .correction import preview as _preview
 from .correction.quality import quality
@@ -442,7 +443,13 @@ class Scene:
             timings["ik_s"] = time.perf_counter() - t0
             timings.update({f"ik_{k.replace(' ', '_')}_s": v
                             for k, v in correction.seconds.items()})
-        scene = self.replace(constraints=tuple(chosen), displacement=correction_keys(correction))
+        # the solved layer: keys fitted to the tasks where they hold them and pop no more
+        # than the dense solve, else keys fitted to the dense curves
+        t0 = time.perf_counter()
+        keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel)
+        timings["keys_s"] = time.perf_counter() - t0
+        scene = self.replace(constraints=tuple(chosen), displacement=(
+            keys if keys is not None else correction_keys(correction)))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
         # measured on what is delivered: the keys on top of the animator's layers
         report["quality"] = quality(self.performer, composed, scene.motion, chosen,

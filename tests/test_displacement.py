@@ -7,7 +7,8 @@ import pytest
 from motion_composer.engine.correction.enforcement import enforce
 from motion_composer.engine.correction.constraints import Constraint
 from motion_composer.engine.correction.displacement import (ROOT, Curve, DisplacementMap,
-                                                            reduce_keys)
+                                                            hermite_basis, reduce_keys)
+from motion_composer.engine.correction.keyfit import KEY_BUDGET, fit_to_tasks
 from motion_composer.engine.errors import MotionComposerError
 from motion_composer.engine import forward_kinematics
 from motion_composer.engine.rotations import angle_between
@@ -72,6 +73,42 @@ def test_a_dense_ik_result_becomes_few_keys_and_applies_back():
     # the hand still reaches within about a millimetre
     got = forward_kinematics(applied).positions[420:521, target.skeleton.index["LeftHand"]]
     assert np.linalg.norm(got - c.goal["point"], axis=1).max() < 2e-3
+
+
+def test_keys_fitted_to_the_task_hold_a_reach_with_a_tenth_of_the_window_as_keys():
+    """Issue 15 point 1's design (engine/correction/keyfit.py) on one reach: the keys are
+    fitted to the hand's task, not to the dense curves that follow the walking arm."""
+    performer, target, corr, composed = walk_on_holden()
+    sk = target.skeleton
+    hand = forward_kinematics(composed).positions[:, sk.index["LeftHand"]]
+    c = Constraint("LeftHand", "position", {"point": hand[420] + [0.1, 0.2, 0.05]},
+                   380, 420, 520, 570)
+    result = enforce(composed, [c])
+    stats = {}
+    dmap = fit_to_tasks(composed, [c], result.rotvecs, result.root, stats=stats)
+    window = c.smooth_out - c.smooth_in + 1
+    assert dmap.curves and all(len(curve) <= KEY_BUDGET * window
+                               for curve in dmap.curves.values())
+    applied = dmap.apply(composed)
+    got = forward_kinematics(applied).positions[c.start:c.end + 1, sk.index["LeftHand"]]
+    assert np.linalg.norm(got - c.goal["point"], axis=1).max() < 1e-3
+    assert stats["worst_task_m"] < 1e-3
+    # zero outside the window: the composed motion bit for bit
+    outside = np.r_[0:c.smooth_in, c.smooth_out + 1:composed.num_frames]
+    np.testing.assert_array_equal(applied.rotations[outside], composed.rotations[outside])
+    np.testing.assert_array_equal(applied.translations[outside],
+                                  composed.translations[outside])
+    # between two keys a curve is the Hermite cubic of their values and out / in slopes
+    curve = max(dmap.curves.values(), key=len)
+    m = curve.tangent_slopes()
+    k = len(curve) // 2
+    f0, f1 = curve.frames[k], curve.frames[k + 1]
+    u = np.linspace(0, 1, 5)
+    b0, b1, b2, b3 = hermite_basis(u)
+    h = f1 - f0
+    np.testing.assert_allclose(curve.evaluate(f0 + u * h),
+                               b0 * curve.values[k] + b1 * h * m[k, 1]
+                               + b2 * curve.values[k + 1] + b3 * h * m[k + 1, 0], atol=1e-15)
 
 
 def test_offsets_add_to_the_composed_motion_which_never_changes():

@@ -38,15 +38,20 @@ def _positions(motion) -> np.ndarray:
 
 
 def _goal_errors(motion, constraints) -> list[float]:
-    """Per position constraint, its largest distance [m] from its goal over its range."""
+    """Per position constraint, its largest distance [m] from its goal over its range; per
+    one-sided plane (the floor), how deep its joint goes through it where it does (0 where
+    it never does)."""
     pos = _positions(motion)
     sk = motion.skeleton
     out = []
     for c in constraints:
+        frames = np.arange(c.start, c.end + 1)
+        got = pos[frames, sk.index[c.joint]]
         if c.enabled and c.kind == "position":
-            frames = np.arange(c.start, c.end + 1)
-            got = pos[frames, sk.index[c.joint]]
             out.append(float(np.linalg.norm(got - c.goal_point(frames), axis=1).max()))
+        elif c.enabled and c.kind == "plane" and c.goal["side"] == "above":
+            depth = -(got - c.goal["point"]) @ c.goal["normal"]
+            out.append(float(max(depth.max(), 0.0)))
     return out
 
 
@@ -119,15 +124,10 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
     # every position goal within 1 mm in the delivered (keyed) motion
     errors = _goal_errors(keyed, solution.constraints)
     assert errors and max(errors) < 1e-3
-    # fewer keys than frames (the pops of the dense solve hold them back, see below), and
-    # every joint stays near the dense solve
+    # fewer keys than frames (see the next test for the budget)
     F = keyed.num_frames
     curves = solution.scene.displacement.curves
-    # (0.65: the eased ramps no longer turn the toes, whose few keys lowered the mean: the
-    # walk's keys fell from 3,297 on 30 channels to 2,964 on 24)
     assert curves and sum(len(c) for c in curves.values()) < 0.65 * F * len(curves)
-    gap = np.linalg.norm(_positions(keyed) - _positions(dense), axis=-1).max()
-    assert gap < 1e-3
     # outside every window the direct conversion, bit for bit
     window = np.zeros(F, dtype=bool)
     for c in solution.constraints:
@@ -143,23 +143,37 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
                                                                       for p in dense_pops))
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 15 point 1): the fitted keys are 28 % (demo, "
-                   "median channel) and 64 % (the Bandai walk onto the CMU skeleton) of their "
-                   "window frames, not 10 %: within 0.1 mm the keys follow the dense solve, "
-                   "whose root correction on the walk jumps 13 cm in one frame at 30 fps; a "
-                   "1 mm fit only reaches about 50 %")
-@pytest.mark.parametrize("name", ["demo", "walk onto another skeleton"])
+WALK_KEYS = pytest.mark.xfail(strict=True, reason=(
+    "open (issue 15 point 1): on the Bandai walk onto the CMU skeleton (30 fps) the keys fitted "
+    "to the tasks (engine/correction/keyfit.py) miss a contact by 2.3 mm at 10 % keys per "
+    "channel (0.87 mm at 12.8 %, popping no more than the dense solve), so the solve keeps the "
+    "keys fitted to the dense curves (63 % of the window frames, median channel): within a "
+    "contact the direct conversion's foot wobbles by about 1 mm from frame to frame"))
+
+
+@pytest.mark.parametrize("name", ["demo", pytest.param("walk onto another skeleton",
+                                                        marks=WALK_KEYS)])
 def test_each_channel_has_at_most_a_tenth_as_many_keys_as_window_frames(name):
     solution = _solved(name)
     sk = solution.motion.skeleton
     F = solution.motion.num_frames
+    shares = []
     for (joint, channel), curve in solution.scene.displacement.curves.items():
         window = np.zeros(F, dtype=bool)
         for c in solution.constraints:
             j = sk.index[c.joint]
             if joint == "<root>" or sk.index[joint] in sk.ancestors(j) + [j]:
                 window[c.smooth_in:c.smooth_out + 1] = True
-        assert len(curve) <= 0.1 * window.sum(), (joint, channel)
+        shares.append(len(curve) / window.sum())
+    # every constraint holds within 1 mm in the keyed result (the floor where it acts)
+    errors = _goal_errors(solution.motion, solution.constraints)
+    gap = np.linalg.norm(_positions(solution.motion) - _positions(solution.correction.motion),
+                         axis=-1).max()
+    print(f"{name}: keys per window frame, median {np.median(shares):.3f}, worst "
+          f"{max(shares):.3f}; worst goal error {max(errors) * 1e3:.3f} mm; largest joint "
+          f"difference from the dense solve {gap * 1e3:.1f} mm")
+    assert max(errors) < 1e-3
+    assert max(shares) <= 0.1
 
 
 # --------------------------------------------------------------------------- layers

@@ -31,7 +31,7 @@ from motion_composer.engine import read_bvh
 from motion_composer.engine.formats.bvh import format_bvh
 from motion_composer.engine.correction.constraints import Constraint
 from motion_composer.engine.conversion.correspondence import Correspondence
-from motion_composer.engine.correction.displacement import Curve, DisplacementMap
+from motion_composer.engine.correction.displacement import Curve, DisplacementMap, Layer
 from motion_composer.engine.errors import MotionComposerError
 from motion_composer.engine.kinematics import forward_kinematics
 from motion_composer.engine.scene import Scene, evaluate_project, solve_project
@@ -650,7 +650,14 @@ def _wait_line(proc, timeout=60.0) -> str:
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs POSIX signals")
 def test_killing_a_save_leaves_the_previous_file_intact(tmp_path):
     path = tmp_path / "walk.mcp"
-    project = embed_sources(session_in(tmp_path))            # about 1.5 MB to write
+    project = embed_sources(session_in(tmp_path))
+    # an animator layer keyed on every frame of every joint's rx: with the solved layer's
+    # sparse keys, about 1.5 MB to write (long enough for a kill to land in the save)
+    sk = read_bvh(TPOSE).skeleton
+    frames = np.arange(read_bvh(WALK).num_frames, dtype=float)
+    busy = DisplacementMap({(name, "rx"): Curve(frames, 0.01 * np.sin(frames / 7 + j))
+                            for j, name in enumerate(sk.names)})
+    project = project.replace(layers=(Layer("busy", busy),))
     save_project(project, path)
     text_a = path.read_bytes()
     original = tmp_path / "original.mcp"             # what the child loads: A, every time

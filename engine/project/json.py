@@ -152,7 +152,7 @@ def _source_dict(source: Source, folder, role: str) -> dict:
 
 _LINE = 100
 #: what a file cut inside a value ends with: part of a number, a word or a string
-_PARTIAL_TOKEN = re.compile(r"[\w.+\-\"]*")
+_PARTIAL_TOKEN = re.compile(r'[\w.+\-]*|"(?:[^"\\\n]|\\.)*\\?')
 
 
 def _encode(value, depth: int, where: str, lead: int = 0) -> str:

@@ -1,0 +1,702 @@
+"""Sparse solved keys fitted to the constraints' tasks, not to the dense curves (issue 15
+point 1).
+
+The IK's dense result moves every corrected channel on every frame of its windows, and a fit
+of each channel to that curve within a fraction of a millimetre follows every wiggle of it
+(a key every 3 or 4 frames). What the constraints ask for is a few task-space quantities (a
+heel held on a point, a foot's orientation, a foot above the floor); many curves meet them.
+:func:`fit_to_tasks` looks for few keys that meet the TASKS:
+
+* **Channels and spans.** A joint is corrected where the dense result turns it (the root's
+  translation where it moves). Its *windows* are the frames ``[smooth_in, smooth_out]`` of the
+  constraints it serves (on it or below it; every constraint for the root's translation):
+  the frames the issue's budget counts. Within each run of its windows where the dense result
+  moves it, its curves are keyed from the first moved frame to the last, with a zero, flat key
+  just outside either end: the curves are exactly zero outside (the direct conversion bit for
+  bit there).
+* **Key frames at a budget, staggered.** Each channel has its own keys, at most
+  :data:`KEY_BUDGET` per window frame: half of that evenly to begin with, each channel's
+  phase shifted (golden ratio) so that a chain's channels do not all key the same frames:
+  between them, the chain's task sees a new piece of curve every few frames (the direct
+  conversion's foot wobbles by about a millimetre from frame to frame within a contact, which
+  one cubic per contact and channel cannot follow; keys shared by all channels could not).
+* **Values and slopes by damped Gauss-Newton.** Each key has a value and an in and an out
+  slope (a ``broken`` tangent where they differ). The curves are linear in them (cubic
+  Hermite basis, :func:`~.displacement.hermite_basis`), so a step minimises, over every held
+  frame (``[start, end]``; a one-sided plane such as the floor where it acts at the keyed
+  posture), the task errors linearised through the IK's own task Jacobians
+  (:func:`~.ik.task_error_and_jacobian`, with the exponential map's left Jacobian, and for
+  orientation tasks the logarithm's), plus a pull towards the dense correction (metres at the
+  joint's lever: :data:`PULL` on frames where a task is held through the joint, so that the
+  null space stays near the dense solve; :data:`PULL_FREE` on the others, the ramps) and a
+  cost on the curves' speed (:data:`SPEED` on the ramps, :data:`SPEED_HELD` on held frames,
+  against pops). Metric tasks weigh
+  1 whatever their priority (each is held within 1 mm); an angle counts at
+  :data:`ANGLE_LEVER` metres per radian, :data:`LEVEL_WEIGHT` less per level below the first.
+  Steps are Levenberg-Marquardt (a step that does not lower the cost is damped and tried
+  again).
+* **Keys where a task misses.** Where a metric task still misses by more than
+  :data:`TASK_TOLERANCE` beyond what the dense solve misses (an unreachable goal is missed by
+  both), per run of missing frames, the worst frame gets a key on the :data:`PER_MISS`
+  channels of the chain whose key interval there is the longest (room in their budget
+  permitting, a quarter of it per round), and the fit runs again, :data:`ROUNDS` rounds at
+  most.
+* **No pops.** Then where the keyed motion turns a joint faster around a ramp than the
+  no-pop rule allows (:func:`~.quality.pop_limits`, at the dense solve's own worst ratio),
+  that joint's curve speed there costs 4 times more and the fit runs again,
+  :data:`CALMING` times at most.
+
+The unknowns are numbered in key order, so the normal equations are banded in time and are
+factorised in that order (no fill outside the band): each iteration is linear in the frames,
+and the rounds are bounded (``benchmarks/bench_keys.py``).
+
+:func:`solved_keys` is what :meth:`~engine.scene.Scene.solve` stores: the task-fitted keys
+when they hold every task within :data:`TASK_LIMIT` (beyond the dense solve's own miss) and
+pop no more than the dense solve (the worst ratio, :data:`POP_MARGIN`), else ``None``: the
+solve keeps the keys fitted to the dense curves (:func:`~.displacement.fit_keys`), so a solve
+never holds its constraints worse than before.
+
+Measured (``tests/test_layers.py``): the demo (994 frames at 120 fps) is stored as task
+keys, 6.3 % of the window frames per channel (median; 7.4 % the worst), every goal within
+0.49 mm, no joint popping more than the dense solve, joints up to 77 mm from the dense solve
+(the null space and the ramps, which no task holds). The Bandai walk onto the CMU skeleton
+(195 frames at 30 fps) is not: at 10 % the fit misses a contact by 2.3 mm (0.87 mm at 12.8 %),
+because within each contact the direct conversion's foot wobbles by about 1 mm from frame to
+frame (a quintic over a 15-frame contact leaves 1 to 1.7 mm), which the keys of 12 channels
+over 15 frames only nearly follow; the solve keeps its dense-following keys there.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MotionComposerError
+from ..motion import Motion
+from ..quaternions import qmul
+from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
+                           DisplacementMap, chain_lengths, hermite_basis)
+from .ik import Task, _Structure, rotvec_to_quat, task_error_and_jacobian
+
+__all__ = ["fit_to_tasks", "solved_keys", "KEY_BUDGET", "TASK_TOLERANCE", "TASK_LIMIT"]
+
+# scipy (sparse) is imported where a fit needs it: opening a project stays off scipy, which
+# costs about half a second to import
+
+
+#: keys per frame of a channel's constraint windows, at most
+KEY_BUDGET = 0.1
+#: [m] a held task missing its goal by more than this gets keys where it misses
+TASK_TOLERANCE = 0.5e-3
+#: the pull towards the dense correction, relative to the tasks' rows (per channel: metres at
+#: the joint's lever), on frames where a task is held through the joint (the tasks decide
+#: there) and on the others (the ramps and the gaps between holds: the dense solve's easing)
+PULL = 0.005
+PULL_FREE = 0.05
+#: [s] the curves' speed (per channel, metres per second at the joint's lever) counts this
+#: much on frames where no task is held through the joint (the ramps: against pops), and
+#: ``SPEED_HELD`` where one is
+SPEED = 0.0005
+SPEED_HELD = 0.0001
+#: an angular task's rows weigh this much less per priority level below the first (a metric
+#: task's are held within :data:`TASK_TOLERANCE` whatever its level)
+LEVEL_WEIGHT = 0.1
+#: [m per rad] an angular task's error counts as a length at this lever
+ANGLE_LEVER = 0.1
+#: damped Gauss-Newton iterations per fit at most, and rounds of added keys at most
+ITERATIONS = 8
+ROUNDS = 12
+#: rounds of a costlier speed where the keys pop, at most
+CALMING = 4
+#: keys added per miss (a run of frames where a task misses) and round, on as many channels
+PER_MISS = 2
+
+
+class _Joint:
+    """One corrected joint (``index`` -1: the root's translation): its keyed frames (the
+    spans) and per channel its key frames and which of them are pinned to zero."""
+
+    def __init__(self, index: int, spans: list, spacing: float, num_frames: int, cap: int,
+                 phases):
+        self.index = index
+        self.cap = cap
+        self.frames = np.concatenate([np.arange(a, b + 1) for a, b in spans])
+        ends = [(max(a - 1, 0), min(b + 1, num_frames - 1), a, b) for a, b in spans]
+        room = cap - 2 * len(spans)
+        length = sum(hi - lo for lo, hi, _, _ in ends)
+        spacing = max(spacing, length / max(room / 2, 1))
+        self.keys, self.pinned = [], []
+        for phase in phases:
+            keys, pinned = [], []
+            for lo, hi, a, b in ends:
+                inner = lo + (phase + np.arange(int((hi - lo) / spacing) + 1)) * spacing
+                inner = np.round(inner[inner < hi - 1]).astype(np.intp)
+                if not len(inner) and hi - lo >= 2:
+                    inner = np.array([(lo + hi) // 2])        # a short span: one free key
+                k = np.unique(np.r_[lo, inner, hi])
+                keys.append(k)
+                pin = np.zeros(len(k), dtype=bool)
+                pin[0] = lo < a
+                pin[-1] = hi > b
+                pinned.append(pin)
+            # spans one frame apart share their zero key
+            k, first = np.unique(np.concatenate(keys), return_index=True)
+            self.keys.append(k)
+            self.pinned.append(np.concatenate(pinned)[first])
+
+    def room(self, channel: int) -> int:
+        return self.cap - len(self.keys[channel])
+
+    def gap(self, channel: int, frame: int) -> int:
+        """The length of the key interval ``frame`` lies in (0 at a key)."""
+        keys = self.keys[channel]
+        at = int(np.searchsorted(keys, frame))
+        if at < len(keys) and keys[at] == frame:
+            return 0
+        if at == 0 or at == len(keys):
+            return 0
+        return int(keys[at] - keys[at - 1])
+
+    def add(self, channel: int, frame: int) -> bool:
+        if self.room(channel) <= 0 or self.gap(channel, frame) < 2:
+            return False
+        keys = self.keys[channel]
+        at = int(np.searchsorted(keys, frame))
+        self.keys[channel] = np.insert(keys, at, frame)
+        self.pinned[channel] = np.insert(self.pinned[channel], at, False)
+        return True
+
+
+def _spans(moved: np.ndarray, window: np.ndarray) -> list[tuple[int, int]]:
+    """Per run of ``window`` where ``moved``, its first and last moved frame."""
+    out = []
+    idx = np.flatnonzero(window)
+    if not len(idx):
+        return out
+    breaks = np.flatnonzero(np.diff(idx) > 1)
+    for a, b in zip(np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]]):
+        m = np.flatnonzero(moved[a:b + 1])
+        if len(m):
+            out.append((int(a + m[0]), int(a + m[-1])))
+    return out
+
+
+def _windows(constraints, skeleton, num_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(J, F)`` per joint the frames of the windows of the constraints on it or below it,
+    and ``(F,)`` every constraint's window."""
+    per_joint = np.zeros((skeleton.num_joints, num_frames), dtype=bool)
+    every = np.zeros(num_frames, dtype=bool)
+    for c in constraints:
+        span = slice(c.smooth_in, c.smooth_out + 1)
+        every[span] = True
+        j = skeleton.index[c.joint]
+        for a in skeleton.ancestors(j) + [j]:
+            per_joint[a, span] = True
+    return per_joint, every
+
+
+class _Layout:
+    """The unknowns (key values and slopes of every channel, pinned keys excluded, numbered
+    in key order so that the normal equations stay banded) and the sparse basis: row
+    ``(joint, keyed frame, channel)`` -> the curve there, linear in the unknowns."""
+
+    def __init__(self, joints: list[_Joint], num_frames: int):
+        import scipy.sparse as sparse
+        self.joints = joints
+        self.num_frames = num_frames
+        owner, when = [], []
+        for g, jt in enumerate(joints):
+            for c in range(3):
+                for k in np.flatnonzero(~jt.pinned[c]):
+                    owner.append((g, c, int(k)))
+                    when.append(jt.keys[c][k])
+        order = np.argsort(np.asarray(when, dtype=float), kind="stable")
+        # per key its value, in slope and out slope
+        self.base = {owner[o]: 3 * n for n, o in enumerate(order)}
+        self.n = 3 * len(order)
+        rows, cols, vals = [], [], []
+        self.row_of = []                # per joint (F,) the row of its channel 0, or -1
+        r0 = 0
+        for g, jt in enumerate(joints):
+            t = jt.frames
+            row_of = np.full(num_frames, -1, dtype=np.intp)
+            row_of[t] = r0 + 3 * np.arange(len(t))
+            self.row_of.append(row_of)
+            for c in range(3):
+                keys = jt.keys[c]
+                K = len(keys)
+                seg = np.clip(np.searchsorted(keys, t, side="right") - 1, 0, K - 2)
+                h = (keys[seg + 1] - keys[seg]).astype(float)
+                b0, b1, b2, b3 = hermite_basis((t - keys[seg]) / h)
+                idx = np.full(K, -1, dtype=np.intp)
+                for k in np.flatnonzero(~jt.pinned[c]):
+                    idx[k] = self.base[(g, c, int(k))]
+                weights = np.stack([b0, b1 * h, b2, b3 * h], axis=1)
+                unknown = np.stack([idx[seg], idx[seg] + 2, idx[seg + 1], idx[seg + 1] + 1],
+                                   axis=1)
+                unknown[:, :2] = np.where(idx[seg, None] < 0, -1, unknown[:, :2])
+                unknown[:, 2:] = np.where(idx[seg + 1, None] < 0, -1, unknown[:, 2:])
+                ok = unknown >= 0
+                r = r0 + 3 * np.arange(len(t)) + c
+                rows.append(np.broadcast_to(r[:, None], unknown.shape)[ok])
+                cols.append(unknown[ok])
+                vals.append(weights[ok])
+            r0 += 3 * len(t)
+        self.m = r0
+        self.basis = sparse.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.m, self.n))
+
+    def values(self, x: np.ndarray) -> np.ndarray:
+        return self.basis @ x
+
+    def curve(self, x: np.ndarray, g: int, c: int):
+        """Channel ``c`` of joint ``g``: key frames, values and slopes."""
+        jt = self.joints[g]
+        keys = jt.keys[c]
+        v = np.zeros(len(keys))
+        s = np.zeros((len(keys), 2))
+        for k in np.flatnonzero(~jt.pinned[c]):
+            b = self.base[(g, c, int(k))]
+            v[k], s[k] = x[b], x[b + 1:b + 3]
+        # the ends' outer slopes shape nothing: the inner ones
+        s[0, 0], s[-1, 1] = s[0, 1], s[-1, 0]
+        return keys, v, s
+
+
+def _left_jacobian(r: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` the left Jacobian of SO(3) at rotation vectors ``r``: ``exp(r + d) ~
+    exp(J d) exp(r)``."""
+    theta = np.linalg.norm(r, axis=-1)[..., None, None]
+    k = np.zeros(r.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -r[..., 2], r[..., 1], -r[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = r[..., 2], -r[..., 1], r[..., 0]
+    small = theta < 1e-6
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta ** 2 / 24, (1 - np.cos(t)) / t ** 2)
+    b = np.where(small, 1 / 6 - theta ** 2 / 120, (t - np.sin(t)) / t ** 3)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+class _Tasks:
+    """The held tasks, the constraints of one task kind, joint, priority and weight in one
+    batch: per batch its frames, goals, row weight and IK structure."""
+
+    def __init__(self, constraints, skeleton, locked):
+        batches: dict = {}
+        for c in constraints:
+            kind = c.kind_object.task_kind
+            frames = np.arange(c.start, c.end + 1)
+            key = (kind.name, c.joint, c.priority, c.weight)
+            entry = batches.setdefault(key, (kind, c, [], []))
+            entry[2].append(frames)
+            entry[3].append(c.kind_object.task_goals(c, frames))
+        self.items = []
+        #: per item, its metric error [m] per frame in the dense solve (None: not known yet)
+        self.floor = None
+        for kind, c, frames, goals in batches.values():
+            frames = np.concatenate(frames)
+            task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
+                        np.ones(len(frames)), c.priority)
+            weight = c.weight ** 0.5
+            if kind.angular:
+                weight *= ANGLE_LEVER * LEVEL_WEIGHT ** (c.priority - 1)
+            self.items.append((frames, _Structure(skeleton, [task], locked), weight,
+                               kind.angular))
+
+
+def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndarray, *,
+                 budget: float = KEY_BUDGET, tolerance: float = TASK_TOLERANCE,
+                 pull: float = PULL, stats: dict | None = None,
+                 cancel=None) -> DisplacementMap:
+    """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
+    (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
+    fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
+    the fit's figures (largest held-task error [m], iterations, rounds); ``cancel()``
+    returning True stops it (:class:`~engine.errors.MotionComposerError`)."""
+    import scipy.sparse as sparse
+    sk = edited.skeleton
+    F = edited.num_frames
+    cons = [c for c in constraints if c.enabled]
+    per_joint, every = _windows(cons, sk, F)
+    moved = np.any(rotvecs != 0, axis=2)                                    # (F, J)
+    moved_root = np.any(root != 0, axis=1)
+    spacing = 2.0 / budget
+    joints = []
+    for j in list(np.flatnonzero(moved.any(axis=0))) + [-1]:
+        if j < 0:
+            spans = _spans(moved_root, every) if moved_root.any() else []
+            window = every
+        else:
+            spans, window = _spans(moved[:, j], per_joint[j]), per_joint[j]
+        if spans:
+            # the channels' keys staggered (a chain's joints too): between them the chain's
+            # tasks see a new piece of curve every few frames
+            n = 3 * len(joints)
+            phases = ((n + np.arange(3)) * 0.618034) % 1.0
+            joints.append(_Joint(int(j), spans, spacing, F,
+                                 int(np.floor(budget * window.sum())), phases))
+    if not joints:
+        return DisplacementMap()
+    lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
+    locked = frozenset(range(sk.num_joints)) - {jt.index for jt in joints}
+    tasks = _Tasks(cons, sk, locked)
+    layout = _Layout(joints, F)
+    # the rows (joint, keyed frame, channel) depend on the keyed frames only, not the keys
+    dense = _stacked(layout, rotvecs, root)
+    held = _held(cons, sk, F)
+    scale = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
+        held[jt.index][jt.frames], pull, PULL_FREE), 3) for jt in joints])
+    speed_w = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
+        held[jt.index][jt.frames], SPEED_HELD, SPEED), 3) for jt in joints])
+    _linearised(tasks, _keyed(edited, layout, dense), layout, dense, tolerance)  # the floor
+    x = _least_squares(layout.basis, dense)
+    reg_pull = sparse.diags(scale)
+    dense_pop = _worst_pop(edited, _keyed(edited, layout, dense), cons)
+    boost = {}                    # (joint index, frame) -> how much more its speed costs
+    total = rounds = calming = 0
+    while True:
+        speed, at = _speeds(layout, edited.fps)
+        weights = abs(speed) @ speed_w / (2 * edited.fps)
+        weights *= np.array([boost.get(key, 1.0) for key in at]) if boost else 1.0
+        reg = sparse.vstack([reg_pull @ layout.basis,
+                             sparse.diags(weights) @ speed @ layout.basis]).tocsr()
+        target = np.r_[scale * dense, np.zeros(speed.shape[0])]
+        if cancel is not None and cancel():
+            raise MotionComposerError("the correction was cancelled")
+        x, worst, misses, used = _gauss_newton(tasks, edited, layout, x, reg, target,
+                                               tolerance)
+        total += used
+        if misses and rounds < ROUNDS and _add_keys(joints, misses):
+            rounds += 1
+            # the new key set fitted to the curves as they are, then Gauss-Newton again
+            values = layout.values(x)
+            layout = _Layout(joints, F)
+            x = _least_squares(layout.basis, values)
+            continue
+        popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons,
+                           max(dense_pop, 1.0))
+        if not popping or calming == CALMING:
+            break
+        # where a joint turns faster than the no-pop rule (as the dense solve meets it)
+        # allows, its curves' speed costs more, and the fit runs again
+        calming += 1
+        for key in popping:
+            boost[key] = boost.get(key, 1.0) * 4.0
+    if stats is not None:
+        stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
+                      "calming": calming})
+    return _as_map(sk, layout, x)
+
+
+def _held(constraints, skeleton, num_frames: int) -> dict:
+    """Per joint (-1: the root's translation) ``(F,)`` where a constraint (not a one-sided
+    plane over the whole clip) is held through it."""
+    out = {j: np.zeros(num_frames, dtype=bool) for j in range(-1, skeleton.num_joints)}
+    for c in constraints:
+        if c.kind_object.one_sided(c.goal) and c.smooth_in == c.start and \
+                c.end == c.smooth_out:
+            continue
+        for a in [-1] + c.kind_object.chain(skeleton, skeleton.index[c.joint]):
+            out[a][c.start:c.end + 1] = True
+    return out
+
+
+def _add_keys(joints: list[_Joint], misses: list) -> int:
+    """Keys where tasks miss, the worst misses first: per run of missing frames of a task, at
+    its worst frame, on the :data:`PER_MISS` channels of the task's chain whose key interval
+    there is the longest (with room in their budget); a channel takes a quarter of its room
+    per round at most (the fit then says where keys are still missing). Returns how many
+    were added."""
+    runs = []
+    for groups, frames, size in misses:
+        for run in np.split(np.arange(len(frames)), np.flatnonzero(np.diff(frames) != 1) + 1):
+            k = run[np.argmax(size[run])]
+            runs.append((float(size[k]), int(frames[k]), groups))
+    runs.sort(key=lambda r: -r[0])
+    allowance = {(g, c): max(1, joints[g].room(c) // 4) for g in range(len(joints))
+                 for c in range(3)}
+    added = 0
+    for _, f, groups in runs:
+        cand = [(joints[g].gap(c, f), g, c) for g in groups for c in range(3)
+                if allowance[(g, c)] > 0 and joints[g].room(c) > 0
+                and joints[g].gap(c, f) >= 2]
+        cand.sort(reverse=True)
+        for _, g, c in cand[:PER_MISS]:
+            if joints[g].add(c, f):
+                allowance[(g, c)] -= 1
+                added += 1
+    return added
+
+
+def _speeds(layout: _Layout, fps: float):
+    """Sparse ``(rows, m)``: per joint channel and pair of consecutive keyed frames (and
+    between a span's end frame and the zero beyond it), the curve's change times ``fps`` (its
+    speed); and per row ``(joint index, frame)``, the later frame of the pair."""
+    import scipy.sparse as sparse
+    rows, cols, vals, at = [], [], [], []
+    n = 0
+    for jt, row_of in zip(layout.joints, layout.row_of):
+        f = jt.frames
+        pair = np.flatnonzero(np.diff(f) == 1)
+        breaks = np.flatnonzero(np.diff(f) > 1)
+        first = f[np.r_[0, breaks + 1]]
+        last = f[np.r_[breaks, len(f) - 1]]
+        first = first[first > 0]
+        last = last[last < layout.num_frames - 1]
+        for c in range(3):
+            r = n + np.arange(len(pair))
+            e = n + len(pair) + np.arange(len(first) + len(last))
+            rows += [r, r, e]
+            cols += [row_of[f[pair]] + c, row_of[f[pair + 1]] + c, row_of[np.r_[first, last]] + c]
+            vals += [np.full(len(pair), -fps), np.full(len(pair), fps),
+                     np.r_[np.full(len(first), fps), np.full(len(last), -fps)]]
+            at += [(jt.index, int(t)) for t in np.r_[f[pair + 1], first, last + 1]]
+            n += len(pair) + len(first) + len(last)
+    matrix = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                       np.concatenate(cols))),
+                               shape=(n, layout.m))
+    return matrix, at
+
+
+def _popping(direct: Motion, keyed: Motion, constraints, allowed: float) -> set:
+    """``(joint index, frame)`` where ``keyed`` turns a joint faster than ``allowed`` times
+    its no-pop limit around a ramp (:func:`~.quality.pop_limits`)."""
+    from .quality import angular_speed, pop_limits, ramps
+    speed = angular_speed(keyed)
+    out = set()
+    for frames, limit in pop_limits(direct, keyed, ramps(constraints, direct.num_frames)):
+        f, j = np.nonzero(speed[frames] > allowed * limit)
+        out.update(zip(j.tolist(), (f + frames.start).tolist()))
+    return out
+
+
+def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, target,
+                  tolerance: float):
+    """Key values and slopes ``x`` improved by damped Gauss-Newton (Levenberg-Marquardt)
+    steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
+    the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
+    misses and the evaluations used."""
+    import scipy.sparse as sparse
+    def state(x):
+        values = layout.values(x)
+        err, jac, worst, misses = _linearised(tasks, _keyed(edited, layout, values), layout,
+                                              values, tolerance)
+        rest = target - reg @ x
+        return (err, jac, worst, misses, rest), float(err @ err + rest @ rest)
+
+    now, cost = state(x)
+    damping = 1e-4
+    used = 1
+    for _ in range(ITERATIONS):
+        err, jac, _, _, rest = now
+        a = sparse.vstack([jac, reg]).tocsc()
+        normal = (a.T @ a).tocsc()
+        diag = normal.diagonal()
+        g = a.T @ np.concatenate([err, rest])
+        while True:
+            used += 1
+            step = _solve_spd(normal + sparse.diags(damping * diag + 1e-12), g)
+            trial, trial_cost = state(x + step)
+            if trial_cost < cost or damping > 1e6:
+                break
+            damping *= 10.0
+        if trial_cost >= cost:
+            break
+        x, now = x + step, trial
+        improvement = (cost - trial_cost) / max(cost, 1e-300)
+        cost = trial_cost
+        damping = max(damping / 10.0, 1e-9)
+        if improvement < 1e-3:
+            break
+    return x, now[2], now[3], used
+
+
+def _lever(jt: _Joint, lever: np.ndarray) -> float:
+    return float(lever[-1]) if jt.index < 0 else max(float(lever[jt.index]), 1e-3)
+
+
+def _stacked(layout: _Layout, rotvecs: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """The dense correction in the layout's rows."""
+    out = np.empty(layout.m)
+    for jt, row_of in zip(layout.joints, layout.row_of):
+        src = root[jt.frames] if jt.index < 0 else rotvecs[jt.frames, jt.index]
+        r = row_of[jt.frames]
+        for c in range(3):
+            out[r + c] = src[:, c]
+    return out
+
+
+def _least_squares(a, rhs: np.ndarray) -> np.ndarray:
+    """The least-squares solution of ``a x = rhs`` (sparse ``a``) by its normal equations,
+    with a tiny ridge (keys a frame apart have more unknowns than frames)."""
+    import scipy.sparse as sparse
+    a = sparse.csc_matrix(a)
+    n = a.shape[1]
+    return _solve_spd(a.T @ a + sparse.identity(n) * 1e-12, a.T @ rhs)
+
+
+#: a normal matrix narrower than this is solved banded, a wider one by sparse LU
+BAND = 60
+
+
+def _solve_spd(normal, rhs: np.ndarray) -> np.ndarray:
+    """``normal^-1 rhs`` for a sparse symmetric positive definite ``normal`` whose unknowns
+    are numbered in time: banded (Cholesky in time linear in the unknowns), else a sparse
+    LU."""
+    import scipy.sparse as sparse
+    from scipy.linalg import LinAlgError, solveh_banded
+    coo = sparse.triu(normal).tocoo()
+    width = int((coo.col - coo.row).max(initial=0))
+    n = normal.shape[0]
+    if width < BAND:
+        band = np.zeros((width + 1, n))
+        np.add.at(band, (width + coo.row - coo.col, coo.col), coo.data)
+        try:
+            return solveh_banded(band, rhs, check_finite=False)
+        except LinAlgError:
+            pass
+    from scipy.sparse.linalg import splu
+    return splu(sparse.csc_matrix(normal), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                options={"SymmetricMode": True}).solve(rhs)
+
+
+def _keyed(edited: Motion, layout: _Layout, values: np.ndarray) -> Motion:
+    """``edited`` with the curves' ``values`` applied (as a displacement map applies them)."""
+    rotations = edited.rotations.copy()
+    translations = edited.translations.copy()
+    for jt, row_of in zip(layout.joints, layout.row_of):
+        r = row_of[jt.frames]
+        v = np.stack([values[r], values[r + 1], values[r + 2]], axis=1)
+        if jt.index < 0:
+            translations[jt.frames, 0] += v
+        else:
+            rotations[jt.frames, jt.index] = qmul(rotvec_to_quat(v),
+                                                  rotations[jt.frames, jt.index])
+    return Motion._trusted(edited.skeleton, rotations, translations, edited.frame_time,
+                           edited.name)
+
+
+def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarray,
+                tolerance: float):
+    """The held tasks' weighted errors ``(R,)``, their Jacobian in the unknowns (sparse
+    ``(R, n)``), the largest metric task error [m] and the misses: per task missing its goal
+    by more than ``tolerance`` somewhere, ``(its chain's joints (layout indices), frames,
+    errors there)``."""
+    import scipy.sparse as sparse
+    sk = motion.skeleton
+    slot = {int(j): k for k, j in enumerate(sk.translated)}
+    group = {jt.index: g for g, jt in enumerate(layout.joints)}
+    # per rotated joint and keyed frame, d(turn) / d(rotation vector)
+    turn = []
+    for jt, row_of in zip(layout.joints, layout.row_of):
+        if jt.index < 0:
+            turn.append(None)
+            continue
+        r = row_of[jt.frames]
+        turn.append(_left_jacobian(np.stack([values[r], values[r + 1], values[r + 2]], 1)))
+    errs, rows, cols, vals = [], [], [], []
+    r0 = 0
+    worst = 0.0
+    misses = []
+    floors = {}
+    for item, (frames, structure, weight, angular) in enumerate(tasks.items):
+        err, jac = task_error_and_jacobian(sk, structure, motion.rotations[frames],
+                                           motion.translations[frames], slot)
+        B, K = err.shape
+        if angular:
+            # the IK's rows are d(rotation) (the error's first order); the error is a
+            # logarithm: d log(exp(e) exp(-d)) = -J_r(e)^-1 d, J_r(e) = J_l(-e)
+            jac = np.linalg.solve(_left_jacobian(-err), jac)
+        blocks = [(group[a], col) for a, col in
+                  [(-1, 0)] + [(int(a), 3 + 3 * k) for k, a in enumerate(structure.joints)]
+                  if a in group]
+        if not angular:
+            # how much further from its goal than the dense solve (which may miss an
+            # unreachable goal) the task is
+            size = np.linalg.norm(err, axis=1)
+            if tasks.floor is not None:
+                size = size - tasks.floor[item]
+            else:
+                floors[item] = size
+            worst = max(worst, float(size.max(initial=0.0)))
+            bad = size > tolerance
+            if bad.any():
+                misses.append(([g for g, _ in blocks], frames[bad], size[bad]))
+        errs.append(weight * err.reshape(-1))
+        for g, col in blocks:
+            row_of = layout.row_of[g][frames]
+            inside = np.flatnonzero(row_of >= 0)
+            if not len(inside):
+                continue
+            block = jac[inside, :, col:col + 3]
+            if turn[g] is not None:
+                first = layout.row_of[g][layout.joints[g].frames[0]]
+                block = block @ turn[g][(row_of[inside] - first) // 3]
+            rr = np.broadcast_to((r0 + inside[:, None] * K + np.arange(K))[:, :, None],
+                                 block.shape)
+            cc = np.broadcast_to(row_of[inside][:, None, None] + np.arange(3), block.shape)
+            rows.append(rr.reshape(-1))
+            cols.append(cc.reshape(-1))
+            vals.append(weight * block.reshape(-1))
+        r0 += B * K
+    big = sparse.csr_matrix((np.concatenate(vals) if vals else np.zeros(0),
+                             (np.concatenate(rows) if rows else np.zeros(0, np.intp),
+                              np.concatenate(cols) if cols else np.zeros(0, np.intp))),
+                            shape=(r0, layout.m))
+    err = np.concatenate(errs) if errs else np.zeros(0)
+    if tasks.floor is None:
+        tasks.floor = floors
+    return err, big @ layout.basis, worst, misses
+
+
+def _as_map(skeleton, layout: _Layout, x: np.ndarray) -> DisplacementMap:
+    curves = {}
+    for g, jt in enumerate(layout.joints):
+        names = TRANSLATION_CHANNELS if jt.index < 0 else ROTATION_CHANNELS
+        joint = ROOT if jt.index < 0 else skeleton.names[jt.index]
+        for c, channel in enumerate(names):
+            keys, v, s = layout.curve(x, g, c)
+            if not np.any(v) and not np.any(s):
+                continue
+            modes = tuple("aligned" if a == b else "broken" for a, b in s)
+            curves[(joint, channel)] = Curve(keys.astype(float), v, ("smooth",) * len(keys),
+                                             modes, s)
+    return DisplacementMap(curves)
+
+
+#: [m] solved keys hold every held task within this, or the dense-following keys are kept
+TASK_LIMIT = 1e-3
+#: solved keys may turn a joint around a ramp at most this much more (in the no-pop rule's
+#: ratio) than the dense solve does
+POP_MARGIN = 1.02
+
+
+def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None):
+    """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), or None when they
+    miss a held task by more than :data:`TASK_LIMIT` or turn a joint faster around a ramp
+    than the dense solve does (the no-pop rule's worst ratio against ``direct``, the direct
+    conversion): the caller then keeps keys fitted to the dense curves. ``cancel()``
+    returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
+    if correction is None or edited.num_frames < 3:
+        return None
+    stats: dict = {}
+    keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root, stats=stats,
+                        cancel=cancel)
+    if stats.get("worst_task_m", 0.0) > TASK_LIMIT:
+        return None
+    cons = [c for c in constraints if c.enabled]
+    if _worst_pop(direct, keys.apply(edited), cons) > \
+            POP_MARGIN * _worst_pop(direct, correction.motion, cons):
+        return None
+    return keys
+
+
+def _worst_pop(direct: Motion, corrected: Motion, constraints) -> float:
+    """The largest ratio of a joint's turning speed to its no-pop limit around the ramps."""
+    from .quality import angular_speed, pop_limits, ramps
+    speed = angular_speed(corrected)
+    worst = 0.0
+    for frames, limit in pop_limits(direct, corrected, ramps(constraints, direct.num_frames)):
+        s = speed[frames]
+        if len(s):
+            worst = max(worst, float((s / limit).max()))
+    return worst
