@@ -462,11 +462,9 @@ def _popping(direct: Motion, keyed: Motion, constraints, allowed: float) -> set:
     its no-pop limit around a ramp (:func:`~.quality.pop_limits`)."""
     from .quality import angular_speed, pop_limits, ramps
     speed = angular_speed(keyed)
-    out = set()
-    for frames, limit in pop_limits(direct, keyed, ramps(constraints, direct.num_frames)):
-        f, j = np.nonzero(speed[frames] > allowed * limit)
-        out.update(zip(j.tolist(), (f + frames.start).tolist()))
-    return out
+    limit = pop_limits(direct, keyed, ramps(constraints, direct.num_frames))
+    f, j = np.nonzero(speed > allowed * limit)          # inf off the ramps: never over
+    return set(zip(j.tolist(), f.tolist()))
 
 
 def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, target,
@@ -672,9 +670,9 @@ POP_MARGIN = 1.02
 
 def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None):
     """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), or None when they
-    miss a held task by more than :data:`TASK_LIMIT` or turn a joint faster around a ramp
-    than the dense solve does (the no-pop rule's worst ratio against ``direct``, the direct
-    conversion): the caller then keeps keys fitted to the dense curves. ``cancel()``
+    miss a held task by more than :data:`TASK_LIMIT` or break the no-pop rule (its worst
+    ratio against ``direct``, the direct conversion, over 1) more than the dense solve does:
+    the caller then keeps keys fitted to the dense curves. ``cancel()``
     returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
     if correction is None or edited.num_frames < 3:
         return None
@@ -684,8 +682,10 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     if stats.get("worst_task_m", 0.0) > TASK_LIMIT:
         return None
     cons = [c for c in constraints if c.enabled]
+    # the keys keep the no-pop rule where the dense solve keeps it, and break it no further
+    # where it does not
     if _worst_pop(direct, keys.apply(edited), cons) > \
-            POP_MARGIN * _worst_pop(direct, correction.motion, cons):
+            max(1.0, POP_MARGIN * _worst_pop(direct, correction.motion, cons)):
         return None
     return keys
 
@@ -694,9 +694,5 @@ def _worst_pop(direct: Motion, corrected: Motion, constraints) -> float:
     """The largest ratio of a joint's turning speed to its no-pop limit around the ramps."""
     from .quality import angular_speed, pop_limits, ramps
     speed = angular_speed(corrected)
-    worst = 0.0
-    for frames, limit in pop_limits(direct, corrected, ramps(constraints, direct.num_frames)):
-        s = speed[frames]
-        if len(s):
-            worst = max(worst, float((s / limit).max()))
-    return worst
+    limit = pop_limits(direct, corrected, ramps(constraints, direct.num_frames))
+    return float((speed / limit).max(initial=0.0))      # 0 off the ramps (inf limits)
