@@ -134,6 +134,31 @@ def _roomy_key(curve, lo=272, hi=328, avoid=None):
     return best
 
 
+def _clear_key(editor, channel, avoid=None, lo=272, hi=328, with_next=False) -> int:
+    """Index of an interior key of ``channel`` inside the IK range, not at frame ``avoid``,
+    whose pixel is at least 8 pixels from every other visible channel's keys (a click there
+    picks this key, whatever the solve put in the other curves), and with ``with_next`` the
+    key after it too; the widest-spaced such key."""
+    curve = editor.curve(channel)
+    others = [_pixel(editor, c, k) for c in editor.visible_channels() if c != channel
+              for k in range(len(editor.curve(c)))]
+    f = curve.frames
+    best, gap = None, -1
+    for i in range(1, len(f) - 1):
+        if not lo <= f[i] <= hi or f[i] == avoid:
+            continue
+        if with_next and (i + 1 >= len(f) - 1 or f[i + 1] == avoid):
+            continue
+        mine = [_pixel(editor, channel, k) for k in ((i, i + 1) if with_next else (i,))]
+        if any((p - at).manhattanLength() < 8 for p in others for at in mine):
+            continue
+        room = min(f[i] - f[i - 1], f[i + 1] - f[i])
+        if room > gap:
+            best, gap = i, room
+    assert best is not None and gap >= 3, f"no key of {channel} clear of the other curves"
+    return best
+
+
 def _graph(editor, channel):
     return editor.key_graphs["xyz".index(channel[1])]
 
@@ -259,8 +284,8 @@ def test_several_selected_keys_move_together(editor, doc, qtbot):
     rx = doc.scene.displacement.curves[(JOINT, "rx")]
     ry = doc.scene.displacement.curves[(JOINT, "ry")]
     # not on the playhead's frame, whose line a press there grabs
-    a = _roomy_key(rx, avoid=doc.scene.viewer.current_frame)
-    b = _roomy_key(ry, avoid=doc.scene.viewer.current_frame)
+    a = _clear_key(editor, "rx", avoid=doc.scene.viewer.current_frame, with_next=True)
+    b = _clear_key(editor, "ry", avoid=doc.scene.viewer.current_frame)
     qtbot.mouseClick(vp, LEFT, NOMOD, _pixel(editor, "rx", a))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "rx", a + 1))
     qtbot.mouseClick(vp, LEFT, SHIFT, _pixel(editor, "ry", b))
@@ -292,7 +317,8 @@ def test_root_translation_keys_move_in_centimetres(editor, doc, qtbot):
     _settle(qtbot, editor)
     before = doc.scene.displacement
     curve = before.curves[(ROOT, "ty")]
-    i = _roomy_key(curve)
+    # not on the playhead's frame, whose line a press there grabs
+    i = _clear_key(editor, "ty", avoid=doc.scene.viewer.current_frame)
     start = _pixel(editor, "ty", i)
     end = start + QtCore.QPoint(0, 30)                 # down
     _drag(qtbot, editor, start, end)
