@@ -352,8 +352,12 @@ def test_window_preview_matches_the_full_solve(doc):
     lo, hi = changed_window(doc.scene.constraints, after)
     assert (lo, hi) == (10, 32)
     assert np.abs(a - b)[lo:hi + 1].max() < 1e-4             # [m] the window: the full solve
-    # beyond it the shown motion stays: the full solve's through the key-reduced map
-    assert np.abs(a - b)[:200].max() < 1e-3
+    # beyond it the shown motion stays (the solved layer's keys, fitted to the tasks, leave
+    # what no task holds to the fit: the shown motion, not the dense solve)
+    shown = forward_kinematics(doc.scene.motion).positions
+    outside = np.ones(len(a), dtype=bool)
+    outside[lo:hi + 1] = False
+    assert np.abs(a - shown)[outside].max() < 1e-3
     # a new goal reaches the whole range: the window is all of it
     goal = doc.scene.constraints[row].goal["point"] + [0.05, 0.0, 0.03]
     after[row] = Constraint.from_dict({**after[row].to_dict(), "goal": {"point": goal}})
