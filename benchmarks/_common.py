@@ -201,6 +201,87 @@ class Row:
 #: but not judged (LOADED instead of PASS or MISS)
 LOAD_LIMIT = 1.0
 _highest_load = 0.0
+_highest_others = 0.0
+
+
+class _OthersLoad:
+    """How much OTHER work shared the machine while this benchmark ran.
+
+    The kernel's 1-minute load average counts this benchmark's own tasks: a script that keeps
+    one core busy for two minutes raises it to about 0.9 by itself, and one run straight after
+    another starts at what the first left, with no task behind it. So a thread samples, once a
+    second, the tasks the kernel counts as runnable now (``procs_running`` in ``/proc/stat``)
+    less those that are this process's threads or its children's (state ``R``): the mean of
+    those counts is the other work's load over the run (1: another task kept one core busy
+    throughout). Where ``/proc`` is absent nothing is sampled and the 1-minute load average
+    alone is judged."""
+
+    PERIOD = 1.0
+
+    def __init__(self):
+        import threading
+        self.total = 0
+        self.samples = 0
+        self.available = Path("/proc/stat").is_file()
+        if self.available:
+            threading.Thread(target=self._run, daemon=True, name="others-load").start()
+
+    @staticmethod
+    def _running_total() -> int:
+        for line in Path("/proc/stat").read_text().splitlines():
+            if line.startswith("procs_running"):
+                return int(line.split()[1])
+        return 0
+
+    @staticmethod
+    def _running_ours() -> int:
+        me = os.getpid()
+        parents, states = {}, {}
+        for entry in os.scandir("/proc"):
+            if not entry.name.isdigit():
+                continue
+            try:
+                text = Path(entry.path, "stat").read_text()
+            except OSError:
+                continue
+            rest = text[text.rindex(")") + 2:].split()
+            parents[int(entry.name)] = int(rest[1])
+            states[int(entry.name)] = entry.path
+        ours = {me}
+        grew = True
+        while grew:                     # this process and its descendants
+            grew = False
+            for pid, parent in parents.items():
+                if parent in ours and pid not in ours:
+                    ours.add(pid)
+                    grew = True
+        count = 0
+        for pid in ours:
+            try:
+                tasks = os.scandir(f"/proc/{pid}/task")
+            except OSError:
+                continue
+            for task in tasks:
+                try:
+                    text = Path(task.path, "stat").read_text()
+                except OSError:
+                    continue
+                if text[text.rindex(")") + 2] == "R":
+                    count += 1
+        return count
+
+    def _run(self) -> None:
+        while True:
+            try:
+                others = max(self._running_total() - self._running_ours(), 0)
+            except (OSError, ValueError, IndexError):
+                return
+            self.total += others
+            self.samples += 1
+            time.sleep(self.PERIOD)
+
+
+_others = _OthersLoad()
 
 
 def sample_load() -> float:
@@ -216,6 +297,39 @@ def highest_load() -> float:
     """The highest 1-minute load average sampled so far in this process (sampling once more)."""
     sample_load()
     return _highest_load
+
+
+def others_load() -> float | None:
+    """The other work's mean number of runnable tasks so far (:class:`_OthersLoad`), or
+    ``None`` where it cannot be measured."""
+    return _others.total / _others.samples if _others.available and _others.samples else None
+
+
+#: the other work's mean runnable tasks above this (:func:`others_load`) means it took half a
+#: core of the two on average: figures are printed but not judged
+OTHERS_LIMIT = 0.5
+
+
+def is_loaded() -> bool:
+    """Whether other work shared the CPUs too much for the figures to be judged: the other
+    work's load over :data:`OTHERS_LIMIT`, or, where that cannot be measured, the 1-minute
+    load average over :data:`LOAD_LIMIT`."""
+    others = others_load()
+    return highest_load() > LOAD_LIMIT if others is None else others > OTHERS_LIMIT
+
+
+def load_line() -> str:
+    """The report's load line: the highest 1-minute load average, the other work's part, and
+    whether the targets were judged."""
+    load, others = highest_load(), others_load()
+    text = f"load average (1 min, highest seen): {load:.2f}"
+    if others is not None:
+        text += (f"; other work's runnable tasks (this benchmark's own left out), mean of "
+                 f"{_others.samples} samples: {others:.2f}")
+    if is_loaded():
+        text += (f" - over {LOAD_LIMIT if others is None else OTHERS_LIMIT:g}: "
+                 "targets read LOADED, not judged")
+    return text
 
 
 def ratio_row(what: str, ours: Timing, reference: Timing, limit: float, *,
@@ -239,11 +353,9 @@ def print_table(title: str, rows: list[Row], *, loaded: bool | None = None) -> N
     line ends its output).
 
     ``loaded``: the machine was too busy for the figures to be judged, so every target reads
-    LOADED; by default, whether the highest load average sampled (:func:`sample_load`, now
-    included) is over :data:`LOAD_LIMIT`."""
-    load = highest_load()
+    LOADED; by default :func:`is_loaded`."""
     if loaded is None:
-        loaded = load > LOAD_LIMIT
+        loaded = is_loaded()
     header = ("measure", "figure", "target", "result", "")
     cells = [(r.what, r.value, r.target,
               "" if r.ok is None else ("LOADED" if loaded else "PASS" if r.ok else "MISS"),
@@ -259,8 +371,7 @@ def print_table(title: str, rows: list[Row], *, loaded: bool | None = None) -> N
         print((text + ("  " + c[4] if c[4] else "")).rstrip())
     print(line)
     results = [c[3] for c in cells if c[3]]
-    print(f"load average (1 min, highest seen): {load:.2f}"
-          + (f" - over {LOAD_LIMIT:g}: targets read LOADED, not judged" if loaded else ""))
+    print(load_line())
     print(f"targets: {results.count('PASS')} PASS, {results.count('MISS')} MISS, "
           f"{results.count('LOADED')} LOADED of {len(results)}")
 

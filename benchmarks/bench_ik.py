@@ -44,7 +44,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _common import (MIB_PER_MB, Row, environment, fmt_seconds, max_rss_mib,  # noqa: E402
-                     print_table, proc_status_mib, run_child, time_runs, SHARED_DATA)
+                     print_table, proc_status_mib, run_child, sample_load, time_runs,
+                     SHARED_DATA)
 
 FPS_TARGET = 1000.0
 EDIT_TARGET = 0.1           # [s]
@@ -111,7 +112,7 @@ def main() -> None:
         return
     if not (WALK.is_file() and BANDAI.is_file()):
         sys.exit(f"error: this benchmark needs {WALK} and {BANDAI} (set MC_SHARED_DATA)")
-    load = os.getloadavg()[0]
+    sample_load()
     # first, while this process is small (ru_maxrss carries over into a child)
     memory = run_child(Path(__file__), ["--child-memory", str(MEMORY_FRAMES)], timeout=1800)
 
@@ -161,11 +162,9 @@ def main() -> None:
     fps = F / full.median
     short, long = _scaling()
     ratio = long / short
-    load = max(load, os.getloadavg()[0])
+    sample_load()
 
     print(f"allocator tuned as the application does: {ALLOCATOR}; {environment()}; BLAS threads pinned to 1")
-    print(f"load average (1 min, the highest seen): {load:.2f}"
-          + (" - over 1: targets read LOADED, not judged" if load > 1 else ""))
     print(f"{WALK.name} ({F} frames) onto {BANDAI.name}'s skeleton, {how}; "
           f"{len(contacts)} contacts -> {len(cons)} constraints, plus a hand constraint\n")
     print_table("Whole-body IK (two passes)", [
@@ -199,7 +198,7 @@ def main() -> None:
             memory["peak_above_mib"] <= MEMORY_TARGET * MIB_PER_MB,
             note=f"above a baseline of {memory['baseline_mib']:,.0f} MiB; "
                  f"{memory['constraints']:,} constraints in {fmt_seconds(memory['seconds'])}"),
-    ], loaded=load > 1)
+    ])
 
 
 if __name__ == "__main__":

@@ -213,7 +213,7 @@ def main() -> None:
         Row("info on a small file (spawn to exit)", f"{info:.2f} s", f"< {INFO_S} s",
             info < INFO_S, note=small.name),
     ]
-    print_table("Viewport", rows, loaded=load > 1)
+    print_table("Viewport", rows)
 
 
 if __name__ == "__main__":
