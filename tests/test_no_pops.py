@@ -11,7 +11,7 @@ from ik_fixtures import walk_on_holden
 from motion_composer.engine import forward_kinematics
 from motion_composer.engine.correction.constraints import Constraint, ConstraintError
 from motion_composer.engine.correction.enforcement import enforce
-from motion_composer.engine.correction.quality import quality
+from motion_composer.engine.correction.quality import angular_speed, pop_limits, quality
 
 
 @pytest.mark.parametrize("frames", [(199, 200, 240, 241), (199, 200, 200, 201)],
@@ -61,3 +61,34 @@ def test_a_tangle_of_overlapping_ramps_is_refused_by_name():
     cons = _reaches(composed, joints, 30)
     with pytest.raises(ConstraintError, match=r"9 ramps overlap at frame \d+ .*at most 8"):
         enforce(composed, cons)
+
+
+def test_a_ramp_starts_from_the_posture_next_to_it_under_a_reach():
+    """The CMU walk onto Bandai with automatic contacts and a hand reaching 20 cm off its path
+    (benchmarks/bench_ik.py's job). The left heel lets go at frame 501 while the right leg,
+    near its full stretch, holds the body under the reach: postures degrees apart meet the
+    same tasks there. The key frame's posture without the heel (what its output ramp eases
+    from) is solved from the frame inside the ramp next to it; solved from the composed
+    posture it ended 2.8 degrees of the hips and a centimetre of the root away, and the ramp
+    turned the hips 314 deg/s in its first frame (limit 302)."""
+    from motion_composer.engine.conversion import retarget
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts
+    from ik_fixtures import walk_on_bandai
+    performer, target, _, _ = walk_on_bandai()
+    corr = automap(target.skeleton, performer.skeleton)
+    composed = retarget(performer, target, corr)
+    cons = contact_constraints(detect_contacts(performer), performer, composed, corr.pairs)
+    here = forward_kinematics(composed).positions[:, target.skeleton.index["Hand_L"]]
+    reach = Constraint("Hand_L", "position", {"point": here[500] + [0.10, 0.15, 0.05]},
+                       460, 480, 520, 540, priority=2, name="hand")
+    heel = [c for c in cons if c.joint == "Foot_L" and c.kind == "position" and c.end == 501]
+    assert heel and heel[0].smooth_out == 515
+    cons = cons + [reach]
+    result = enforce(composed, cons)
+    q = quality(performer, composed, result.motion, cons, result.residual)
+    assert max(c["max_residual"] for c in q["constraints"]) < 1e-3
+    limit = pop_limits(composed, result.motion, [(501, 515)])
+    speed = angular_speed(result.motion)
+    ratio = speed[501:517] / limit[501:517]
+    assert ratio.max() <= 1.0, (np.unravel_index(ratio.argmax(), ratio.shape), ratio.max())

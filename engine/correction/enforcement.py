@@ -19,7 +19,11 @@ built on: no joint turns faster than the direct conversion plus 1.5 times the co
 over the ramp. Ramps keyed on the same frame are taken off it one at a time, shortest first,
 so that their corrections add up to the key posture's (with the first go the constraints
 that switch on or off there without a ramp of their own, such as a toe held from the flat
-foot on: the posture without the ramps is the one inside them). The sum meets the tasks held on those
+foot on: the posture without the ramps is the one inside them). The posture without a ramp's
+constraints starts from the correction solved on the frame next to the key frame inside the
+ramp, which holds the same tasks: near a stretched leg, postures far apart meet the same
+tasks, and one found from the composed posture instead can differ from its neighbour's by
+degrees, which the ramp would turn in one frame. The sum meets the tasks held on those
 frames (another foot's contact) only nearly; they are solved again from it (pass two), the
 posture each frame starts from and is pulled towards.
 
@@ -292,14 +296,15 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
     return out
 
 
-def _solve(problem: _Problem, entries, attraction_rot, attraction_tra):
+def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=None):
     """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
-    task goals), as :func:`_where_needed` leaves them. Entries share task slots where they do
-    not overlap in time, so all frames form one batch. Returns rot, tra, residual per
-    constraint, iterations."""
+    task goals), as :func:`_where_needed` leaves them, each from ``start`` (rot, tra; by
+    default the attraction posture). Entries share task slots where they do not overlap in
+    time, so all frames form one batch. Returns rot, tra, residual per constraint,
+    iterations."""
     sk, F = problem.skeleton, problem.num_frames
-    rot = attraction_rot.copy()
-    tra = attraction_tra.copy()
+    rot = (attraction_rot if start is None else start[0]).copy()
+    tra = (attraction_tra if start is None else start[1]).copy()
     residual = Residuals(F, len(problem.cons))
     iters = np.zeros(F, dtype=np.intp)
     slots = _assign_slots(entries, problem.cons, sk, F)
@@ -437,10 +442,14 @@ def _virtual_frames(problem: _Problem, units):
     as they mostly are while the shorter one eases.
 
     Returns ``src (V,)`` each virtual frame's clip frame (the first ``F`` are the clip's
-    frames), per virtual frame the constraint indices it leaves out, and per ramp ``(unit,
-    virtual frame with its constraints, virtual frame without)``."""
+    frames), per virtual frame the constraint indices it leaves out, per ramp ``(unit,
+    virtual frame with its constraints, virtual frame without)``, and ``inner (V,)`` per
+    virtual frame beyond the clip's the clip frame next to its key frame on the ramps' side
+    (``start - 1`` of an input ramp, ``end + 1`` of an output one; -1 for the clip's own):
+    the frame whose tasks are the key frame's without the ramps'."""
     F = problem.num_frames
     src = list(range(F))
+    inner_of = [-1] * F
     removed: list[tuple] = [()] * F
     deltas = []
     groups: dict[tuple, list] = {}
@@ -460,10 +469,12 @@ def _virtual_frames(problem: _Problem, units):
         for k in ks:
             gone = gone + tuple(units[k][3])
             src.append(key)
+            inner_of.append(inner)
             removed.append(gone)
             deltas.append((k, before, len(src) - 1))
             before = len(src) - 1
-    return np.array(src, dtype=np.intp), removed, deltas
+    return (np.array(src, dtype=np.intp), removed, deltas,
+            np.array(inner_of, dtype=np.intp))
 
 
 def _virtual_entries(problem: _Problem, src, removed) -> list:
@@ -554,27 +565,62 @@ def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals
 
 
 def _pass_one(problem: _Problem):
-    """The key postures and the blend over the ramps: every virtual frame
-    (:func:`_virtual_frames`) solved from the composed motion, then each ramp's correction
-    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's
-    frames), iterations, the frames solved and the frames blended (both ``(F,)``)."""
+    """The key postures and the blend over the ramps: the clip's frames solved from the
+    composed motion, then each key frame without its ramps' constraints
+    (:func:`_virtual_frames`) solved from the correction next to it on the ramps' side
+    (:func:`_from_inner`), then each ramp's correction eased in or out over it
+    (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
+    frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
     units = _ramp_units(problem.cons)
     _check_overlaps(problem, units)
-    src, removed, deltas = _virtual_frames(problem, units)
+    src, removed, deltas, inner = _virtual_frames(problem, units)
     virtual = _virtual(problem, src, removed)
     entries = _where_needed(virtual, _virtual_entries(problem, src, removed),
                             virtual.composed.rotations, virtual.composed.translations)
-    rot_v, tra_v, residual_v, iters_v = _solve(virtual, entries, virtual.composed.rotations,
+    clip = np.arange(len(src)) < F
+    rot_v, tra_v, residual_v, iters_v = _solve(virtual, _restricted(entries, clip),
+                                               virtual.composed.rotations,
                                                virtual.composed.translations)
+    if not clip.all():
+        start = _from_inner(virtual.composed, rot_v, tra_v, inner, ~clip)
+        # each from its start, in the paper's scheme too
+        keys = _solve(dataclasses.replace(virtual, previous=np.full(len(src), -1, np.intp)),
+                      _restricted(entries, ~clip), virtual.composed.rotations,
+                      virtual.composed.translations, start)
+        rot_v[~clip], tra_v[~clip] = keys[0][~clip], keys[1][~clip]
+        residual_v.extend(keys[2])
+        iters_v[~clip] = keys[3][~clip]
     rot, tra, blended = _blend(problem, rot_v, tra_v, src, units, deltas)
     iters = np.zeros(F, dtype=np.intp)
     np.maximum.at(iters, src, iters_v)
     solved = np.zeros(F, dtype=bool)
     for _, frames, _ in entries:
         solved[src[frames]] = True
-    clip = np.arange(len(src)) < F
     return rot, tra, _map_residuals(residual_v, src, clip, F), iters, solved, blended
+
+
+def _from_inner(composed: Motion, rot, tra, inner, frames):
+    """Start postures for the key frames without their ramps (``frames``, a mask over virtual
+    frames): the composed posture there with the correction solved at the ``inner`` clip
+    frame (per joint its rotation offset; the root's translation offset). That frame holds
+    the same tasks; a solve from the composed posture could end in another of the postures
+    that meet them (a leg near its full stretch under a reach: 2.8 degrees of the hips and a
+    centimetre of the root apart on the CMU walk onto Bandai), and the ramp would turn the
+    difference in one frame."""
+    base_rot, base_tra = composed.rotations, composed.translations
+    rot0, tra0 = base_rot.copy(), base_tra.copy()
+    v = np.flatnonzero(frames)
+    n = inner[v]
+    # joints the correction leaves alone start (and, with no task to move them, stay) bit
+    # for bit where they are
+    moved = np.any(rot[n] != base_rot[n], axis=-1)
+    r = rot0[v]
+    r[moved] = qnormalize(qmul(qmul(rot[n][moved], qconj(base_rot[n][moved])), r[moved]))
+    rot0[v] = r
+    shifted = np.any(tra[n, 0] != base_tra[n, 0], axis=-1)
+    tra0[v[shifted], 0] += tra[n[shifted], 0] - base_tra[n[shifted], 0]
+    return rot0, tra0
 
 
 def _pass_two(problem: _Problem, rot, tra, blended):
