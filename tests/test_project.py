@@ -12,6 +12,7 @@ import dataclasses
 import json
 import os
 import random
+import re
 import select
 import shutil
 import signal
@@ -334,6 +335,24 @@ def test_not_a_project(tmp_path):
             load_project(path)
     with pytest.raises(ProjectError, match="no such project file"):
         load_project(tmp_path / "nope.mcp")
+
+
+@pytest.mark.parametrize("clip, words", [
+    (lambda: clip_path("cmu_131_01_walk.bvh"), "a BVH file (a motion clip)"),
+    (lambda: shared_path("target_mixamo_ely.glb"), "a GLB file (a character)"),
+    (lambda: shared_path("fbx/Samba_Dancing.fbx"), "an FBX file (a character or its takes)")],
+    ids=["bvh", "glb", "fbx"])
+def test_a_clip_or_a_character_opened_as_a_project_is_named(clip, words, tmp_path, capsys):
+    """Not "byte 8 is not UTF-8 text": what the file is, and what to do with it; the window's
+    command line says it in one line and exits 2."""
+    with pytest.raises(ProjectError, match=rf"this is {re.escape(words)}, not a project: "
+                       "import it as the performer or the target"):
+        load_project(clip())
+    from motion_composer.app.cli import main
+    assert main(["export", str(clip()), "-o", str(tmp_path / "out.bvh")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a project" in err, err
+    assert not (tmp_path / "out.bvh").exists()
 
 
 # --------------------------------------------------------------------------- bad input

@@ -56,11 +56,28 @@ def _read_text(path) -> str:
         data = read_regular_file(path)
     if not data.strip():
         raise ProjectError("the file is empty (a project is a JSON object)", path)
+    _refuse_motion_file(data, path)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ProjectError(f"not a project file: byte {exc.start} is not UTF-8 text",
                            path) from None
+
+
+def _refuse_motion_file(data: bytes, path) -> None:
+    """A clip or a character opened as a project is named as what it is, with what to do
+    (its JSON or UTF-8 error would say nothing of the kind)."""
+    from ..formats import FORMATS, HEAD_BYTES
+    head = data[:HEAD_BYTES]
+    for fmt in FORMATS:
+        if fmt.sniff(head):
+            what = ("a character or its takes" if fmt.read_take else
+                    "a character" if fmt.mesh else "a motion clip")
+            article = "an" if fmt.name[0] in "AEFHILMNORSX" else "a"    # "an FBX file"
+            raise ProjectError(f"this is {article} {fmt.name} file ({what}), not a project: "
+                               "import it "
+                               "as the performer or the target, or make a project from it "
+                               "with 'motion-composer retarget ... --save-project'", path)
 
 
 def open_project(path) -> OpenedProject:
