@@ -66,9 +66,13 @@ def _read_text(path) -> str:
 
 def _refuse_motion_file(data: bytes, path) -> None:
     """A clip or a character opened as a project is named as what it is, with what to do
-    (its JSON or UTF-8 error would say nothing of the kind)."""
+    (its JSON or UTF-8 error would say nothing of the kind). A JSON object is left to the
+    project's own checks (a project may name a glTF file's members; a glTF file there is
+    "not a Motion Composer project")."""
     from ..formats import FORMATS, HEAD_BYTES
     head = data[:HEAD_BYTES]
+    if head.lstrip(b"\xef\xbb\xbf \t\r\n").startswith(b"{"):
+        return
     for fmt in FORMATS:
         if fmt.sniff(head):
             what = ("a character or its takes" if fmt.read_take else
