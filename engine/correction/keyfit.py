@@ -106,6 +106,10 @@ ITERATIONS = 8
 ROUNDS = 12
 #: rounds of a costlier speed where the keys pop, at most
 CALMING = 4
+#: rounds of emphasis on the frames where a task still misses, at most, and how much more
+#: such a frame counts per round at most
+EMPHASIS = 6
+EMPHASIS_STEP = 4.0
 #: keys added per miss (a run of frames where a task misses) and round, on as many channels
 PER_MISS = 2
 
@@ -292,6 +296,10 @@ class _Tasks:
         self.items = []
         #: per item, its metric error [m] per frame in the dense solve (None: not known yet)
         self.floor = None
+        #: per item, how much more each of its frames counts (see :meth:`emphasise`), and its
+        #: metric error beyond the dense solve's in the last evaluation
+        self.emphasis = []
+        self.size = {}
         for kind, c, frames, goals in batches.values():
             frames = np.concatenate(frames)
             task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
@@ -301,6 +309,20 @@ class _Tasks:
                 weight *= ANGLE_LEVER * LEVEL_WEIGHT ** (c.priority - 1)
             self.items.append((frames, _Structure(skeleton, [task], locked), weight,
                                kind.angular))
+            self.emphasis.append(np.ones(len(frames)))
+
+    def emphasise(self, sizes: dict, tolerance: float) -> bool:
+        """Frames where a metric task misses by more than ``tolerance`` count more (by how
+        much they miss, at most :data:`EMPHASIS_STEP` times per call): least squares spreads
+        the error that few keys leave, and the limit is on the largest (iteratively
+        reweighted towards the maximum). Returns whether any frame changed."""
+        changed = False
+        for item, size in sizes.items():
+            over = size > tolerance
+            if over.any():
+                self.emphasis[item][over] *= np.minimum(size[over] / tolerance, EMPHASIS_STEP)
+                changed = True
+        return changed
 
 
 def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndarray, *,
@@ -352,7 +374,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     reg_pull = sparse.diags(scale)
     dense_pop = _worst_pop(edited, _keyed(edited, layout, dense), cons)
     boost = {}                    # (joint index, frame) -> how much more its speed costs
-    total = rounds = calming = 0
+    total = rounds = calming = emphasised = 0
     while True:
         speed, at = _speeds(layout, edited.fps)
         weights = abs(speed) @ speed_w / (2 * edited.fps)
@@ -371,6 +393,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
             values = layout.values(x)
             layout = _Layout(joints, F)
             x = _least_squares(layout.basis, values)
+            continue
+        if misses and emphasised < EMPHASIS and tasks.emphasise(tasks.size, tolerance):
+            emphasised += 1
             continue
         popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons,
                            max(dense_pop, 1.0))
@@ -596,6 +621,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     worst = 0.0
     misses = []
     floors = {}
+    sizes = {}
     for item, (frames, structure, weight, angular) in enumerate(tasks.items):
         err, jac = task_error_and_jacobian(sk, structure, motion.rotations[frames],
                                            motion.translations[frames], slot)
@@ -616,10 +642,12 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
             else:
                 floors[item] = size
             worst = max(worst, float(size.max(initial=0.0)))
+            sizes[item] = size
             bad = size > tolerance
             if bad.any():
                 misses.append(([g for g, _ in blocks], frames[bad], size[bad]))
-        errs.append(weight * err.reshape(-1))
+        weight = weight * tasks.emphasis[item][:, None]
+        errs.append((weight * err).reshape(-1))
         for g, col in blocks:
             row_of = layout.row_of[g][frames]
             inside = np.flatnonzero(row_of >= 0)
@@ -634,7 +662,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
             cc = np.broadcast_to(row_of[inside][:, None, None] + np.arange(3), block.shape)
             rows.append(rr.reshape(-1))
             cols.append(cc.reshape(-1))
-            vals.append(weight * block.reshape(-1))
+            vals.append((weight[inside, :, None] * block).reshape(-1))
         r0 += B * K
     big = sparse.csr_matrix((np.concatenate(vals) if vals else np.zeros(0),
                              (np.concatenate(rows) if rows else np.zeros(0, np.intp),
@@ -643,6 +671,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     err = np.concatenate(errs) if errs else np.zeros(0)
     if tasks.floor is None:
         tasks.floor = floors
+    tasks.size = sizes
     return err, big @ layout.basis, worst, misses
 
 
