@@ -105,10 +105,10 @@ ANGLE_LEVER = 0.1
 ITERATIONS = 8
 ROUNDS = 12
 #: rounds of a costlier speed where the keys pop, at most
-CALMING = 4
+CALMING = 10
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
-EMPHASIS = 6
+EMPHASIS = 10
 EMPHASIS_STEP = 4.0
 #: keys added per miss (a run of frames where a task misses) and round, on as many channels
 PER_MISS = 2
@@ -394,21 +394,23 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
             layout = _Layout(joints, F)
             x = _least_squares(layout.basis, values)
             continue
-        if misses and emphasised < EMPHASIS and tasks.emphasise(tasks.size, tolerance):
-            emphasised += 1
-            continue
+        # where tasks still miss, their frames count more; where a joint turns faster than
+        # the no-pop rule (as the dense solve meets it) allows, its curves' speed costs
+        # more; both at once, so that neither undoes what the other gained
         popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons,
                            max(dense_pop, 1.0))
-        if not popping or calming == CALMING:
+        emphasise = bool(misses) and emphasised < EMPHASIS and \
+            tasks.emphasise(tasks.size, tolerance)
+        calm = bool(popping) and calming < CALMING
+        if not emphasise and not calm:
             break
-        # where a joint turns faster than the no-pop rule (as the dense solve meets it)
-        # allows, its curves' speed costs more, and the fit runs again
-        calming += 1
-        for key in popping:
+        emphasised += emphasise
+        calming += calm
+        for key in popping if calm else ():
             boost[key] = boost.get(key, 1.0) * 4.0
     if stats is not None:
         stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
-                      "calming": calming})
+                      "calming": calming, "emphasised": emphasised})
     return _as_map(sk, layout, x)
 
 
