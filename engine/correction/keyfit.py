@@ -511,12 +511,15 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     now, cost = state(x)
     damping = 1e-4
     used = 1
+    # the linear rows' part of the normal equations is the same on every iteration
+    reg_t = reg.T.tocsr()
+    reg_normal = reg_t @ reg
     for _ in range(ITERATIONS):
         err, jac, _, _, rest = now
-        a = sparse.vstack([jac, reg]).tocsc()
-        normal = (a.T @ a).tocsc()
+        jac_t = jac.T.tocsr()
+        normal = jac_t @ jac + reg_normal
         diag = normal.diagonal()
-        g = a.T @ np.concatenate([err, rest])
+        g = jac_t @ err + reg_t @ rest
         while True:
             used += 1
             step = _solve_spd(normal + sparse.diags(damping * diag + 1e-12), g)
@@ -569,12 +572,14 @@ def _solve_spd(normal, rhs: np.ndarray) -> np.ndarray:
     LU."""
     import scipy.sparse as sparse
     from scipy.linalg import LinAlgError, solveh_banded
-    coo = sparse.triu(normal).tocoo()
-    width = int((coo.col - coo.row).max(initial=0))
+    coo = normal.tocoo()
+    upper = coo.col >= coo.row
+    row, col, data = coo.row[upper], coo.col[upper], coo.data[upper]
+    width = int((col - row).max(initial=0))
     n = normal.shape[0]
     if width < BAND:
         band = np.zeros((width + 1, n))
-        np.add.at(band, (width + coo.row - coo.col, coo.col), coo.data)
+        np.add.at(band, (width + row - col, col), data)
         try:
             return solveh_banded(band, rhs, check_finite=False)
         except LinAlgError:
