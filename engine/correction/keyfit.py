@@ -314,10 +314,8 @@ class _Tasks:
         self.items = []
         #: per item, its metric error [m] per frame in the dense solve (None: not known yet)
         self.floor = None
-        #: per item, how much more each of its frames counts (see :meth:`emphasise`), and its
-        #: metric error beyond the dense solve's in the last evaluation
+        #: per item, how much more each of its frames counts (see :meth:`emphasise`)
         self.emphasis = []
-        self.size = {}
         for kind, c, frames, goals in batches.values():
             frames = np.concatenate(frames)
             task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
@@ -330,7 +328,8 @@ class _Tasks:
             self.emphasis.append(np.ones(len(frames)))
 
     def emphasise(self, sizes: dict, tolerance: float) -> bool:
-        """Frames where a metric task misses by more than ``tolerance`` count more (by how
+        """Frames where a metric task (``sizes``: per item its error beyond the dense
+        solve's per frame) misses by more than ``tolerance`` count more (by how
         much they miss, at most :data:`EMPHASIS_STEP` times per call): least squares spreads
         the error that few keys leave, and the limit is on the largest (iteratively
         reweighted towards the maximum). Returns whether any frame changed."""
@@ -402,7 +401,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         target = np.r_[scale * dense, np.zeros(speed.shape[0])]
         if cancel is not None and cancel():
             raise MotionComposerError("the correction was cancelled")
-        x, worst, misses, used = _gauss_newton(tasks, edited, layout, x, reg, target,
+        x, worst, misses, sizes, used = _gauss_newton(tasks, edited, layout, x, reg, target,
                                                tolerance)
         total += used
         if misses and rounds < ROUNDS and _add_keys(joints, misses):
@@ -418,7 +417,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons,
                            max(dense_pop, 1.0))
         emphasise = bool(misses) and emphasised < EMPHASIS and \
-            tasks.emphasise(tasks.size, tolerance)
+            tasks.emphasise(sizes, tolerance)
         calm = bool(popping) and calming < CALMING
         if not emphasise and not calm:
             break
@@ -517,14 +516,14 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     """Key values and slopes ``x`` improved by damped Gauss-Newton (Levenberg-Marquardt)
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
-    misses and the evaluations used."""
+    misses, the metric errors (as :func:`_linearised`) and the evaluations used."""
     import scipy.sparse as sparse
     def state(x):
         values = layout.values(x)
-        err, jac, worst, misses = _linearised(tasks, _keyed(edited, layout, values), layout,
-                                              values, tolerance)
+        motion = _keyed(edited, layout, values)
+        err, jac, worst, misses, sizes = _linearised(tasks, motion, layout, values, tolerance)
         rest = target - reg @ x
-        return (err, jac, worst, misses, rest), float(err @ err + rest @ rest)
+        return (err, jac, worst, misses, sizes, rest), float(err @ err + rest @ rest)
 
     now, cost = state(x)
     damping = 1e-4
@@ -533,7 +532,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     reg_t = reg.T.tocsr()
     reg_normal = reg_t @ reg
     for _ in range(ITERATIONS):
-        err, jac, _, _, rest = now
+        err, jac, _, _, _, rest = now
         jac_t = jac.T.tocsr()
         normal = jac_t @ jac + reg_normal
         diag = normal.diagonal()
@@ -553,7 +552,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
         damping = max(damping / 10.0, 1e-9)
         if improvement < 1e-3:
             break
-    return x, now[2], now[3], used
+    return x, now[2], now[3], now[4], used
 
 
 def _lever(jt: _Joint, lever: np.ndarray) -> float:
@@ -628,7 +627,8 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     """The held tasks' weighted errors ``(R,)``, their Jacobian in the unknowns (sparse
     ``(R, n)``), the largest metric task error [m] and the misses: per task missing its goal
     by more than ``tolerance`` somewhere, ``(its chain's joints (layout indices), frames,
-    errors there)``."""
+    errors there)``; and per metric task (item) its error beyond the dense solve's per
+    frame."""
     import scipy.sparse as sparse
     sk = motion.skeleton
     slot = {int(j): k for k, j in enumerate(sk.translated)}
@@ -696,8 +696,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     err = np.concatenate(errs) if errs else np.zeros(0)
     if tasks.floor is None:
         tasks.floor = floors
-    tasks.size = sizes
-    return err, big @ layout.basis, worst, misses
+    return err, big @ layout.basis, worst, misses, sizes
 
 
 def _as_map(skeleton, layout: _Layout, x: np.ndarray) -> DisplacementMap:
