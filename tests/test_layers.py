@@ -2,6 +2,7 @@
 what is saved is what was delivered, format version 3 from a real version-2 project."""
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -55,12 +56,20 @@ def _goal_errors(motion, constraints) -> list[float]:
     return out
 
 
+#: a walk onto another skeleton with automatic contacts: (performer, target) in ../shared/data
+WALKS = {"walk onto another skeleton": ("bandai1_walk_normal_001.bvh",
+                                        "cmu_max_131_01_walk.bvh"),              # 30 fps
+         "120 fps walk onto another skeleton": ("cmu_max_131_01_walk.bvh",
+                                                "bandai1_walk_normal_001.bvh")}
+
+
+@functools.lru_cache(maxsize=None)
 def _solved(name):
+    """The case solved once per session (the key tests read it; none changes it)."""
     if name == "demo":
         project, performer, target = open_project(DEMO)
     else:
-        perf_path = shared_path("bandai1_walk_normal_001.bvh")
-        targ_path = shared_path("cmu_max_131_01_walk.bvh")
+        perf_path, targ_path = (shared_path(n) for n in WALKS[name])
         performer, target = read_performer(perf_path), read_motion(targ_path)
         project = Project(performer=Source(str(perf_path)), target=Source(str(targ_path)),
                           correspondence=automap(target.skeleton, performer.skeleton),
@@ -116,7 +125,7 @@ def test_tangent_modes(mode, slopes):
         Curve([0, 1], [0, 1], tangents=("aligned", "auto"), slopes=[(1, 2), (0, 0)])
 
 
-@pytest.mark.parametrize("name", ["demo", "walk onto another skeleton"])
+@pytest.mark.parametrize("name", ["demo", *WALKS])
 def test_solved_keys_on_real_clips_hold_the_constraints(name):
     solution = _solved(name)
     dense, keyed = solution.correction.motion, solution.motion
@@ -143,16 +152,7 @@ def test_solved_keys_on_real_clips_hold_the_constraints(name):
                                                                       for p in dense_pops))
 
 
-WALK_KEYS = pytest.mark.xfail(strict=True, reason=(
-    "open (issue 15 point 1): on the Bandai walk onto the CMU skeleton (30 fps) the keys fitted "
-    "to the tasks (engine/correction/keyfit.py) miss a contact by 2.3 mm at 10 % keys per "
-    "channel (0.87 mm at 12.8 %, popping no more than the dense solve), so the solve keeps the "
-    "keys fitted to the dense curves (63 % of the window frames, median channel): within a "
-    "contact the direct conversion's foot wobbles by about 1 mm from frame to frame"))
-
-
-@pytest.mark.parametrize("name", ["demo", pytest.param("walk onto another skeleton",
-                                                        marks=WALK_KEYS)])
+@pytest.mark.parametrize("name", ["demo", *WALKS])
 def test_each_channel_has_at_most_a_tenth_as_many_keys_as_window_frames(name):
     solution = _solved(name)
     sk = solution.motion.skeleton
