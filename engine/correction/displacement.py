@@ -178,7 +178,7 @@ class Curve:
     def to_dict(self) -> dict:
         out = {"frames": self.frames.tolist(), "values": self.values.tolist(),
                "interpolation": list(self.interpolation)}
-        if any(m != "auto" for m in self.tangents):
+        if self.tangents.count("auto") != len(self.tangents):
             out["tangents"] = list(self.tangents)
             out["slopes"] = self.slopes[:, 1].tolist()
             if "broken" in self.tangents:

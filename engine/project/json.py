@@ -123,7 +123,7 @@ def _displacement_dict(displacement: DisplacementMap) -> dict:
     for item in displacement.to_dict()["channels"]:
         for name in ("interpolation", "tangents"):
             kinds = item.get(name)
-            if kinds and all(k == kinds[0] for k in kinds):
+            if kinds and kinds.count(kinds[0]) == len(kinds):
                 item = dict(item, **{name: kinds[0]})
         channels.append(item)
     return {"channels": channels}
@@ -211,12 +211,15 @@ def _packed(parts: list, width: int) -> list:
     as it can be (a part longer than ``width`` has a line of its own). A line is found by a
     binary search on the running lengths, not by adding the parts one at a time: a solve's
     keys are 400,000 numbers at 40,000 frames, and the per-number loop this replaces was most
-    of a save."""
+    of a save. The search looks only as far as a line can reach (a part and its ", " are at
+    least 3 characters), so that its cost does not grow with the list."""
     # where each part's ", " ends, from the line's start: the lengths + 2, summed in C
     ends = [0, *itertools.accumulate(map(operator.add, map(len, parts), itertools.repeat(2)))]
+    reach = max(width, 0) // 3 + 2
     lines, i = [], 0
     while i < len(parts):
-        j = max(bisect.bisect_right(ends, ends[i] + width + 2, i) - 1, i + 1)
+        j = bisect.bisect_right(ends, ends[i] + width + 2, i, min(i + reach, len(ends)))
+        j = max(j - 1, i + 1)
         lines.append(", ".join(parts[i:j]))
         i = j
     return lines
