@@ -175,14 +175,20 @@ class Curve:
         modes[index] = mode
         return Curve(self.frames, self.values, self.interpolation, tuple(modes), stored)
 
-    def to_dict(self) -> dict:
-        out = {"frames": self.frames.tolist(), "values": self.values.tolist(),
+    def to_dict(self, *, arrays: bool = False) -> dict:
+        """The curve's fields as a project file holds them; with ``arrays``, its numbers as
+        the read-only arrays instead of lists: the project writer turns one array at a time
+        into text, so that a long solve's keys (1.2 million numbers at 40,000 frames) never
+        exist all at once as Python floats, which cost fresh memory (page faults) on every
+        save."""
+        numbers = (lambda a: a) if arrays else np.ndarray.tolist
+        out = {"frames": numbers(self.frames), "values": numbers(self.values),
                "interpolation": list(self.interpolation)}
         if self.tangents.count("auto") != len(self.tangents):
             out["tangents"] = list(self.tangents)
-            out["slopes"] = self.slopes[:, 1].tolist()
+            out["slopes"] = numbers(self.slopes[:, 1])
             if "broken" in self.tangents:
-                out["slopes_in"] = self.slopes[:, 0].tolist()
+                out["slopes_in"] = numbers(self.slopes[:, 0])
         return out
 
     @classmethod
@@ -323,8 +329,9 @@ class DisplacementMap:
                 curves[(ROOT, channel)] = fit_keys(signal, position_tolerance)
         return cls(curves)
 
-    def to_dict(self) -> dict:
-        return {"channels": [{"joint": j, "channel": c, **curve.to_dict()}
+    def to_dict(self, *, arrays: bool = False) -> dict:
+        """The map as a project file holds it (``arrays``: see :meth:`Curve.to_dict`)."""
+        return {"channels": [{"joint": j, "channel": c, **curve.to_dict(arrays=arrays)}
                              for (j, c), curve in self.curves.items()]}
 
     @classmethod

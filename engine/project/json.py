@@ -118,9 +118,10 @@ def ik_dict(options: IKOptions) -> dict:
 
 def _displacement_dict(displacement: DisplacementMap) -> dict:
     """``DisplacementMap.to_dict`` with one interpolation (or tangent) name instead of a
-    list where every key has the same (the IK's keys are all smooth)."""
+    list where every key has the same (the IK's keys are all smooth); the numbers stay
+    arrays until :func:`_encode` writes each."""
     channels = []
-    for item in displacement.to_dict()["channels"]:
+    for item in displacement.to_dict(arrays=True)["channels"]:
         for name in ("interpolation", "tangents"):
             kinds = item.get(name)
             if kinds and kinds.count(kinds[0]) == len(kinds):
