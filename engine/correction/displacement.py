@@ -459,11 +459,16 @@ def _splits(keys: np.ndarray, frames: np.ndarray, err: np.ndarray) -> np.ndarray
     middles of the intervals beside it when that frame is a key already."""
     seg = np.searchsorted(keys, frames, side="right") - 1
     order = np.lexsort((-err, seg))
-    first = np.r_[True, seg[order][1:] != seg[order][:-1]]
+    seg = seg[order]
+    first = np.ones(len(seg), dtype=bool)
+    np.not_equal(seg[1:], seg[:-1], out=first[1:])
     worst = frames[order][first]
-    is_key = np.isin(worst, keys)
+    # membership by the search the neighbours need anyway (np.isin's setup cost more than
+    # the rest: this runs once per round of every channel's fit, whatever the clip's length)
+    at = np.searchsorted(keys, worst)
+    is_key = keys[np.minimum(at, len(keys) - 1)] == worst
     out = [worst[~is_key]]
-    at = np.searchsorted(keys, worst[is_key])
+    at = at[is_key]
     for lo_i, hi_i in ((at - 1, at), (at, at + 1)):
         ok = (lo_i >= 0) & (hi_i < len(keys))
         a, b = keys[lo_i[ok]], keys[hi_i[ok]]
