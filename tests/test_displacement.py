@@ -137,3 +137,16 @@ def test_maps_round_trip_through_plain_data_and_reject_unknown_channels():
         DisplacementMap({(ROOT, "rx"): Curve([0], [0])})
     with pytest.raises(MotionComposerError, match="joint channels"):
         DisplacementMap({("Hips", "tx"): Curve([0], [0])})
+
+
+def test_a_fit_round_splits_each_missing_interval_at_its_worst_frame():
+    """Per key interval with frames over the tolerance, the worst frame becomes a key; when
+    that frame is a key already, the middles of the intervals beside it do (those at least two
+    frames wide)."""
+    from motion_composer.engine.correction.displacement import _splits
+    keys = np.array([0, 10, 20, 21, 30])
+    frames = np.array([3, 7, 10, 12, 21, 25, 30])
+    err = np.array([1.0, 2.0, 5.0, 1.0, 3.0, 1.0, 4.0])
+    # [0, 10): 7; [10, 20): 10 is a key -> 5 and 15; [20, 21): none over; [21, 30): 21 is a
+    # key -> 25 (the interval before it, 20..21, is too narrow); [30]: a key -> 25
+    assert _splits(keys, frames, err).tolist() == [5, 7, 15, 25]

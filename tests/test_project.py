@@ -173,6 +173,24 @@ def test_save_load_save_is_byte_identical(tmp_path):
     assert max(len(line) for line in first.decode().splitlines()) <= 100
 
 
+@pytest.mark.parametrize("items", [
+    [0.1 * k - 3e-7 * k * k for k in range(500)],                       # a curve's keys
+    [True, None, "one, two", "x" * 120, "y" * 30, "z", "w" * 95, "v, " * 20],   # words
+])
+def test_lists_are_packed_greedily_into_lines(items):
+    """A list that does not fit on its key's line is written one line per run of items, each
+    line as full as 100 characters allow (a longer item alone on its line), in order."""
+    from motion_composer.engine.project.json import _encode
+    text = _encode({"list": items}, 0, "")
+    assert json.loads(text)["list"] == items
+    lines = text.splitlines()[2:-2]
+    runs = [json.loads("[" + line.strip().rstrip(",") + "]") for line in lines]
+    assert all(line.startswith("    ") for line in lines)
+    assert all(len(line) <= 100 or len(run) == 1 for line, run in zip(lines, runs))
+    for line, following in zip(lines, runs[1:]):
+        assert len(line) + len(json.dumps(following[0])) + 2 > 100     # it would not fit
+
+
 def test_the_retargeted_motion_is_identical_after_load(tmp_path):
     project = session_in(tmp_path)
     path = tmp_path / "walk.mcp"

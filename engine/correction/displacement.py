@@ -175,14 +175,20 @@ class Curve:
         modes[index] = mode
         return Curve(self.frames, self.values, self.interpolation, tuple(modes), stored)
 
-    def to_dict(self) -> dict:
-        out = {"frames": self.frames.tolist(), "values": self.values.tolist(),
+    def to_dict(self, *, arrays: bool = False) -> dict:
+        """The curve's fields as a project file holds them; with ``arrays``, its numbers as
+        the read-only arrays instead of lists: the project writer turns one array at a time
+        into text, so that a long solve's keys (1.2 million numbers at 40,000 frames) never
+        exist all at once as Python floats, which cost fresh memory (page faults) on every
+        save."""
+        numbers = (lambda a: a) if arrays else np.ndarray.tolist
+        out = {"frames": numbers(self.frames), "values": numbers(self.values),
                "interpolation": list(self.interpolation)}
-        if any(m != "auto" for m in self.tangents):
+        if self.tangents.count("auto") != len(self.tangents):
             out["tangents"] = list(self.tangents)
-            out["slopes"] = self.slopes[:, 1].tolist()
+            out["slopes"] = numbers(self.slopes[:, 1])
             if "broken" in self.tangents:
-                out["slopes_in"] = self.slopes[:, 0].tolist()
+                out["slopes_in"] = numbers(self.slopes[:, 0])
         return out
 
     @classmethod
@@ -323,8 +329,9 @@ class DisplacementMap:
                 curves[(ROOT, channel)] = fit_keys(signal, position_tolerance)
         return cls(curves)
 
-    def to_dict(self) -> dict:
-        return {"channels": [{"joint": j, "channel": c, **curve.to_dict()}
+    def to_dict(self, *, arrays: bool = False) -> dict:
+        """The map as a project file holds it (``arrays``: see :meth:`Curve.to_dict`)."""
+        return {"channels": [{"joint": j, "channel": c, **curve.to_dict(arrays=arrays)}
                              for (j, c), curve in self.curves.items()]}
 
     @classmethod
@@ -452,11 +459,16 @@ def _splits(keys: np.ndarray, frames: np.ndarray, err: np.ndarray) -> np.ndarray
     middles of the intervals beside it when that frame is a key already."""
     seg = np.searchsorted(keys, frames, side="right") - 1
     order = np.lexsort((-err, seg))
-    first = np.r_[True, seg[order][1:] != seg[order][:-1]]
+    seg = seg[order]
+    first = np.ones(len(seg), dtype=bool)
+    np.not_equal(seg[1:], seg[:-1], out=first[1:])
     worst = frames[order][first]
-    is_key = np.isin(worst, keys)
+    # membership by the search the neighbours need anyway (np.isin's setup cost more than
+    # the rest: this runs once per round of every channel's fit, whatever the clip's length)
+    at = np.searchsorted(keys, worst)
+    is_key = keys[np.minimum(at, len(keys) - 1)] == worst
     out = [worst[~is_key]]
-    at = np.searchsorted(keys, worst[is_key])
+    at = at[is_key]
     for lo_i, hi_i in ((at - 1, at), (at, at + 1)):
         ok = (lo_i >= 0) & (hi_i < len(keys))
         a, b = keys[lo_i[ok]], keys[hi_i[ok]]

@@ -1072,7 +1072,8 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
             out.append(_format_rows(values, column_decimals))
     else:
         out.extend("" for _ in range(F))
-    return "\n".join(out) + "\n"
+    out.append("")                  # the last newline, by the join: no copy of the whole text
+    return "\n".join(out)
 
 
 def _joint_angles(q: np.ndarray, order: str) -> np.ndarray:
