@@ -130,9 +130,18 @@ def main() -> None:
     full = median_of(lambda: doc.scene.solve(constraints=constraints))
 
     def release():
+        """The release's command and the solve it starts in the document's job runner, to
+        the solved motion shown (the solve runs on another thread: without the wait only the
+        push was timed, and the process could end with the thread still running)."""
         moved = list(doc.scene.constraints)
         moved[2] = moved[2].with_range(18, 28, 91, 105)
         live.commit(moved, "move")
+        deadline = time.perf_counter() + 300.0
+        while doc.pending and time.perf_counter() < deadline:
+            app.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 10)
+            time.sleep(0.002)
+        if doc.pending:
+            sys.exit("error: the release's solve did not land within 300 s")
         doc.undo_stack.undo()
     release_s = median_of(release)
 

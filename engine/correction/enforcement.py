@@ -298,13 +298,13 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
 
 def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=None):
     """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
-    task goals), as :func:`_where_needed` leaves them, each from ``start`` (rot, tra; by
-    default the attraction posture). Entries share task slots where they do not overlap in
-    time, so all frames form one batch. Returns rot, tra, residual per constraint,
-    iterations."""
+    task goals), as :func:`_where_needed` leaves them, each from the attraction posture, or
+    from ``start`` (rot, tra), which then receives the solved frames in place (a second
+    solve over a long clip's arrays costs no copy of them). Entries share task slots where
+    they do not overlap in time, so all frames form one batch. Returns rot, tra, residual
+    per constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
-    rot = (attraction_rot if start is None else start[0]).copy()
-    tra = (attraction_tra if start is None else start[1]).copy()
+    rot, tra = (attraction_rot.copy(), attraction_tra.copy()) if start is None else start
     residual = Residuals(F, len(problem.cons))
     iters = np.zeros(F, dtype=np.intp)
     slots = _assign_slots(entries, problem.cons, sk, F)
@@ -568,7 +568,7 @@ def _pass_one(problem: _Problem):
     """The key postures and the blend over the ramps: the clip's frames solved from the
     composed motion, then each key frame without its ramps' constraints
     (:func:`_virtual_frames`) solved from the correction next to it on the ramps' side
-    (:func:`_from_inner`), then each ramp's correction eased in or out over it
+    (:func:`_start_from_inner`), then each ramp's correction eased in or out over it
     (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
     frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
@@ -583,14 +583,14 @@ def _pass_one(problem: _Problem):
                                                virtual.composed.rotations,
                                                virtual.composed.translations)
     if not clip.all():
-        start = _from_inner(virtual.composed, rot_v, tra_v, inner, ~clip)
-        # each from its start, in the paper's scheme too
-        keys = _solve(dataclasses.replace(virtual, previous=np.full(len(src), -1, np.intp)),
-                      _restricted(entries, ~clip), virtual.composed.rotations,
-                      virtual.composed.translations, start)
-        rot_v[~clip], tra_v[~clip] = keys[0][~clip], keys[1][~clip]
-        residual_v.extend(keys[2])
-        iters_v[~clip] = keys[3][~clip]
+        _start_from_inner(virtual.composed, rot_v, tra_v, inner, ~clip)
+        # each from its start, in the paper's scheme too; solved into rot_v, tra_v
+        _, _, residual_k, iters_k = _solve(
+            dataclasses.replace(virtual, previous=np.full(len(src), -1, np.intp)),
+            _restricted(entries, ~clip), virtual.composed.rotations,
+            virtual.composed.translations, start=(rot_v, tra_v))
+        residual_v.extend(residual_k)
+        iters_v[~clip] = iters_k[~clip]
     rot, tra, blended = _blend(problem, rot_v, tra_v, src, units, deltas)
     iters = np.zeros(F, dtype=np.intp)
     np.maximum.at(iters, src, iters_v)
@@ -600,27 +600,27 @@ def _pass_one(problem: _Problem):
     return rot, tra, _map_residuals(residual_v, src, clip, F), iters, solved, blended
 
 
-def _from_inner(composed: Motion, rot, tra, inner, frames):
+def _start_from_inner(composed: Motion, rot, tra, inner, frames) -> None:
     """Start postures for the key frames without their ramps (``frames``, a mask over virtual
-    frames): the composed posture there with the correction solved at the ``inner`` clip
-    frame (per joint its rotation offset; the root's translation offset). That frame holds
+    frames), written into ``rot`` and ``tra`` (which hold the composed posture there): the
+    composed posture with the correction solved at the ``inner`` clip frame (per joint its
+    rotation offset; the root's translation offset). That frame holds
     the same tasks; a solve from the composed posture could end in another of the postures
     that meet them (a leg near its full stretch under a reach: 2.8 degrees of the hips and a
     centimetre of the root apart on the CMU walk onto Bandai), and the ramp would turn the
     difference in one frame."""
     base_rot, base_tra = composed.rotations, composed.translations
-    rot0, tra0 = base_rot.copy(), base_tra.copy()
     v = np.flatnonzero(frames)
     n = inner[v]
     # joints the correction leaves alone start (and, with no task to move them, stay) bit
     # for bit where they are
     moved = np.any(rot[n] != base_rot[n], axis=-1)
-    r = rot0[v]
+    r = base_rot[v]
     r[moved] = qnormalize(qmul(qmul(rot[n][moved], qconj(base_rot[n][moved])), r[moved]))
-    rot0[v] = r
+    rot[v] = r
     shifted = np.any(tra[n, 0] != base_tra[n, 0], axis=-1)
-    tra0[v[shifted], 0] += tra[n[shifted], 0] - base_tra[n[shifted], 0]
-    return rot0, tra0
+    tra[v] = base_tra[v]
+    tra[v[shifted], 0] += tra[n[shifted], 0] - base_tra[n[shifted], 0]
 
 
 def _pass_two(problem: _Problem, rot, tra, blended):
