@@ -236,7 +236,7 @@ class _OthersLoad:
     @staticmethod
     def _running_ours() -> int:
         me = os.getpid()
-        parents, states = {}, {}
+        parents = {}
         for entry in os.scandir("/proc"):
             if not entry.name.isdigit():
                 continue
@@ -246,7 +246,6 @@ class _OthersLoad:
                 continue
             rest = text[text.rindex(")") + 2:].split()
             parents[int(entry.name)] = int(rest[1])
-            states[int(entry.name)] = entry.path
         ours = {me}
         grew = True
         while grew:                     # this process and its descendants

@@ -225,7 +225,6 @@ class _Problem:
     chunk_frames: int = CHUNK_FRAMES
     locked: frozenset = frozenset()
     #: ``(F,)`` per frame the frame a warm start begins from (-1: none); ``None``: ``f - 1``
-    #: (over virtual frames: the previous clip frame's posture with the same tasks held)
     previous: np.ndarray | None = None
 
     @property
@@ -540,17 +539,15 @@ def _blend(problem: _Problem, rot_v, tra_v, src, units, deltas):
     return rot, tra, blended
 
 
-def _virtual(problem: _Problem, src, removed) -> _Problem:
-    """The problem over virtual frames (the composed motion's frames ``src``, each leaving out
-    the constraints ``removed``); a warm start begins from the previous clip frame's virtual
-    frame that leaves out the same constraints."""
+def _virtual(problem: _Problem, src) -> _Problem:
+    """The problem over virtual frames (the composed motion's frames ``src``). Its first
+    ``F`` are the clip's frames, so a warm start begins from the frame before as over the
+    clip; the key frames beyond them start from their neighbour's correction
+    (:func:`_start_from_inner`)."""
     composed = problem.composed
     motion = Motion._trusted(composed.skeleton, composed.rotations[src],
                              composed.translations[src], composed.frame_time, composed.name)
-    index = {(int(t), frozenset(gone)): v for v, (t, gone) in enumerate(zip(src, removed))}
-    previous = np.array([index.get((int(t) - 1, frozenset(gone)), -1)
-                         for t, gone in zip(src, removed)], dtype=np.intp)
-    return dataclasses.replace(problem, composed=motion, previous=previous)
+    return dataclasses.replace(problem, composed=motion)
 
 
 def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals:
@@ -575,7 +572,7 @@ def _pass_one(problem: _Problem):
     units = _ramp_units(problem.cons)
     _check_overlaps(problem, units)
     src, removed, deltas, inner = _virtual_frames(problem, units)
-    virtual = _virtual(problem, src, removed)
+    virtual = _virtual(problem, src)
     entries = _where_needed(virtual, _virtual_entries(problem, src, removed),
                             virtual.composed.rotations, virtual.composed.translations)
     clip = np.arange(len(src)) < F

@@ -503,12 +503,17 @@ def _speeds(layout: _Layout, fps: float):
 
 def _popping(direct: Motion, keyed: Motion, constraints, allowed: float) -> set:
     """``(joint index, frame)`` where ``keyed`` turns a joint faster than ``allowed`` times
-    its no-pop limit around a ramp (:func:`~.quality.pop_limits`)."""
-    from .quality import angular_speed, pop_limits, ramps
-    speed = angular_speed(keyed)
-    limit = pop_limits(direct, keyed, ramps(constraints, direct.num_frames))
-    f, j = np.nonzero(speed > allowed * limit)          # inf off the ramps: never over
+    its no-pop limit around a ramp (:func:`_pop_ratios`)."""
+    f, j = np.nonzero(_pop_ratios(direct, keyed, constraints) > allowed)
     return set(zip(j.tolist(), f.tolist()))
+
+
+def _pop_ratios(direct: Motion, corrected: Motion, constraints) -> np.ndarray:
+    """``(F, J)`` each joint's turning speed over its no-pop limit around the ramps
+    (:func:`~.quality.pop_limits`; 0 off the ramps, where the limit is infinite)."""
+    from .quality import angular_speed, pop_limits, ramps
+    limit = pop_limits(direct, corrected, ramps(constraints, direct.num_frames))
+    return angular_speed(corrected) / limit
 
 
 def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, target,
@@ -745,7 +750,4 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
 
 def _worst_pop(direct: Motion, corrected: Motion, constraints) -> float:
     """The largest ratio of a joint's turning speed to its no-pop limit around the ramps."""
-    from .quality import angular_speed, pop_limits, ramps
-    speed = angular_speed(corrected)
-    limit = pop_limits(direct, corrected, ramps(constraints, direct.num_frames))
-    return float((speed / limit).max(initial=0.0))      # 0 off the ramps (inf limits)
+    return float(_pop_ratios(direct, corrected, constraints).max(initial=0.0))
