@@ -353,6 +353,42 @@ def test_a_capture_onto_a_mixamo_fbx_character_written_as_glb(tmp_path, capsys):
     assert written.num_vertices == 24746 and written.motions[0].num_frames == 994
 
 
+def test_a_maya_rig_with_controls_beside_its_body_is_a_target(tmp_path, capsys):
+    """The Kenney rig's ``Root`` holds foot, knee and hips controls beside the body (13 joints
+    outside the skin): its hips carry 39 of 59 joints. Driven from the performer's root they
+    are the body's root all the same; the controls and the unmapped root keep their rest
+    placement. A map of one arm is still no body."""
+    kenney = shared_path("fbx/maya_kenney_character_7700_binary.fbx")
+    out = tmp_path / "walk_on_kenney.bvh"
+    assert main(["retarget", str(WALK), "--target", str(kenney), "-o", str(out),
+                 "--save-map", str(tmp_path / "map.json")]) == 0, capsys.readouterr().err
+    pairs = json.loads((tmp_path / "map.json").read_text())["pairs"]
+    assert pairs["Hips"] == "Hips" and "Root" not in pairs and "LeftFootCtrl" not in pairs
+    motion, rest = read_motion(out), read_fbx(kenney)
+    sk = motion.skeleton
+    assert sk.names == rest.skeleton.names and motion.num_frames == 994
+    controls = [j for j, name in enumerate(sk.names)
+                if name == "Root" or "Ctrl" in name or "Roll" in name or "FootIK" in name]
+    assert len(controls) >= 12
+    first = motion.rotations[:1, controls]
+    assert np.allclose(np.abs(np.sum(motion.rotations[:, controls] * first, axis=-1)), 1.0,
+                       atol=1e-9)
+    fk = forward_kinematics(motion).positions
+    hips = fk[:, sk.index["Hips"]]
+    walked = np.linalg.norm((hips[-1] - hips[0])[[0, 2]])
+    performer = forward_kinematics(read_motion(WALK)).positions[:, 0]
+    assert walked > 0.5 * np.linalg.norm((performer[-1] - performer[0])[[0, 2]]) > 0.5
+    # the hips above the feet all along: the body stands on its legs
+    feet = fk[:, [sk.index["LeftFoot"], sk.index["RightFoot"]], 1].min(axis=1)
+    assert (hips[:, 1] > feet + 0.3).all()
+    arm = {"LeftArm": "LeftShoulder", "LeftForeArm": "LeftElbow"}
+    map_path = tmp_path / "arm.json"
+    map_path.write_text(json.dumps({"pairs": arm}))
+    assert main(["retarget", str(WALK), "--target", str(kenney), "-o", str(tmp_path / "a.bvh"),
+                 "--map", str(map_path)]) == 2
+    assert "carries only" in capsys.readouterr().err
+
+
 def test_a_project_with_an_fbx_target_exports_onto_its_mesh(tmp_path, capsys):
     project = tmp_path / "p.mcp"
     mixamo = shared_path("fbx/mixamo.fbx")

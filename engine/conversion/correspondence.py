@@ -106,10 +106,15 @@ class Correspondence:
         top = target.index[tops[0]]
         if top != 0:
             # an unmapped root is a ground-level node above the body (Bandai's joint_Root,
-            # CC3's RL_BoneRoot, an armature's root bone): the mapped top must carry nearly
-            # the whole skeleton, not one limb
+            # CC3's RL_BoneRoot, an armature's root bone): the mapped top must be the body's
+            # root, not one limb. It is when it carries nearly the whole skeleton, or when
+            # the performer joint driving it carries nearly the whole performer: a rig whose
+            # root also holds control joints beside the body (a Maya rig's foot and knee
+            # controls under its Root, outside the skin) has its hips carry only two thirds
             size = _subtree_size(target, top)
-            if size < 0.75 * target.num_joints:
+            driver = performer.index[self.pairs[tops[0]]]
+            if size < 0.75 * target.num_joints and \
+                    _subtree_size(performer, driver) < 0.75 * performer.num_joints:
                 raise MappingError(
                     f"the target's root {target.names[0]!r} is unmapped and the top mapped "
                     f"joint {tops[0]!r} carries only {size} of {target.num_joints} joints; map "
