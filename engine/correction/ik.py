@@ -23,7 +23,6 @@ converge leave the batch.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import numbers
 from collections.abc import Mapping
@@ -34,7 +33,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import cmul, crot, cto_matrix, qconj, qmul, qnormalize
+from ..quaternions import cto_matrix, qconj, qmul, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -66,6 +65,10 @@ def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     scale = np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-12),
                      angle / np.where(small, 1.0, s))
     return q[..., :3] * scale
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -102,7 +105,7 @@ class TaskState:
             return self.point
         B, C = self.batch, len(self.pivots)
         out = np.empty((B, 3, 3 + 3 * C))
-        out[:, :, :3] = np.eye(3)
+        out[:, :, :3] = _EYE3
         if C:
             d = self.position - np.asarray(self.pivots).reshape(C, B, 3)          # (C, B, 3)
             m = np.asarray(self.frames).reshape(C, B, 3, 3)
@@ -347,6 +350,13 @@ class _Structure:
         # without options: the Jacobian as it is)
         self.colscale = (column_scale(skeleton, self.joints, options.scale)
                          if options is not None else np.ones(self.n))
+        self.task_colscale = [self.colscale[cols] for cols in self.task_cols]
+        # (T, T): task k pins task t's joint (see ``pins``), for all frames at once
+        self.pin_matrix = np.zeros((len(tasks), len(tasks)), dtype=np.intp)
+        for t, pins in enumerate(self.pins):
+            self.pin_matrix[pins, t] = 1
+        # (B, T) each task's weight is not zero, for the batch it was made with
+        self.task_on = (np.stack([t.weight > 0 for t in tasks], axis=1) if tasks else None)
 
     def _index(self, skeleton: Skeleton) -> None:
         """Positions among ``fk_joints`` ("local"): FK levels ``(joints, parents)`` by depth
@@ -363,6 +373,8 @@ class _Structure:
         self.fk_offsets = skeleton.offsets[self.fk_joints].T[:, :, None]         # (3, n, 1)
         self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
                                        dtype=np.intp)
+        self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
+        self.parent_local = self.unknown_parent[~self.parent_root]
         unknown = {int(j): k for k, j in enumerate(self.joints)}
         self.task_local = [local[t.joint] for t in self.tasks]
         self.chain_local = [np.array([local[int(a)] for a in c], dtype=np.intp)
@@ -386,28 +398,64 @@ class _Structure:
                                      else None)
 
 
+#: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
+#: ``b`` that ``a``'s x, y and z multiply, and its sign (:func:`_cmul`)
+_MUL_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]])
+_MUL_SIGN = np.array([[1.0, -1.0, 1.0, -1.0], [1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0]])
+
+
+def _cmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.cmul` of component arrays ``a, b (4, n, B)`` bit for bit
+    (the same products, signs and sums in the same order; a test checks it) in a few calls
+    on whole arrays instead of four rows: the FK of a small batch costs the calls, not the
+    arithmetic."""
+    p = a[:3, None] * (b[_MUL_INDEX] * _MUL_SIGN[:, :, None, None])
+    out = a[3] * b
+    out += p[0]
+    out += p[1]
+    out += p[2]
+    return out
+
+
+def _crot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.crot` of ``q (4, n, B)`` rotating ``v (3, n, B or 1)``
+    bit for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
+    u, w = q[:3], q[3]
+    u1, u2 = u[[1, 2, 0]], u[[2, 0, 1]]
+    t = u1 * v[[2, 0, 1]]
+    t -= u2 * v[[1, 2, 0]]
+    t *= 2.0
+    out = w * t
+    out += v
+    cross = u1 * t[[2, 0, 1]]
+    cross -= u2 * t[[1, 2, 0]]
+    out += cross
+    return out
+
+
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
                 slot: dict) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
     (closed under ancestors, sorted: the root first) as component arrays, one depth level at a
     time, from local rotations ``rot (B, J, 4)`` and the translated joints' translations
-    ``tra (B, K, 3)``."""
+    ``tra (B, K, 3)``. A level whose joints are not translated turns their offsets ``(3, m,
+    1)`` as they are (broadcast over the batch)."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
-    local_q = np.ascontiguousarray(rot[:, joints].transpose(2, 1, 0))            # (4, n, B)
-    local_t = np.empty((3, n, B))
-    local_t[:] = structure.fk_offsets
-    for k, j in enumerate(joints):
-        if int(j) in slot:
-            local_t[:, k] = tra[:, slot[int(j)]].T
+    local_q = rot[:, joints].transpose(2, 1, 0)                                 # (4, n, B)
+    moved = [k for k, j in enumerate(joints.tolist()) if j in slot]
+    local_t = structure.fk_offsets
+    if moved:
+        local_t = np.repeat(local_t, B, axis=2)
+        local_t[:, moved] = tra[:, [slot[int(joints[k])] for k in moved]].transpose(2, 1, 0)
     wq = np.empty((4, n, B))
     wp = np.empty((3, n, B))
     wq[:, 0] = local_q[:, 0]
     wp[:, 0] = local_t[:, 0]
     for here, up in structure.fk_levels:
         parent_q = wq[:, up]
-        wq[:, here] = cmul(parent_q, local_q[:, here])
-        wp[:, here] = wp[:, up] + crot(parent_q, local_t[:, here])
+        wq[:, here] = _cmul(parent_q, local_q[:, here])
+        wp[:, here] = wp[:, up] + _crot(parent_q, local_t[:, here])
     return wq, wp
 
 
@@ -420,31 +468,32 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure, rot, tra, slot)
     positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
-    parent = structure.unknown_parent
-    frames = np.empty((len(parent), B, 3, 3))
-    frames[parent < 0] = np.eye(3)
-    frames[parent >= 0] = cto_matrix(wq[:, parent[parent >= 0]])
+    frames = np.empty((len(structure.unknown_parent), B, 3, 3))
+    frames[structure.parent_root] = _EYE3
+    frames[~structure.parent_root] = cto_matrix(wq[:, structure.parent_local])
     err = np.empty((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
-    on = np.empty((B, len(structure.tasks)), dtype=bool)
+    task_on = structure.task_on
+    on = (np.ones((B, 0), dtype=bool) if task_on is None else
+          task_on.copy() if select is None else task_on[select])
     acting = np.empty_like(on)
     points = {}                 # task -> the point Jacobian of the tasks sharing its joint
     for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
         goal = task.goal if select is None else task.goal[select]
-        weight = task.weight if select is None else task.weight[select]
         e = structure.task_local[ti]
         shared = structure.shared_point[ti]
-        state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
-                          frames[structure.chain_unknown[ti]], points.get(shared))
-        if shared is not None and shared not in points:
-            points[shared] = state.point_jacobian()
-            state = dataclasses.replace(state, point=points[shared])
+        pivots = positions[structure.chain_local[ti]]
+        chain_frames = frames[structure.chain_unknown[ti]]
+        point = points.get(shared)
+        state = TaskState(positions[e], wq[:, e].T, pivots, chain_frames, point)
+        if shared is not None and point is None:
+            point = points[shared] = state.point_jacobian()
+            state = TaskState(state.position, state.rotation, pivots, chain_frames, point)
         rows = slice(r0, r0 + task.rows)
-        on[:, ti] = weight > 0
         acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
         err[:, rows] = task.kind.error(goal, state)
-        cols = structure.task_cols[ti]
-        jac[:, rows, cols] = task.kind.jacobian(goal, state) * structure.colscale[cols]
+        jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
+                                                 * structure.task_colscale[ti])
     return err, jac, on, acting
 
 
@@ -622,7 +671,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                                               axis=1)
         polish_all[active[short]] = True
         settled &= ~short
-        pinned = np.stack([on[:, pins].any(axis=1) for pins in structure.pins], axis=1)
+        pinned = (on @ structure.pin_matrix) > 0
         held_all[active] = (held | acting) & on & ~pinned
         if np.all(settled):
             iterations[active] -= 1
