@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -316,6 +317,24 @@ def column_scale(skeleton: Skeleton, joints: np.ndarray, scale: float) -> np.nda
                            np.repeat(STIFFNESS ** (0.5 * below), 3)])
 
 
+#: per skeleton (weakly), :class:`_Structure`'s layouts by task set; at most this many kept
+_LAYOUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_LAYOUTS_PER_SKELETON = 256
+
+
+def _eye(n: int) -> np.ndarray:
+    """The ``n x n`` identity, read-only and shared (the solves add it to small matrices on
+    every iteration)."""
+    out = _EYES.get(n)
+    if out is None:
+        out = _EYES[n] = np.eye(n)
+        out.setflags(write=False)
+    return out
+
+
+_EYES: dict[int, np.ndarray] = {}
+
+
 class _Structure:
     """What a task set needs from the skeleton: the unknown joints, each task's chain, the
     index arrays that evaluate every task at once (the joints forward kinematics places,
@@ -324,6 +343,25 @@ class _Structure:
 
     def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset(),
                  options: IKOptions | None = None):
+        # everything but the tasks' goals and weights depends on the tasks' kinds, joints and
+        # priorities only: worked out once per skeleton and task set (a live preview solves
+        # the same few task sets on every step of a drag)
+        key = (tuple((t.kind, t.joint, t.priority) for t in tasks), frozenset(locked),
+               None if options is None else options.scale)
+        layouts = _LAYOUTS.setdefault(skeleton, {})
+        layout = layouts.get(key)
+        if layout is None:
+            self._layout(skeleton, tasks, locked, options)
+            if len(layouts) >= _LAYOUTS_PER_SKELETON:
+                layouts.clear()
+            layouts[key] = {k: v for k, v in vars(self).items() if k != "tasks"}
+        else:
+            vars(self).update(layout)
+        self.tasks = tasks
+        # (B, T) each task's weight is not zero, for the batch it was made with
+        self.task_on = (np.stack([t.weight > 0 for t in tasks], axis=1) if tasks else None)
+
+    def _layout(self, skeleton: Skeleton, tasks: list[Task], locked, options) -> None:
         self.tasks = tasks
         moving: set[int] = set()
         chains = []
@@ -355,8 +393,6 @@ class _Structure:
         self.pin_matrix = np.zeros((len(tasks), len(tasks)), dtype=np.intp)
         for t, pins in enumerate(self.pins):
             self.pin_matrix[pins, t] = 1
-        # (B, T) each task's weight is not zero, for the batch it was made with
-        self.task_on = (np.stack([t.weight > 0 for t in tasks], axis=1) if tasks else None)
 
     def _index(self, skeleton: Skeleton) -> None:
         """Positions among ``fk_joints`` ("local"): FK levels ``(joints, parents)`` by depth
@@ -414,6 +450,17 @@ def _cmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out += p[0]
     out += p[1]
     out += p[2]
+    return out
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.qmul` of quaternions ``a, b (..., 4)`` of one shape, bit
+    for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
+    p = a[..., :3, None] * (b[..., _MUL_INDEX] * _MUL_SIGN)
+    out = a[..., 3:4] * b
+    out += p[..., 0, :]
+    out += p[..., 1, :]
+    out += p[..., 2, :]
     return out
 
 
@@ -771,7 +818,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
                 above = stacked[on]
                 cross = above @ jl.transpose(0, 2, 1)                          # (f, k, m)
                 # the rows' part in the null space of the levels above
-                coef = np.linalg.solve(gram[on] + ns_lam2 * np.eye(k), cross)
+                coef = np.linalg.solve(gram[on] + ns_lam2 * _eye(k), cross)
                 jt = jl - coef.transpose(0, 2, 1) @ above
                 # a lower level waits while a higher one is not met: its steps are
                 # first-order invisible to the higher levels, but near their singularities
@@ -792,7 +839,7 @@ def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float,
     """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``; ``gram``:
     ``a a^T`` when known."""
     gram = a @ a.transpose(0, 2, 1) if gram is None else gram
-    y = np.linalg.solve(gram + lam2 * np.eye(a.shape[1]), rhs[..., None])
+    y = np.linalg.solve(gram + lam2 * _eye(a.shape[1]), rhs[..., None])
     return (a.transpose(0, 2, 1) @ y)[..., 0]
 
 
@@ -809,10 +856,10 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
-    dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
+    dz[:, 3:] = quat_to_rotvec(_qmul(home, qconj(cur))).reshape(nb, -1)
     dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
-    coef = np.linalg.solve(gram + ns_lam2 * np.eye(gram.shape[1]), stacked @ dz[..., None])
+    coef = np.linalg.solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
     return dz - (stacked.transpose(0, 2, 1) @ coef)[..., 0]
 
 
@@ -835,7 +882,7 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
-    new = qnormalize(qmul(rotvec_to_quat(step), cur))
+    new = qnormalize(_qmul(rotvec_to_quat(step), cur))
     for j, limit in options.joint_limits:
         if j in structure.col:
             k = int(np.searchsorted(joints, j))
