@@ -424,14 +424,31 @@ class _Structure:
         # joint clear of the bound)
         self.pins = [[k for k, u in enumerate(self.tasks) if u.kind.fixed_point
                       and u.joint == t.joint] for t in self.tasks]
-        # per task, the first of the point tasks (not angular) on its joint and chain when
-        # there are several (they share the point Jacobian), else None
-        self.shared_point = []
-        for t, chain in zip(self.tasks, self.chains):
-            same = [k for k, (u, c) in enumerate(zip(self.tasks, self.chains))
-                    if not u.kind.angular and u.joint == t.joint and np.array_equal(c, chain)]
-            self.shared_point.append(same[0] if len(same) > 1 and not t.kind.angular
-                                     else None)
+        # the point tasks' (not angular) point Jacobians, one per joint and chain (the tasks
+        # on one joint share it), all computed together (:func:`_point_jacobians`): per task
+        # its group (None: angular), per group the range of its pairs (the group's joint and
+        # each joint of its chain, in column order: their local and unknown indices)
+        groups: dict[tuple, int] = {}
+        self.point_group = []
+        pairs = []
+        for ti, (t, chain) in enumerate(zip(self.tasks, self.chains)):
+            if t.kind.angular:
+                self.point_group.append(None)
+                continue
+            key = (t.joint, tuple(chain.tolist()))
+            if key not in groups:
+                groups[key] = len(groups)
+                pairs.append(ti)
+            self.point_group.append(groups[key])
+        sizes = [len(self.chains[ti]) for ti in pairs]
+        self.point_bounds = list(zip(np.cumsum([0] + sizes)[:-1].tolist(),
+                                     np.cumsum(sizes).tolist()))
+        self.pair_effector = np.array([self.task_local[ti] for ti in pairs
+                                       for _ in self.chains[ti]], dtype=np.intp)
+        self.pair_pivot = np.concatenate([self.chain_local[ti] for ti in pairs] +
+                                         [np.zeros(0, dtype=np.intp)])
+        self.pair_unknown = np.concatenate([self.chain_unknown[ti] for ti in pairs] +
+                                           [np.zeros(0, dtype=np.intp)])
 
 
 #: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
@@ -506,6 +523,29 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra:
     return wq, wp
 
 
+def _point_jacobians(structure: _Structure, positions: np.ndarray,
+                     frames: np.ndarray) -> list[np.ndarray]:
+    """Per point group of ``structure`` (a joint and its chain) its
+    :meth:`TaskState.point_jacobian` ``(B, 3, 3 + 3C)``, bit for bit, all groups' blocks in
+    one go: ``positions (n, B, 3)`` of the FK joints, ``frames (U, B, 3, 3)`` the unknowns'
+    parent rotations."""
+    B = positions.shape[1]
+    if len(structure.pair_pivot):
+        d = positions[structure.pair_effector] - positions[structure.pair_pivot]   # (P, B, 3)
+        m = frames[structure.pair_unknown]                                      # (P, B, 3, 3)
+        u0, u1, u2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]
+        d0, d1, d2 = d[..., 0:1], d[..., 1:2], d[..., 2:3]
+        blocks = np.stack([u1 * d2 - u2 * d1, u2 * d0 - u0 * d2, u0 * d1 - u1 * d0])
+    out = []
+    for lo, hi in structure.point_bounds:
+        point = np.empty((B, 3, 3 + 3 * (hi - lo)))
+        point[:, :, :3] = _EYE3
+        if hi > lo:
+            point[:, :, 3:] = blocks[:, lo:hi].transpose(2, 0, 1, 3).reshape(B, 3, 3 * (hi - lo))
+        out.append(point)
+    return out
+
+
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
               slot: dict, select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
@@ -524,18 +564,14 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
     on = (np.ones((B, 0), dtype=bool) if task_on is None else
           task_on.copy() if select is None else task_on[select])
     acting = np.empty_like(on)
-    points = {}                 # task -> the point Jacobian of the tasks sharing its joint
+    points = _point_jacobians(structure, positions, frames)
     for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
         goal = task.goal if select is None else task.goal[select]
         e = structure.task_local[ti]
-        shared = structure.shared_point[ti]
-        pivots = positions[structure.chain_local[ti]]
-        chain_frames = frames[structure.chain_unknown[ti]]
-        point = points.get(shared)
-        state = TaskState(positions[e], wq[:, e].T, pivots, chain_frames, point)
-        if shared is not None and point is None:
-            point = points[shared] = state.point_jacobian()
-            state = TaskState(state.position, state.rotation, pivots, chain_frames, point)
+        group = structure.point_group[ti]
+        state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
+                          frames[structure.chain_unknown[ti]],
+                          None if group is None else points[group])
         rows = slice(r0, r0 + task.rows)
         acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
         err[:, rows] = task.kind.error(goal, state)
