@@ -44,10 +44,17 @@ __all__ = ["Task", "TaskState", "IKOptions", "solve_frames", "rotvec_to_quat",
            "quat_to_rotvec", "task_error_and_jacobian"]
 
 
+def _norm(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
+    """``np.linalg.norm(x, axis=-1)`` of a real array, bit for bit (its own arithmetic for
+    one axis), without its checks: the solver takes the norms of small arrays on every
+    iteration."""
+    return np.sqrt(np.add.reduce(x * x, axis=-1, keepdims=keepdims))
+
+
 def rotvec_to_quat(v: np.ndarray) -> np.ndarray:
     """Quaternions ``(..., 4)`` of rotation vectors ``(..., 3)`` [rad]."""
     v = np.asarray(v, dtype=float)
-    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    angle = _norm(v, keepdims=True)
     half = 0.5 * angle
     # sin(x/2)/x with its limit 1/2 - x^2/48 near zero
     small = angle < 1e-8
@@ -60,7 +67,7 @@ def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     """Rotation vectors ``(..., 3)`` of quaternions ``(..., 4)`` (the shortest rotation)."""
     q = np.asarray(q, dtype=float)
     q = np.where(q[..., 3:4] < 0, -q, q)
-    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    s = _norm(q[..., :3], keepdims=True)
     angle = 2.0 * np.arctan2(s, q[..., 3:4])
     small = s < 1e-12
     scale = np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-12),
@@ -914,7 +921,7 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     # at most step_cap for any joint in one step, scaling the whole step alike so that it
     # stays in the null space of the higher priorities
     # initial: a task on the root alone turns no joint
-    biggest = np.linalg.norm(step, axis=-1).max(axis=1, initial=0.0)
+    biggest = _norm(step).max(axis=1, initial=0.0)
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
@@ -923,7 +930,7 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
         if j in structure.col:
             k = int(np.searchsorted(joints, j))
             off = quat_to_rotvec(qmul(new[:, k], qconj(home[:, j])))
-            ang = np.linalg.norm(off, axis=-1, keepdims=True)
+            ang = _norm(off, keepdims=True)
             off = off * np.minimum(1.0, limit / np.maximum(ang, 1e-12))
             new[:, k] = qmul(rotvec_to_quat(off), home[:, j])
     r = r.copy()
