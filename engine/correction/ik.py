@@ -367,6 +367,10 @@ class _Structure:
         self.tasks = tasks
         # (B, T) each task's weight is not zero, for the batch it was made with
         self.task_on = (np.stack([t.weight > 0 for t in tasks], axis=1) if tasks else None)
+        # per group of tasks evaluated together, their goals ``(G, B, goal_size)``
+        self.group_goals = [None if joints is None else np.stack([tasks[ti].goal
+                                                                  for ti in members])
+                            for members, joints, _, _, _ in self.kind_groups]
 
     def _layout(self, skeleton: Skeleton, tasks: list[Task], locked, options) -> None:
         self.tasks = tasks
@@ -456,6 +460,25 @@ class _Structure:
                                          [np.zeros(0, dtype=np.intp)])
         self.pair_unknown = np.concatenate([self.chain_unknown[ti] for ti in pairs] +
                                            [np.zeros(0, dtype=np.intp)])
+        # tasks evaluated together (:func:`_evaluate`): those of one kind whose chains are
+        # equally long, their states stacked along the batch (task after task); per group
+        # its tasks, their joints, chains (local and unknown indices, ``(G, C)``) and point
+        # groups
+        together: dict[tuple, list] = {}
+        for ti, t in enumerate(self.tasks):
+            together.setdefault((t.kind, len(self.chains[ti])), []).append(ti)
+        self.kind_groups = []
+        for members in together.values():
+            if len(members) < 2:
+                self.kind_groups.append((members, None, None, None, None))
+                continue
+            C = len(self.chains[members[0]])
+            self.kind_groups.append((
+                members, np.array([self.task_local[ti] for ti in members], dtype=np.intp),
+                np.array([self.chain_local[ti] for ti in members], dtype=np.intp).reshape(-1, C),
+                np.array([self.chain_unknown[ti] for ti in members],
+                         dtype=np.intp).reshape(-1, C),
+                [self.point_group[ti] for ti in members]))
 
 
 #: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
@@ -572,18 +595,43 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
           task_on.copy() if select is None else task_on[select])
     acting = np.empty_like(on)
     points = _point_jacobians(structure, positions, frames)
-    for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
-        goal = task.goal if select is None else task.goal[select]
-        e = structure.task_local[ti]
-        group = structure.point_group[ti]
-        state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
-                          frames[structure.chain_unknown[ti]],
-                          None if group is None else points[group])
-        rows = slice(r0, r0 + task.rows)
-        acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
-        err[:, rows] = task.kind.error(goal, state)
-        jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
-                                                 * structure.task_colscale[ti])
+    tasks, row0 = structure.tasks, structure.row0
+    for (members, joints, pivots, unknown, point_groups), goals in zip(
+            structure.kind_groups, structure.group_goals):
+        if joints is None:                      # a task alone
+            ti = members[0]
+            task = tasks[ti]
+            goal = task.goal if select is None else task.goal[select]
+            e = structure.task_local[ti]
+            group = structure.point_group[ti]
+            state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
+                              frames[structure.chain_unknown[ti]],
+                              None if group is None else points[group])
+            rows = slice(row0[ti], row0[ti] + task.rows)
+            acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
+            err[:, rows] = task.kind.error(goal, state)
+            jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
+                                                     * structure.task_colscale[ti])
+            continue
+        # G tasks of one kind with chains of C joints, as one batch of G B frames (the same
+        # arithmetic per frame: bit for bit the tasks one by one, but for the sign of zeros
+        # where a Jacobian's entry is zero)
+        kind, G, C = tasks[members[0]].kind, len(members), pivots.shape[1]
+        goal = (goals if select is None else goals[:, select]).reshape(G * B, -1)
+        state = TaskState(
+            positions[joints].reshape(G * B, 3), wq[:, joints].reshape(4, G * B).T,
+            positions[pivots].transpose(1, 0, 2, 3).reshape(C, G * B, 3),
+            frames[unknown].transpose(1, 0, 2, 3, 4).reshape(C, G * B, 3, 3),
+            None if point_groups[0] is None else
+            np.concatenate([points[g] for g in point_groups]))
+        active = kind.active(goal, state).reshape(G, B)
+        error = kind.error(goal, state).reshape(G, B, kind.rows)
+        jacobian = kind.jacobian(goal, state).reshape(G, B, kind.rows, 3 + 3 * C)
+        for k, ti in enumerate(members):
+            rows = slice(row0[ti], row0[ti] + kind.rows)
+            acting[:, ti] = on[:, ti] & active[k]
+            err[:, rows] = error[k]
+            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * structure.task_colscale[ti]
     return err, jac, on, acting
 
 
