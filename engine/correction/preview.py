@@ -103,6 +103,13 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
     A constraint that only shapes a key posture may be left one frame long with no ramps (a
     pin at the key): solve the problem with ``enforce(..., pins=True)``.
     """
+    return [c if rng == c.range else retimed(c, rng)
+            for c, rng in _window_ranges(constraints, lo, hi)]
+
+
+def _window_ranges(constraints: list, lo: int, hi: int) -> list:
+    """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
+    problem)``."""
     inside = overlapping(constraints, lo, hi)
     keys = set()
     for c in inside:
@@ -127,25 +134,27 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
             si = st = min(L, en)
         if en > H:
             en = so = max(H, st)
-        out.append(c if (si, st, en, so) == c.range else retimed(c, (si, st, en, so)))
+        out.append((c, (si, st, en, so)))
     return out
 
 
 def splice(base, part, lo: int, hi: int, first: int = 0):
     """``base`` with frames ``lo..hi`` taken from ``part`` (same skeleton), whose frame 0 is
     ``base``'s frame ``first`` (0: the same length)."""
+    from ..motion import Motion
     rot = np.array(base.rotations)
     tra = np.array(base.translations)
     rot[lo:hi + 1] = part.rotations[lo - first:hi + 1 - first]
     tra[lo:hi + 1] = part.translations[lo - first:hi + 1 - first]
-    return base.replace(rotations=rot, translations=tra)
+    # both motions' frames, checked when they were made: no second check of the whole clip
+    return Motion._trusted(base.skeleton, rot, tra, base.frame_time, base.name)
 
 
-def _span(problem: list, lo: int, hi: int) -> tuple[int, int]:
+def _span(ranges: list, lo: int, hi: int) -> tuple[int, int]:
     """The frames ``[L, H]`` a window problem reaches: the window and its constraints'
-    ``[smooth_in, smooth_out]``."""
-    return (min([lo] + [c.smooth_in for c in problem]),
-            max([hi] + [c.smooth_out for c in problem]))
+    ``[smooth_in, smooth_out]`` (``ranges``: :func:`_window_ranges`)."""
+    return (min([lo] + [rng[0] for _, rng in ranges]),
+            max([hi] + [rng[3] for _, rng in ranges]))
 
 
 class WindowSolver:
@@ -183,10 +192,13 @@ class WindowSolver:
         ``lo..hi``, a motion whose frame 0 is the clip's frame ``first``."""
         from ..motion import Motion
         from .enforcement import enforce
-        problem = window_problem(constraints, lo, hi)
-        first, last = _span(problem, lo, hi)
-        shifted = [retimed(c, tuple(x - first for x in c.range), shift=-first) if first else c
-                   for c in problem]
+        ranges = _window_ranges(constraints, lo, hi)
+        first, last = _span(ranges, lo, hi)
+        # window_problem's constraints shifted by -first (one retimed copy each)
+        shifted = []
+        for c, rng in ranges:
+            rng = tuple(x - first for x in rng)
+            shifted.append(c if rng == c.range else retimed(c, rng, shift=-first or None))
         composed = self._composed()
         if composed is None:
             raise ValueError("the composed motion of this WindowSolver is gone")
