@@ -171,3 +171,16 @@ def test_the_solvers_quaternion_products_are_the_engines_bit_for_bit():
                                                                          shape[1], axis=2)))):
                 assert np.array_equal(got, want)
                 assert np.array_equal(np.signbit(got), np.signbit(want))
+
+
+def test_the_positions_of_some_joints_are_forward_kinematics_bit_for_bit():
+    """ik.joint_positions places the joints asked for and their ancestors only (the floor's
+    check of the attraction posture): fk_arrays' positions to the last bit."""
+    from motion_composer.engine.correction.ik import joint_positions
+    _, _, _, composed = walk_on_holden()
+    sk = composed.skeleton
+    frames = np.array([0, 5, 250, 600, 900])
+    rot, tra = composed.rotations[frames], composed.translations[frames]
+    want = fk_arrays(sk, rot, tra, end_sites=False).positions
+    for joints in ([sk.index[n] for n in sk.names[-3:]], [0], list(range(sk.num_joints))):
+        assert np.array_equal(joint_positions(sk, rot, tra, joints), want[:, joints])

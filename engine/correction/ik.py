@@ -411,13 +411,7 @@ class _Structure:
         chain, and each task's Jacobian columns."""
         local = {int(j): k for k, j in enumerate(self.fk_joints)}
         parents = skeleton.parents
-        depth = skeleton.depth[self.fk_joints]
-        self.fk_levels = []
-        for d in range(1, int(depth.max(initial=0)) + 1):
-            here = np.flatnonzero(depth == d)
-            up = np.array([local[int(parents[self.fk_joints[h]])] for h in here], dtype=np.intp)
-            self.fk_levels.append((here, up))
-        self.fk_offsets = skeleton.offsets[self.fk_joints].T[:, :, None]         # (3, n, 1)
+        self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
         self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
                                        dtype=np.intp)
         self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
@@ -525,6 +519,57 @@ def _crot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     cross -= u2 * t[[1, 2, 0]]
     out += cross
     return out
+
+
+def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndarray]:
+    """For :func:`_fk_partial`: the FK levels ``(joints, parents)`` of ``fk_joints`` (closed
+    under ancestors, sorted) by depth below the root, as positions among them, and their
+    offsets ``(3, n, 1)``."""
+    local = {int(j): k for k, j in enumerate(fk_joints)}
+    parents = skeleton.parents
+    depth = skeleton.depth[fk_joints]
+    levels = []
+    for d in range(1, int(depth.max(initial=0)) + 1):
+        here = np.flatnonzero(depth == d)
+        up = np.array([local[int(parents[fk_joints[h]])] for h in here], dtype=np.intp)
+        levels.append((here, up))
+    return levels, skeleton.offsets[fk_joints].T[:, :, None]
+
+
+class _Chains:
+    """What :func:`_fk_partial` needs to place some joints: ``fk_joints`` (them and their
+    ancestors), ``fk_levels``, ``fk_offsets``, and ``index`` the joints' positions among
+    ``fk_joints``."""
+
+    def __init__(self, skeleton: Skeleton, joints):
+        needed = set()
+        for j in joints:
+            needed.add(int(j))
+            needed.update(int(a) for a in skeleton.ancestors(int(j)))
+        needed.add(0)
+        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
+        self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
+        local = {int(j): k for k, j in enumerate(self.fk_joints)}
+        self.index = np.array([local[int(j)] for j in joints], dtype=np.intp)
+
+
+def joint_positions(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                    joints) -> np.ndarray:
+    """``(F, len(joints), 3)`` [m] the world positions of ``joints`` from local ``rotations
+    (F, J, 4)`` and the translated joints' ``translations (F, K, 3)``: forward kinematics of
+    those joints and their ancestors only, bit for bit the positions of
+    :func:`~engine.kinematics.fk_arrays` (the same products in the same order; a test checks
+    it)."""
+    joints = tuple(int(j) for j in joints)
+    layouts = _LAYOUTS.setdefault(skeleton, {})
+    chains = layouts.get(("positions", joints))
+    if chains is None:
+        if len(layouts) >= _LAYOUTS_PER_SKELETON:
+            layouts.clear()
+        chains = layouts[("positions", joints)] = _Chains(skeleton, joints)
+    slot = {int(j): k for k, j in enumerate(skeleton.translated)}
+    _, wp = _fk_partial(skeleton, chains, rotations, translations, slot)
+    return wp[:, chains.index].transpose(2, 1, 0)
 
 
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
