@@ -184,3 +184,16 @@ def test_the_positions_of_some_joints_are_forward_kinematics_bit_for_bit():
     want = fk_arrays(sk, rot, tra, end_sites=False).positions
     for joints in ([sk.index[n] for n in sk.names[-3:]], [0], list(range(sk.num_joints))):
         assert np.array_equal(joint_positions(sk, rot, tra, joints), want[:, joints])
+
+
+def test_the_solvers_small_solves_are_numpys():
+    """ik._solve (np.linalg.solve's gufunc without its checks) gives np.linalg.solve's values
+    bit for bit and raises its error on a singular matrix."""
+    from motion_composer.engine.correction.ik import _solve
+    rng = np.random.default_rng(3)
+    for n, k, m in [(1, 3, 1), (19, 9, 1), (7, 12, 5)]:
+        a = rng.normal(size=(n, k, k)) + 4 * np.eye(k)
+        b = rng.normal(size=(n, k, m))
+        assert np.array_equal(_solve(a, b), np.linalg.solve(a, b))
+    with pytest.raises(np.linalg.LinAlgError):
+        _solve(np.zeros((2, 3, 3)), np.ones((2, 3, 1)))

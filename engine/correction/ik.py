@@ -329,6 +329,26 @@ _LAYOUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LAYOUTS_PER_SKELETON = 256
 
 
+try:                            # numpy's own gufunc behind np.linalg.solve, and its error hook
+    from numpy.linalg import _umath_linalg
+    from numpy.linalg._linalg import _raise_linalgerror_singular
+except ImportError:             # another numpy's layout: np.linalg.solve itself
+    _umath_linalg = None
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(a, b)`` of float stacks ``a (n, k, k)`` and ``b (n, k, m)``, bit
+    for bit: its gufunc under its error state (a singular matrix raises ``LinAlgError``),
+    without its checks and conversions, which cost more than a small solve (the solver
+    makes four or five a frame batch and iteration). A numpy whose internals differ uses
+    ``np.linalg.solve``."""
+    if _umath_linalg is None:
+        return np.linalg.solve(a, b)
+    with np.errstate(call=_raise_linalgerror_singular, invalid="call", over="ignore",
+                     divide="ignore", under="ignore"):
+        return _umath_linalg.solve(a, b, signature="dd->d")
+
+
 def _eye(n: int) -> np.ndarray:
     """The ``n x n`` identity, read-only and shared (the solves add it to small matrices on
     every iteration)."""
@@ -934,7 +954,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
     behind = np.zeros(nb)                   # how far the higher levels are from being met
     for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
-        on = np.flatnonzero(np.any(w[:, level] > 0, axis=1))
+        on = np.flatnonzero((w[:, level] > 0).any(axis=1))
         some = len(on) > 0
         if len(on) == nb:
             on = slice(None)                # every frame: views instead of copies
@@ -954,7 +974,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
                 above = stacked[on]
                 cross = above @ jl.transpose(0, 2, 1)                          # (f, k, m)
                 # the rows' part in the null space of the levels above
-                coef = np.linalg.solve(gram[on] + ns_lam2 * _eye(k), cross)
+                coef = _solve(gram[on] + ns_lam2 * _eye(k), cross)
                 jt = jl - coef.transpose(0, 2, 1) @ above
                 # a lower level waits while a higher one is not met: its steps are
                 # first-order invisible to the higher levels, but near their singularities
@@ -975,7 +995,7 @@ def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float,
     """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``; ``gram``:
     ``a a^T`` when known."""
     gram = a @ a.transpose(0, 2, 1) if gram is None else gram
-    y = np.linalg.solve(gram + lam2 * _eye(a.shape[1]), rhs[..., None])
+    y = _solve(gram + lam2 * _eye(a.shape[1]), rhs[..., None])
     return (a.transpose(0, 2, 1) @ y)[..., 0]
 
 
@@ -995,7 +1015,7 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     dz[:, 3:] = quat_to_rotvec(_qmul(home, qconj(cur))).reshape(nb, -1)
     dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
-    coef = np.linalg.solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
+    coef = _solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
     return dz - (stacked.transpose(0, 2, 1) @ coef)[..., 0]
 
 
