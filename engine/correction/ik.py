@@ -373,8 +373,9 @@ class _Structure:
         # everything but the tasks' goals and weights depends on the tasks' kinds, joints and
         # priorities only: worked out once per skeleton and task set (a live preview solves
         # the same few task sets on every step of a drag)
+        # (and on the column weights' settings, which a caller may change)
         key = (tuple((t.kind, t.joint, t.priority) for t in tasks), frozenset(locked),
-               None if options is None else options.scale)
+               None if options is None else options.scale, STIFFNESS, ROOT_TRANSLATION)
         layouts = _LAYOUTS.setdefault(skeleton, {})
         layout = layouts.get(key)
         if layout is None:
