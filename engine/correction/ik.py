@@ -402,6 +402,7 @@ class _Structure:
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
+        self.others = np.setdiff1d(np.arange(skeleton.num_joints), self.joints)
         self.col = {int(j): 3 + 3 * k for k, j in enumerate(self.joints)}
         self.n = 3 + 3 * len(self.joints)
         self.chains = chains
@@ -780,8 +781,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints
     # joints that move nothing constrained sit at their attraction posture
-    others = np.setdiff1d(np.arange(skeleton.num_joints), joints)
-    rot[:, others] = attraction_rot[:, others]
+    rot[:, structure.others] = attraction_rot[:, structure.others]
     # the last share of the cap only restores the first level (for frames still going:
     # unreachable lower levels, which would otherwise end mid-oscillation; a frame that
     # stops with a lower level unmet polishes from then on)
