@@ -346,6 +346,13 @@ def test_window_preview_matches_the_full_solve(doc):
     motion, seconds, mode = live.preview_motion(after)
     live.cancel()
     assert mode == "window" and seconds > 0
+    # the live solver's window (the window's frames cut from the clip and solved alone) is
+    # the scene's window preview bit for bit
+    ref, ref_mode = doc.scene.preview(after, base_constraints=list(doc.scene.constraints),
+                                      base_motion=doc.motion, whole=False)
+    assert ref_mode == "window"
+    assert np.array_equal(motion.rotations, ref.rotations)
+    assert np.array_equal(motion.translations, ref.translations)
     full = enforce(doc.scene.composed, after).motion
     a = forward_kinematics(motion).positions
     b = forward_kinematics(full).positions

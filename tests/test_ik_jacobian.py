@@ -150,3 +150,50 @@ def test_rotation_vector_helpers_are_inverse_and_match_scipy():
     np.testing.assert_allclose(np.abs(np.sum(q * Rotation.from_rotvec(v).as_quat(), 1)), 1,
                                atol=1e-12)
     np.testing.assert_allclose(quat_to_rotvec(q), v, atol=1e-9)
+
+
+def test_the_solvers_quaternion_products_are_the_engines_bit_for_bit():
+    """The solver's FK multiplies and turns component arrays in a few whole-array calls
+    (ik._cmul, ik._crot; ik._qmul the quaternions of its steps): the same values as
+    quaternions.cmul, crot and qmul to the last bit,
+    signed zeros included, with a batch of one and offsets broadcast over the batch."""
+    from motion_composer.engine.correction.ik import _cmul, _crot, _qmul
+    from motion_composer.engine.quaternions import cmul, crot
+    rng = np.random.default_rng(7)
+    for shape in [(1, 1), (3, 19), (5, 40)]:
+        for _ in range(10):
+            a, b = rng.normal(size=(4,) + shape), rng.normal(size=(4,) + shape)
+            v = rng.normal(size=(3,) + shape)
+            a[:, 0, 0], b[:, 0, 0], v[:, 0, 0] = 0.0, -0.0, -0.0
+            for got, want in ((_cmul(a, b), cmul(a, b)), (_crot(a, v), crot(a, v)),
+                              (_qmul(a.T, b.T), qmul(a.T, b.T)),
+                              (_crot(a, v[:, :, :1]), crot(a, np.repeat(v[:, :, :1],
+                                                                         shape[1], axis=2)))):
+                assert np.array_equal(got, want)
+                assert np.array_equal(np.signbit(got), np.signbit(want))
+
+
+def test_the_positions_of_some_joints_are_forward_kinematics_bit_for_bit():
+    """ik.joint_positions places the joints asked for and their ancestors only (the floor's
+    check of the attraction posture): fk_arrays' positions to the last bit."""
+    from motion_composer.engine.correction.ik import joint_positions
+    _, _, _, composed = walk_on_holden()
+    sk = composed.skeleton
+    frames = np.array([0, 5, 250, 600, 900])
+    rot, tra = composed.rotations[frames], composed.translations[frames]
+    want = fk_arrays(sk, rot, tra, end_sites=False).positions
+    for joints in ([sk.index[n] for n in sk.names[-3:]], [0], list(range(sk.num_joints))):
+        assert np.array_equal(joint_positions(sk, rot, tra, joints), want[:, joints])
+
+
+def test_the_solvers_small_solves_are_numpys():
+    """ik._solve (np.linalg.solve's gufunc without its checks) gives np.linalg.solve's values
+    bit for bit and raises its error on a singular matrix."""
+    from motion_composer.engine.correction.ik import _solve
+    rng = np.random.default_rng(3)
+    for n, k, m in [(1, 3, 1), (19, 9, 1), (7, 12, 5)]:
+        a = rng.normal(size=(n, k, k)) + 4 * np.eye(k)
+        b = rng.normal(size=(n, k, m))
+        assert np.array_equal(_solve(a, b), np.linalg.solve(a, b))
+    with pytest.raises(np.linalg.LinAlgError):
+        _solve(np.zeros((2, 3, 3)), np.ones((2, 3, 1)))

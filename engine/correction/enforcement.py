@@ -59,9 +59,8 @@ import numpy as np
 
 from .constraints import ConstraintError
 from .displacement import DisplacementMap
-from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
+from .ik import IKOptions, Task, joint_positions, quat_to_rotvec, solve_frames
 from ..errors import MotionComposerError
-from ..kinematics import fk_arrays
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize
 
@@ -280,9 +279,10 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
     free_frames = np.flatnonzero(~solved)
     for lo in range(0, len(free_frames), problem.chunk_frames):
         f = free_frames[lo:lo + problem.chunk_frames]
-        pose = fk_arrays(sk, attraction_rot[f], attraction_tra[f], end_sites=False)
-        for j in joints:
-            position[j][f] = pose.positions[:, j]
+        # those joints alone (fk_arrays' positions bit for bit)
+        pose = joint_positions(sk, attraction_rot[f], attraction_tra[f], joints)
+        for k, j in enumerate(joints):
+            position[j][f] = pose[:, k]
     out = list(entries)
     for k in lone:
         i, frames, goals = entries[k]
@@ -663,7 +663,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
-            chunk_frames: int = CHUNK_FRAMES, pins: bool = False) -> Correction:
+            chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
+            still: frozenset | None = None) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -682,6 +683,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             constraint may not have (its joint would jump there and back) but the live
             preview's window problem makes: a constraint that only shapes a key posture,
             held on that frame (:func:`~engine.correction.preview.window_problem`).
+        still: the joints the correction leaves alone; ``None`` (the default): those the
+            composed motion holds still (:func:`_still_joints`). A solve of a few frames cut
+            from a clip (the live preview's window) passes the whole clip's.
     """
     from ..describe import stature
 
@@ -692,7 +696,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
-                       _still_joints(composed))
+                       _still_joints(composed) if still is None else frozenset(still))
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1, residual, iters, changed, blended = _pass_one(problem)

@@ -23,9 +23,9 @@ converge leave the batch.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import numbers
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import cmul, crot, cto_matrix, qconj, qmul, qnormalize
+from ..quaternions import cto_matrix, qconj, qmul, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -44,10 +44,17 @@ __all__ = ["Task", "TaskState", "IKOptions", "solve_frames", "rotvec_to_quat",
            "quat_to_rotvec", "task_error_and_jacobian"]
 
 
+def _norm(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
+    """``np.linalg.norm(x, axis=-1)`` of a real array, bit for bit (its own arithmetic for
+    one axis), without its checks: the solver takes the norms of small arrays on every
+    iteration."""
+    return np.sqrt(np.add.reduce(x * x, axis=-1, keepdims=keepdims))
+
+
 def rotvec_to_quat(v: np.ndarray) -> np.ndarray:
     """Quaternions ``(..., 4)`` of rotation vectors ``(..., 3)`` [rad]."""
     v = np.asarray(v, dtype=float)
-    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    angle = _norm(v, keepdims=True)
     half = 0.5 * angle
     # sin(x/2)/x with its limit 1/2 - x^2/48 near zero
     small = angle < 1e-8
@@ -60,12 +67,16 @@ def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
     """Rotation vectors ``(..., 3)`` of quaternions ``(..., 4)`` (the shortest rotation)."""
     q = np.asarray(q, dtype=float)
     q = np.where(q[..., 3:4] < 0, -q, q)
-    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    s = _norm(q[..., :3], keepdims=True)
     angle = 2.0 * np.arctan2(s, q[..., 3:4])
     small = s < 1e-12
     scale = np.where(small, 2.0 / np.maximum(q[..., 3:4], 1e-12),
                      angle / np.where(small, 1.0, s))
     return q[..., :3] * scale
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -102,7 +113,7 @@ class TaskState:
             return self.point
         B, C = self.batch, len(self.pivots)
         out = np.empty((B, 3, 3 + 3 * C))
-        out[:, :, :3] = np.eye(3)
+        out[:, :, :3] = _EYE3
         if C:
             d = self.position - np.asarray(self.pivots).reshape(C, B, 3)          # (C, B, 3)
             m = np.asarray(self.frames).reshape(C, B, 3, 3)
@@ -313,6 +324,44 @@ def column_scale(skeleton: Skeleton, joints: np.ndarray, scale: float) -> np.nda
                            np.repeat(STIFFNESS ** (0.5 * below), 3)])
 
 
+#: per skeleton (weakly), :class:`_Structure`'s layouts by task set; at most this many kept
+_LAYOUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_LAYOUTS_PER_SKELETON = 256
+
+
+try:                            # numpy's own gufunc behind np.linalg.solve, and its error hook
+    from numpy.linalg import _umath_linalg
+    from numpy.linalg._linalg import _raise_linalgerror_singular
+except ImportError:             # another numpy's layout: np.linalg.solve itself
+    _umath_linalg = None
+
+
+def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(a, b)`` of float stacks ``a (n, k, k)`` and ``b (n, k, m)``, bit
+    for bit: its gufunc under its error state (a singular matrix raises ``LinAlgError``),
+    without its checks and conversions, which cost more than a small solve (the solver
+    makes four or five a frame batch and iteration). A numpy whose internals differ uses
+    ``np.linalg.solve``."""
+    if _umath_linalg is None:
+        return np.linalg.solve(a, b)
+    with np.errstate(call=_raise_linalgerror_singular, invalid="call", over="ignore",
+                     divide="ignore", under="ignore"):
+        return _umath_linalg.solve(a, b, signature="dd->d")
+
+
+def _eye(n: int) -> np.ndarray:
+    """The ``n x n`` identity, read-only and shared (the solves add it to small matrices on
+    every iteration)."""
+    out = _EYES.get(n)
+    if out is None:
+        out = _EYES[n] = np.eye(n)
+        out.setflags(write=False)
+    return out
+
+
+_EYES: dict[int, np.ndarray] = {}
+
+
 class _Structure:
     """What a task set needs from the skeleton: the unknown joints, each task's chain, the
     index arrays that evaluate every task at once (the joints forward kinematics places,
@@ -321,6 +370,30 @@ class _Structure:
 
     def __init__(self, skeleton: Skeleton, tasks: list[Task], locked=frozenset(),
                  options: IKOptions | None = None):
+        # everything but the tasks' goals and weights depends on the tasks' kinds, joints and
+        # priorities only: worked out once per skeleton and task set (a live preview solves
+        # the same few task sets on every step of a drag)
+        # (and on the column weights' settings, which a caller may change)
+        key = (tuple((t.kind, t.joint, t.priority) for t in tasks), frozenset(locked),
+               None if options is None else options.scale, STIFFNESS, ROOT_TRANSLATION)
+        layouts = _LAYOUTS.setdefault(skeleton, {})
+        layout = layouts.get(key)
+        if layout is None:
+            self._layout(skeleton, tasks, locked, options)
+            if len(layouts) >= _LAYOUTS_PER_SKELETON:
+                layouts.clear()
+            layouts[key] = {k: v for k, v in vars(self).items() if k != "tasks"}
+        else:
+            vars(self).update(layout)
+        self.tasks = tasks
+        # (B, T) each task's weight is not zero, for the batch it was made with
+        self.task_on = (np.stack([t.weight > 0 for t in tasks], axis=1) if tasks else None)
+        # per group of tasks evaluated together, their goals ``(G, B, goal_size)``
+        self.group_goals = [None if joints is None else np.stack([tasks[ti].goal
+                                                                  for ti in members])
+                            for members, joints, _, _, _ in self.kind_groups]
+
+    def _layout(self, skeleton: Skeleton, tasks: list[Task], locked, options) -> None:
         self.tasks = tasks
         moving: set[int] = set()
         chains = []
@@ -329,6 +402,7 @@ class _Structure:
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
+        self.others = np.setdiff1d(np.arange(skeleton.num_joints), self.joints)
         self.col = {int(j): 3 + 3 * k for k, j in enumerate(self.joints)}
         self.n = 3 + 3 * len(self.joints)
         self.chains = chains
@@ -347,6 +421,11 @@ class _Structure:
         # without options: the Jacobian as it is)
         self.colscale = (column_scale(skeleton, self.joints, options.scale)
                          if options is not None else np.ones(self.n))
+        self.task_colscale = [self.colscale[cols] for cols in self.task_cols]
+        # (T, T): task k pins task t's joint (see ``pins``), for all frames at once
+        self.pin_matrix = np.zeros((len(tasks), len(tasks)), dtype=np.intp)
+        for t, pins in enumerate(self.pins):
+            self.pin_matrix[pins, t] = 1
 
     def _index(self, skeleton: Skeleton) -> None:
         """Positions among ``fk_joints`` ("local"): FK levels ``(joints, parents)`` by depth
@@ -354,15 +433,11 @@ class _Structure:
         chain, and each task's Jacobian columns."""
         local = {int(j): k for k, j in enumerate(self.fk_joints)}
         parents = skeleton.parents
-        depth = skeleton.depth[self.fk_joints]
-        self.fk_levels = []
-        for d in range(1, int(depth.max(initial=0)) + 1):
-            here = np.flatnonzero(depth == d)
-            up = np.array([local[int(parents[self.fk_joints[h]])] for h in here], dtype=np.intp)
-            self.fk_levels.append((here, up))
-        self.fk_offsets = skeleton.offsets[self.fk_joints].T[:, :, None]         # (3, n, 1)
+        self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
         self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
                                        dtype=np.intp)
+        self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
+        self.parent_local = self.unknown_parent[~self.parent_root]
         unknown = {int(j): k for k, j in enumerate(self.joints)}
         self.task_local = [local[t.joint] for t in self.tasks]
         self.chain_local = [np.array([local[int(a)] for a in c], dtype=np.intp)
@@ -376,14 +451,147 @@ class _Structure:
         # joint clear of the bound)
         self.pins = [[k for k, u in enumerate(self.tasks) if u.kind.fixed_point
                       and u.joint == t.joint] for t in self.tasks]
-        # per task, the first of the point tasks (not angular) on its joint and chain when
-        # there are several (they share the point Jacobian), else None
-        self.shared_point = []
-        for t, chain in zip(self.tasks, self.chains):
-            same = [k for k, (u, c) in enumerate(zip(self.tasks, self.chains))
-                    if not u.kind.angular and u.joint == t.joint and np.array_equal(c, chain)]
-            self.shared_point.append(same[0] if len(same) > 1 and not t.kind.angular
-                                     else None)
+        # the point tasks' (not angular) point Jacobians, one per joint and chain (the tasks
+        # on one joint share it), all computed together (:func:`_point_jacobians`): per task
+        # its group (None: angular), per group the range of its pairs (the group's joint and
+        # each joint of its chain, in column order: their local and unknown indices)
+        groups: dict[tuple, int] = {}
+        self.point_group = []
+        pairs = []
+        for ti, (t, chain) in enumerate(zip(self.tasks, self.chains)):
+            if t.kind.angular:
+                self.point_group.append(None)
+                continue
+            key = (t.joint, tuple(chain.tolist()))
+            if key not in groups:
+                groups[key] = len(groups)
+                pairs.append(ti)
+            self.point_group.append(groups[key])
+        sizes = [len(self.chains[ti]) for ti in pairs]
+        self.point_bounds = list(zip(np.cumsum([0] + sizes)[:-1].tolist(),
+                                     np.cumsum(sizes).tolist()))
+        self.pair_effector = np.array([self.task_local[ti] for ti in pairs
+                                       for _ in self.chains[ti]], dtype=np.intp)
+        self.pair_pivot = np.concatenate([self.chain_local[ti] for ti in pairs] +
+                                         [np.zeros(0, dtype=np.intp)])
+        self.pair_unknown = np.concatenate([self.chain_unknown[ti] for ti in pairs] +
+                                           [np.zeros(0, dtype=np.intp)])
+        # tasks evaluated together (:func:`_evaluate`): those of one kind whose chains are
+        # equally long, their states stacked along the batch (task after task); per group
+        # its tasks, their joints, chains (local and unknown indices, ``(G, C)``) and point
+        # groups
+        together: dict[tuple, list] = {}
+        for ti, t in enumerate(self.tasks):
+            together.setdefault((t.kind, len(self.chains[ti])), []).append(ti)
+        self.kind_groups = []
+        for members in together.values():
+            if len(members) < 2:
+                self.kind_groups.append((members, None, None, None, None))
+                continue
+            C = len(self.chains[members[0]])
+            self.kind_groups.append((
+                members, np.array([self.task_local[ti] for ti in members], dtype=np.intp),
+                np.array([self.chain_local[ti] for ti in members], dtype=np.intp).reshape(-1, C),
+                np.array([self.chain_unknown[ti] for ti in members],
+                         dtype=np.intp).reshape(-1, C),
+                [self.point_group[ti] for ti in members]))
+
+
+#: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
+#: ``b`` that ``a``'s x, y and z multiply, and its sign (:func:`_cmul`)
+_MUL_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]])
+_MUL_SIGN = np.array([[1.0, -1.0, 1.0, -1.0], [1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0]])
+
+
+def _cmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.cmul` of component arrays ``a, b (4, n, B)`` bit for bit
+    (the same products, signs and sums in the same order; a test checks it) in a few calls
+    on whole arrays instead of four rows: the FK of a small batch costs the calls, not the
+    arithmetic."""
+    p = a[:3, None] * (b[_MUL_INDEX] * _MUL_SIGN[:, :, None, None])
+    out = a[3] * b
+    out += p[0]
+    out += p[1]
+    out += p[2]
+    return out
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.qmul` of quaternions ``a, b (..., 4)`` of one shape, bit
+    for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
+    p = a[..., :3, None] * (b[..., _MUL_INDEX] * _MUL_SIGN)
+    out = a[..., 3:4] * b
+    out += p[..., 0, :]
+    out += p[..., 1, :]
+    out += p[..., 2, :]
+    return out
+
+
+def _crot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`~engine.quaternions.crot` of ``q (4, n, B)`` rotating ``v (3, n, B or 1)``
+    bit for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
+    u, w = q[:3], q[3]
+    u1, u2 = u[[1, 2, 0]], u[[2, 0, 1]]
+    t = u1 * v[[2, 0, 1]]
+    t -= u2 * v[[1, 2, 0]]
+    t *= 2.0
+    out = w * t
+    out += v
+    cross = u1 * t[[2, 0, 1]]
+    cross -= u2 * t[[1, 2, 0]]
+    out += cross
+    return out
+
+
+def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndarray]:
+    """For :func:`_fk_partial`: the FK levels ``(joints, parents)`` of ``fk_joints`` (closed
+    under ancestors, sorted) by depth below the root, as positions among them, and their
+    offsets ``(3, n, 1)``."""
+    local = {int(j): k for k, j in enumerate(fk_joints)}
+    parents = skeleton.parents
+    depth = skeleton.depth[fk_joints]
+    levels = []
+    for d in range(1, int(depth.max(initial=0)) + 1):
+        here = np.flatnonzero(depth == d)
+        up = np.array([local[int(parents[fk_joints[h]])] for h in here], dtype=np.intp)
+        levels.append((here, up))
+    return levels, skeleton.offsets[fk_joints].T[:, :, None]
+
+
+class _Chains:
+    """What :func:`_fk_partial` needs to place some joints: ``fk_joints`` (them and their
+    ancestors), ``fk_levels``, ``fk_offsets``, and ``index`` the joints' positions among
+    ``fk_joints``."""
+
+    def __init__(self, skeleton: Skeleton, joints):
+        needed = set()
+        for j in joints:
+            needed.add(int(j))
+            needed.update(int(a) for a in skeleton.ancestors(int(j)))
+        needed.add(0)
+        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
+        self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
+        local = {int(j): k for k, j in enumerate(self.fk_joints)}
+        self.index = np.array([local[int(j)] for j in joints], dtype=np.intp)
+
+
+def joint_positions(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+                    joints) -> np.ndarray:
+    """``(F, len(joints), 3)`` [m] the world positions of ``joints`` from local ``rotations
+    (F, J, 4)`` and the translated joints' ``translations (F, K, 3)``: forward kinematics of
+    those joints and their ancestors only, bit for bit the positions of
+    :func:`~engine.kinematics.fk_arrays` (the same products in the same order; a test checks
+    it)."""
+    joints = tuple(int(j) for j in joints)
+    layouts = _LAYOUTS.setdefault(skeleton, {})
+    chains = layouts.get(("positions", joints))
+    if chains is None:
+        if len(layouts) >= _LAYOUTS_PER_SKELETON:
+            layouts.clear()
+        chains = layouts[("positions", joints)] = _Chains(skeleton, joints)
+    slot = {int(j): k for k, j in enumerate(skeleton.translated)}
+    _, wp = _fk_partial(skeleton, chains, rotations, translations, slot)
+    return wp[:, chains.index].transpose(2, 1, 0)
 
 
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
@@ -391,24 +599,48 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
     (closed under ancestors, sorted: the root first) as component arrays, one depth level at a
     time, from local rotations ``rot (B, J, 4)`` and the translated joints' translations
-    ``tra (B, K, 3)``."""
+    ``tra (B, K, 3)``. A level whose joints are not translated turns their offsets ``(3, m,
+    1)`` as they are (broadcast over the batch)."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
-    local_q = np.ascontiguousarray(rot[:, joints].transpose(2, 1, 0))            # (4, n, B)
-    local_t = np.empty((3, n, B))
-    local_t[:] = structure.fk_offsets
-    for k, j in enumerate(joints):
-        if int(j) in slot:
-            local_t[:, k] = tra[:, slot[int(j)]].T
+    local_q = rot[:, joints].transpose(2, 1, 0)                                 # (4, n, B)
+    moved = [k for k, j in enumerate(joints.tolist()) if j in slot]
+    local_t = structure.fk_offsets
+    if moved:
+        local_t = np.repeat(local_t, B, axis=2)
+        local_t[:, moved] = tra[:, [slot[int(joints[k])] for k in moved]].transpose(2, 1, 0)
     wq = np.empty((4, n, B))
     wp = np.empty((3, n, B))
     wq[:, 0] = local_q[:, 0]
     wp[:, 0] = local_t[:, 0]
     for here, up in structure.fk_levels:
         parent_q = wq[:, up]
-        wq[:, here] = cmul(parent_q, local_q[:, here])
-        wp[:, here] = wp[:, up] + crot(parent_q, local_t[:, here])
+        wq[:, here] = _cmul(parent_q, local_q[:, here])
+        wp[:, here] = wp[:, up] + _crot(parent_q, local_t[:, here])
     return wq, wp
+
+
+def _point_jacobians(structure: _Structure, positions: np.ndarray,
+                     frames: np.ndarray) -> list[np.ndarray]:
+    """Per point group of ``structure`` (a joint and its chain) its
+    :meth:`TaskState.point_jacobian` ``(B, 3, 3 + 3C)``, bit for bit, all groups' blocks in
+    one go: ``positions (n, B, 3)`` of the FK joints, ``frames (U, B, 3, 3)`` the unknowns'
+    parent rotations."""
+    B = positions.shape[1]
+    if len(structure.pair_pivot):
+        d = positions[structure.pair_effector] - positions[structure.pair_pivot]   # (P, B, 3)
+        m = frames[structure.pair_unknown]                                      # (P, B, 3, 3)
+        u0, u1, u2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]
+        d0, d1, d2 = d[..., 0:1], d[..., 1:2], d[..., 2:3]
+        blocks = np.stack([u1 * d2 - u2 * d1, u2 * d0 - u0 * d2, u0 * d1 - u1 * d0])
+    out = []
+    for lo, hi in structure.point_bounds:
+        point = np.empty((B, 3, 3 + 3 * (hi - lo)))
+        point[:, :, :3] = _EYE3
+        if hi > lo:
+            point[:, :, 3:] = blocks[:, lo:hi].transpose(2, 0, 1, 3).reshape(B, 3, 3 * (hi - lo))
+        out.append(point)
+    return out
 
 
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
@@ -420,31 +652,53 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure, rot, tra, slot)
     positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
-    parent = structure.unknown_parent
-    frames = np.empty((len(parent), B, 3, 3))
-    frames[parent < 0] = np.eye(3)
-    frames[parent >= 0] = cto_matrix(wq[:, parent[parent >= 0]])
+    frames = np.empty((len(structure.unknown_parent), B, 3, 3))
+    frames[structure.parent_root] = _EYE3
+    frames[~structure.parent_root] = cto_matrix(wq[:, structure.parent_local])
     err = np.empty((B, structure.k))
     jac = np.zeros((B, structure.k, structure.n))
-    on = np.empty((B, len(structure.tasks)), dtype=bool)
+    task_on = structure.task_on
+    on = (np.ones((B, 0), dtype=bool) if task_on is None else
+          task_on.copy() if select is None else task_on[select])
     acting = np.empty_like(on)
-    points = {}                 # task -> the point Jacobian of the tasks sharing its joint
-    for ti, (task, r0) in enumerate(zip(structure.tasks, structure.row0)):
-        goal = task.goal if select is None else task.goal[select]
-        weight = task.weight if select is None else task.weight[select]
-        e = structure.task_local[ti]
-        shared = structure.shared_point[ti]
-        state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
-                          frames[structure.chain_unknown[ti]], points.get(shared))
-        if shared is not None and shared not in points:
-            points[shared] = state.point_jacobian()
-            state = dataclasses.replace(state, point=points[shared])
-        rows = slice(r0, r0 + task.rows)
-        on[:, ti] = weight > 0
-        acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
-        err[:, rows] = task.kind.error(goal, state)
-        cols = structure.task_cols[ti]
-        jac[:, rows, cols] = task.kind.jacobian(goal, state) * structure.colscale[cols]
+    points = _point_jacobians(structure, positions, frames)
+    tasks, row0 = structure.tasks, structure.row0
+    for (members, joints, pivots, unknown, point_groups), goals in zip(
+            structure.kind_groups, structure.group_goals):
+        if joints is None:                      # a task alone
+            ti = members[0]
+            task = tasks[ti]
+            goal = task.goal if select is None else task.goal[select]
+            e = structure.task_local[ti]
+            group = structure.point_group[ti]
+            state = TaskState(positions[e], wq[:, e].T, positions[structure.chain_local[ti]],
+                              frames[structure.chain_unknown[ti]],
+                              None if group is None else points[group])
+            rows = slice(row0[ti], row0[ti] + task.rows)
+            acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
+            err[:, rows] = task.kind.error(goal, state)
+            jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
+                                                     * structure.task_colscale[ti])
+            continue
+        # G tasks of one kind with chains of C joints, as one batch of G B frames (the same
+        # arithmetic per frame: bit for bit the tasks one by one, but for the sign of zeros
+        # where a Jacobian's entry is zero)
+        kind, G, C = tasks[members[0]].kind, len(members), pivots.shape[1]
+        goal = (goals if select is None else goals[:, select]).reshape(G * B, -1)
+        state = TaskState(
+            positions[joints].reshape(G * B, 3), wq[:, joints].reshape(4, G * B).T,
+            positions[pivots].transpose(1, 0, 2, 3).reshape(C, G * B, 3),
+            frames[unknown].transpose(1, 0, 2, 3, 4).reshape(C, G * B, 3, 3),
+            None if point_groups[0] is None else
+            np.concatenate([points[g] for g in point_groups]))
+        active = kind.active(goal, state).reshape(G, B)
+        error = kind.error(goal, state).reshape(G, B, kind.rows)
+        jacobian = kind.jacobian(goal, state).reshape(G, B, kind.rows, 3 + 3 * C)
+        for k, ti in enumerate(members):
+            rows = slice(row0[ti], row0[ti] + kind.rows)
+            acting[:, ti] = on[:, ti] & active[k]
+            err[:, rows] = error[k]
+            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * structure.task_colscale[ti]
     return err, jac, on, acting
 
 
@@ -527,8 +781,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints
     # joints that move nothing constrained sit at their attraction posture
-    others = np.setdiff1d(np.arange(skeleton.num_joints), joints)
-    rot[:, others] = attraction_rot[:, others]
+    rot[:, structure.others] = attraction_rot[:, structure.others]
     # the last share of the cap only restores the first level (for frames still going:
     # unreachable lower levels, which would otherwise end mid-oscillation; a frame that
     # stops with a lower level unmet polishes from then on)
@@ -622,7 +875,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                                               axis=1)
         polish_all[active[short]] = True
         settled &= ~short
-        pinned = np.stack([on[:, pins].any(axis=1) for pins in structure.pins], axis=1)
+        pinned = (on @ structure.pin_matrix) > 0
         held_all[active] = (held | acting) & on & ~pinned
         if np.all(settled):
             iterations[active] -= 1
@@ -702,7 +955,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
     behind = np.zeros(nb)                   # how far the higher levels are from being met
     for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
-        on = np.flatnonzero(np.any(w[:, level] > 0, axis=1))
+        on = np.flatnonzero((w[:, level] > 0).any(axis=1))
         some = len(on) > 0
         if len(on) == nb:
             on = slice(None)                # every frame: views instead of copies
@@ -722,7 +975,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
                 above = stacked[on]
                 cross = above @ jl.transpose(0, 2, 1)                          # (f, k, m)
                 # the rows' part in the null space of the levels above
-                coef = np.linalg.solve(gram[on] + ns_lam2 * np.eye(k), cross)
+                coef = _solve(gram[on] + ns_lam2 * _eye(k), cross)
                 jt = jl - coef.transpose(0, 2, 1) @ above
                 # a lower level waits while a higher one is not met: its steps are
                 # first-order invisible to the higher levels, but near their singularities
@@ -743,7 +996,7 @@ def _damped_solve(a: np.ndarray, rhs: np.ndarray, lam2: float,
     """``a^T (a a^T + lam2 I)^-1 rhs`` for batches ``a (B, K, N)``, ``rhs (B, K)``; ``gram``:
     ``a a^T`` when known."""
     gram = a @ a.transpose(0, 2, 1) if gram is None else gram
-    y = np.linalg.solve(gram + lam2 * np.eye(a.shape[1]), rhs[..., None])
+    y = _solve(gram + lam2 * _eye(a.shape[1]), rhs[..., None])
     return (a.transpose(0, 2, 1) @ y)[..., 0]
 
 
@@ -760,10 +1013,10 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
-    dz[:, 3:] = quat_to_rotvec(qmul(home, qconj(cur))).reshape(nb, -1)
+    dz[:, 3:] = quat_to_rotvec(_qmul(home, qconj(cur))).reshape(nb, -1)
     dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
-    coef = np.linalg.solve(gram + ns_lam2 * np.eye(gram.shape[1]), stacked @ dz[..., None])
+    coef = _solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
     return dz - (stacked.transpose(0, 2, 1) @ coef)[..., 0]
 
 
@@ -782,16 +1035,16 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     # at most step_cap for any joint in one step, scaling the whole step alike so that it
     # stays in the null space of the higher priorities
     # initial: a task on the root alone turns no joint
-    biggest = np.linalg.norm(step, axis=-1).max(axis=1, initial=0.0)
+    biggest = _norm(step).max(axis=1, initial=0.0)
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
-    new = qnormalize(qmul(rotvec_to_quat(step), cur))
+    new = qnormalize(_qmul(rotvec_to_quat(step), cur))
     for j, limit in options.joint_limits:
         if j in structure.col:
             k = int(np.searchsorted(joints, j))
             off = quat_to_rotvec(qmul(new[:, k], qconj(home[:, j])))
-            ang = np.linalg.norm(off, axis=-1, keepdims=True)
+            ang = _norm(off, keepdims=True)
             off = off * np.minimum(1.0, limit / np.maximum(ang, 1e-12))
             new[:, k] = qmul(rotvec_to_quat(off), home[:, j])
     r = r.copy()

@@ -15,11 +15,12 @@ before the change.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 import numpy as np
 
 __all__ = ["changed_window", "affected_frames", "overlapping", "window_problem", "retimed",
-           "splice"]
+           "splice", "WindowSolver"]
 
 
 def _same_but_range(a, b) -> bool:
@@ -102,6 +103,13 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
     A constraint that only shapes a key posture may be left one frame long with no ramps (a
     pin at the key): solve the problem with ``enforce(..., pins=True)``.
     """
+    return [c if rng == c.range else retimed(c, rng)
+            for c, rng in _window_ranges(constraints, lo, hi)]
+
+
+def _window_ranges(constraints: list, lo: int, hi: int) -> list:
+    """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
+    problem)``."""
     inside = overlapping(constraints, lo, hi)
     keys = set()
     for c in inside:
@@ -126,14 +134,87 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
             si = st = min(L, en)
         if en > H:
             en = so = max(H, st)
-        out.append(c if (si, st, en, so) == c.range else retimed(c, (si, st, en, so)))
+        out.append((c, (si, st, en, so)))
     return out
 
 
-def splice(base, part, lo: int, hi: int):
-    """``base`` with frames ``lo..hi`` taken from ``part`` (same skeleton and length)."""
+def splice(base, part, lo: int, hi: int, first: int = 0):
+    """``base`` with frames ``lo..hi`` taken from ``part`` (same skeleton), whose frame 0 is
+    ``base``'s frame ``first`` (0: the same length)."""
+    from ..motion import Motion
     rot = np.array(base.rotations)
     tra = np.array(base.translations)
-    rot[lo:hi + 1] = part.rotations[lo:hi + 1]
-    tra[lo:hi + 1] = part.translations[lo:hi + 1]
-    return base.replace(rotations=rot, translations=tra)
+    rot[lo:hi + 1] = part.rotations[lo - first:hi + 1 - first]
+    tra[lo:hi + 1] = part.translations[lo - first:hi + 1 - first]
+    # both motions' frames, checked when they were made: no second check of the whole clip
+    return Motion._trusted(base.skeleton, rot, tra, base.frame_time, base.name)
+
+
+def _span(ranges: list, lo: int, hi: int) -> tuple[int, int]:
+    """The frames ``[L, H]`` a window problem reaches: the window and its constraints'
+    ``[smooth_in, smooth_out]`` (``ranges``: :func:`_window_ranges`)."""
+    return (min([lo] + [rng[0] for _, rng in ranges]),
+            max([hi] + [rng[3] for _, rng in ranges]))
+
+
+class WindowSolver:
+    """Window previews of one composed motion with one set of solver settings.
+
+    A window problem (:func:`window_problem`) holds no constraint outside its frames ``[L,
+    H]``, and every frame is solved on its own (the batch solve), so it is solved on those
+    frames alone, cut from the clip and shifted to start at 0, instead of on whole-clip
+    arrays: what :func:`~engine.correction.enforcement.enforce` would take from the whole clip
+    is worked out once here and passed in, the settings' ``scale`` (the composed motion's
+    stature) and the joints the composed motion holds still. The frames ``[L, H]`` then get
+    the same tasks, key postures and attraction postures as in a solve of the whole clip.
+
+    The solver refers to the composed motion weakly: one kept for the next drag does not keep
+    a replaced conversion (a whole clip's arrays) alive."""
+
+    def __init__(self, composed, options=None):
+        from ..describe import stature
+        from .enforcement import _still_joints
+        from .ik import IKOptions
+        self._composed = weakref.ref(composed)
+        self.given_options = options
+        options = options if options is not None else IKOptions()
+        if options.scale is None:
+            options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
+        self.options = options
+        self.still = _still_joints(composed)
+
+    def serves(self, composed, options) -> bool:
+        """Whether this solver is the one for ``composed`` (by identity) and ``options``."""
+        return composed is self._composed() and options == self.given_options
+
+    def solve(self, constraints: list, lo: int, hi: int):
+        """``(part, first)``: the solution of the window problem of ``constraints`` for frames
+        ``lo..hi``, a motion whose frame 0 is the clip's frame ``first``."""
+        from ..motion import Motion
+        from .enforcement import enforce
+        ranges = _window_ranges(constraints, lo, hi)
+        first, last = _span(ranges, lo, hi)
+        # window_problem's constraints shifted by -first (one retimed copy each)
+        shifted = []
+        for c, rng in ranges:
+            rng = tuple(x - first for x in rng)
+            shifted.append(c if rng == c.range else retimed(c, rng, shift=-first or None))
+        composed = self._composed()
+        if composed is None:
+            raise ValueError("the composed motion of this WindowSolver is gone")
+        cut = Motion._trusted(composed.skeleton, composed.rotations[first:last + 1],
+                              composed.translations[first:last + 1], composed.frame_time,
+                              composed.name)
+        part = enforce(cut, shifted, options=self.options, pins=True, still=self.still).motion
+        return part, first
+
+    def preview(self, constraints: list, base_constraints: list, base_motion):
+        """The motion for ``constraints``: ``base_motion`` (solved for ``base_constraints``)
+        with the frames the change can reach solved again (:func:`changed_window`); ``None``
+        when the change cannot be localised (a constraint added or removed)."""
+        window = changed_window(base_constraints, constraints)
+        if window is None:
+            return None
+        lo, hi = window
+        part, first = self.solve(constraints, lo, hi)
+        return splice(base_motion, part, lo, hi, first)
