@@ -186,14 +186,22 @@ def test_the_positions_of_some_joints_are_forward_kinematics_bit_for_bit():
         assert np.array_equal(joint_positions(sk, rot, tra, joints), want[:, joints])
 
 
-def test_the_solvers_small_solves_are_numpys():
+@pytest.mark.parametrize("private", [True, False], ids=["numpy's gufunc", "the fallback"])
+def test_the_solvers_small_solves_are_numpys(private, monkeypatch):
     """ik._solve (np.linalg.solve's gufunc without its checks) gives np.linalg.solve's values
-    bit for bit and raises its error on a singular matrix."""
-    from motion_composer.engine.correction.ik import _solve
+    bit for bit and raises its error on a singular matrix; so does its fallback, the public
+    function, which a numpy whose private module differs gets."""
+    from motion_composer.engine.correction import ik
+    if private:
+        # the numpy this runs on passes the import-time probe: the fast path is the one tested
+        assert ik._umath_linalg is not None and ik._private_solve_works()
+    else:
+        monkeypatch.setattr(ik, "_umath_linalg", None)
+        assert not ik._private_solve_works()
     rng = np.random.default_rng(3)
     for n, k, m in [(1, 3, 1), (19, 9, 1), (7, 12, 5)]:
         a = rng.normal(size=(n, k, k)) + 4 * np.eye(k)
         b = rng.normal(size=(n, k, m))
-        assert np.array_equal(_solve(a, b), np.linalg.solve(a, b))
+        assert np.array_equal(ik._solve(a, b), np.linalg.solve(a, b))
     with pytest.raises(np.linalg.LinAlgError):
-        _solve(np.zeros((2, 3, 3)), np.ones((2, 3, 1)))
+        ik._solve(np.zeros((2, 3, 3)), np.ones((2, 3, 1)))

@@ -349,6 +349,26 @@ def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return _umath_linalg.solve(a, b, signature="dd->d")
 
 
+def _private_solve_works() -> bool:
+    """numpy's private gufunc is called as this numpy version calls it, and gives
+    ``np.linalg.solve``'s result: checked once, so that a numpy whose internals changed
+    falls back to the public function instead of failing in a solve."""
+    if _umath_linalg is None:
+        return False
+    a = np.array([[[2.0, 1.0], [1.0, 3.0]]])
+    b = np.array([[[1.0], [2.0]]])
+    try:
+        with np.errstate(call=_raise_linalgerror_singular, invalid="call"):
+            got = _umath_linalg.solve(a, b, signature="dd->d")
+    except Exception:           # noqa: BLE001 - any change of the private API
+        return False
+    return bool(np.array_equal(got, np.linalg.solve(a, b)))
+
+
+if not _private_solve_works():
+    _umath_linalg = None
+
+
 def _eye(n: int) -> np.ndarray:
     """The ``n x n`` identity, read-only and shared (the solves add it to small matrices on
     every iteration)."""
