@@ -71,6 +71,9 @@ class Derived:
         self.size = size
         self.computed: Counter = Counter()
         self._stages: dict[str, OrderedDict] = {}
+        #: the live preview's window solver, for the composed motion and solver settings it
+        #: was made for (:meth:`Scene.preview`)
+        self.window_solver: _preview.WindowSolver | None = None
 
     def get(self, stage: str, key, compute):
         entries = self._stages.setdefault(stage, OrderedDict())
@@ -503,14 +506,17 @@ class Scene:
         if composed is None:
             raise MotionComposerError("nothing to preview: the scene has no direct conversion")
         options = self.project.ik_options
-        window = (None if base_constraints is None or base_motion is None
-                  else _preview.changed_window(base_constraints, constraints))
-        if whole or window is None:
-            return enforce(composed, constraints, options=options).motion, "full"
-        lo, hi = window
-        part = enforce(composed, _preview.window_problem(constraints, lo, hi),
-                       options=options, pins=True).motion
-        return _preview.splice(base_motion, part, lo, hi), "window"
+        if not whole and base_constraints is not None and base_motion is not None:
+            # the window's frames alone, with what the whole clip gives them worked out once
+            # per conversion and settings (kept with the derived results across a drag)
+            solver = self.derived.window_solver
+            if solver is None or not solver.serves(composed, options):
+                solver = self.derived.window_solver = _preview.WindowSolver(composed, options)
+                self.derived.computed["window solver"] += 1
+            motion = solver.preview(constraints, base_constraints, base_motion)
+            if motion is not None:
+                return motion, "window"
+        return enforce(composed, constraints, options=options).motion, "full"
 
 
 _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))

@@ -5,8 +5,8 @@ there the preview is the full solve's motion.
 A constraint that only shapes a key posture outside the window is cut to its active frames at
 that key; where that leaves it one frame long (a pin at the key, no ramps) the window problem
 must still solve (a user's one-frame range with no ramps is refused, a key posture's is not).
-The live solver's :class:`WindowSolver` solves the same problem on the window's frames cut
-from the clip: bit for bit the scene's window preview.
+The scene's preview (:class:`WindowSolver`) solves the same problem on the window's frames
+cut from the clip: bit for bit the problem solved on the whole clip's arrays.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from motion_composer.engine.correction.enforcement import enforce
-from motion_composer.engine.correction.preview import WindowSolver, changed_window, window_problem
+from motion_composer.engine.correction.preview import changed_window, splice, window_problem
 from motion_composer.engine.kinematics import fk_arrays
 from motion_composer.engine.project import open_project
 from motion_composer.engine.scene import Scene
@@ -45,15 +45,17 @@ def test_a_moved_contact_previews_in_its_window_as_the_full_solve():
                for x in problem):
             pins.append((after, lo, hi))
     assert pins, "the demo's contacts give no window with a pinned key posture"
-    window = WindowSolver(scene.edited, project.ik_options)
     for after, lo, hi in pins[:2]:
         motion, mode = scene.preview(after, base_constraints=constraints,
                                      base_motion=scene.motion, whole=False)
         assert mode == "window"
-        # the live solver's: the window's frames cut from the clip, solved alone, the same
-        cut = window.preview(after, constraints, scene.motion)
-        assert np.array_equal(cut.rotations, motion.rotations)
-        assert np.array_equal(cut.translations, motion.translations)
+        # the scene's preview solves the window's frames cut from the clip (WindowSolver):
+        # bit for bit the window problem solved on the whole clip's arrays
+        part = enforce(scene.edited, window_problem(after, lo, hi), options=project.ik_options,
+                       pins=True).motion
+        whole = splice(scene.motion, part, lo, hi)
+        assert np.array_equal(whole.rotations, motion.rotations)
+        assert np.array_equal(whole.translations, motion.translations)
         full = enforce(scene.edited, after, options=project.ik_options).motion
         gap = np.abs(_positions(motion) - _positions(full))[lo:hi + 1].max()
         assert gap < 1e-4, (lo, hi, gap)             # [m] the window: the full solve

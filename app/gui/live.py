@@ -23,7 +23,6 @@ import time
 
 from motion_composer.app.gui.commands import push_constraints
 from motion_composer.app.gui.qt import QtCore
-from motion_composer.engine.correction.preview import WindowSolver
 from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["LiveSolver", "live_solver", "BUDGET"]
@@ -60,7 +59,6 @@ class LiveSolver(QtCore.QObject):
         self._base_constraints: list | None = None
         self._base_motion = None
         self._shown = False
-        self._window: WindowSolver | None = None
         self._timer = QtCore.QTimer(self)
         self._timer.setSingleShot(True)
         self._timer.setInterval(0)
@@ -132,27 +130,15 @@ class LiveSolver(QtCore.QObject):
     # ------------------------------------------------------------------ solving
     def preview_motion(self, constraints: list):
         """``(motion, seconds, mode)``: the corrected motion for ``constraints``, solved whole
-        (:meth:`engine.scene.Scene.preview`) or in the changed window
-        (:class:`engine.correction.preview.WindowSolver`: the window's frames alone, with
-        what the whole clip gives them worked out once per conversion and settings)."""
+        or in the changed window (:meth:`engine.scene.Scene.preview`)."""
         doc = self.doc
         base_constraints = self._base_constraints if self.active else list(doc.scene.constraints)
         base_motion = self._base_motion if self.active else doc.motion
         last = self.full_seconds if self.full_seconds is not None else doc.solve_seconds
         whole = last is not None and last <= self.budget
         t0 = time.perf_counter()
-        motion, mode = None, "window"
-        if not whole and base_motion is not None:
-            composed, options = doc.scene.edited, doc.scene.project.ik_options
-            if composed is None:
-                raise MotionComposerError("nothing to preview: the scene has no direct "
-                                          "conversion")
-            if self._window is None or not self._window.serves(composed, options):
-                self._window = WindowSolver(composed, options)
-            motion = self._window.preview(constraints, base_constraints, base_motion)
-        if motion is None:
-            motion, mode = doc.scene.preview(constraints, base_constraints=base_constraints,
-                                             base_motion=base_motion, whole=whole)
+        motion, mode = doc.scene.preview(constraints, base_constraints=base_constraints,
+                                         base_motion=base_motion, whole=whole)
         seconds = time.perf_counter() - t0
         if mode == "full":
             self.full_seconds = seconds
