@@ -67,6 +67,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.quality_panel = QualityPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self._panels: dict = {}                     # the panels built so far (see _panel)
+        self._quality_strip = None                  # built when needed (see _strip)
         docks = [
             ("Correspondence", self.correspondence_panel,
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
@@ -133,20 +134,40 @@ class MainWindow(QtWidgets.QMainWindow):
         self.playback.install_shortcuts(self)
 
     def _timeline_page(self) -> QtWidgets.QWidget:
-        """The constraint timeline with the quality strip under it, on the same frames (the
-        strip shows while there are quality figures)."""
-        from motion_composer.app.gui.quality_panel import QualityStrip
-        self.quality_strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+        """The constraint timeline, and under it the quality strip (:attr:`quality_strip`)
+        once there are quality figures."""
         page = QtWidgets.QWidget()
-        box = QtWidgets.QVBoxLayout(page)
-        box.setContentsMargins(0, 0, 0, 0)
-        box.setSpacing(0)
-        box.addWidget(self.timeline, 1)
-        box.addWidget(self.quality_strip)
-        left = self.quality_strip.getAxis("left")
-        self.timeline.view.sigResized.connect(
-            lambda *_: left.setWidth(self.timeline.row_axis.width()))
+        self._timeline_box = QtWidgets.QVBoxLayout(page)
+        self._timeline_box.setContentsMargins(0, 0, 0, 0)
+        self._timeline_box.setSpacing(0)
+        self._timeline_box.addWidget(self.timeline, 1)
+        self.quality_panel.qualityChanged.connect(self._quality_changed)
         return page
+
+    def _quality_changed(self, quality) -> None:
+        if quality is not None:
+            self._strip()               # it follows the figures from then on
+
+    def _strip(self):
+        """The quality strip under the timeline, on the timeline's frames; built the first
+        time there are quality figures or it is asked for (it is hidden until there are: the
+        window's first frame waits for no plot of them). None without the timeline."""
+        if self._quality_strip is None and self.timeline is not None:
+            from motion_composer.app.gui.quality_panel import QualityStrip
+            strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+            self._timeline_box.addWidget(strip)
+            left = strip.getAxis("left")
+
+            def align(*_args):              # its plot starts where the timeline's does
+                left.setWidth(self.timeline.row_axis.width())
+            self.timeline.view.sigResized.connect(align)
+            align()
+            self._quality_strip = strip
+        return self._quality_strip
+
+    quality_strip = property(lambda self: self._strip(),
+                             doc="The quality strip (built when there are figures or asked "
+                                 "for; None without the constraint timeline).")
 
     # ------------------------------------------------------------------ panels built when shown
     def _panel(self, name: str):
