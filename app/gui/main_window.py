@@ -11,9 +11,13 @@ from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
 
-#: panels whose docks start behind another tab -> their dock's name (see MainWindow._panel)
+#: panels built after the window's start -> their dock's name (see MainWindow._panel)
 _LAZY_PANELS = {"curve_editor": "curves", "binding_panel": "binding", "ik_panel": "ik",
-                "inspector": "inspector"}
+                "inspector": "inspector", "correspondence_panel": "correspondence",
+                "timeline": "timeline"}
+#: the panels of _LAZY_PANELS in view at start: built once the viewport has drawn its first
+#: frame (the others when their dock is first shown)
+_FIRST_SHOWN = ("correspondence_panel", "timeline")
 
 MAX_RECENT = 8
 #: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
@@ -38,6 +42,10 @@ class MainWindow(QtWidgets.QMainWindow):
 
         self.viewport = Viewport(self.doc)
         self._build_docks()
+        if self.viewport.can_draw:
+            self.viewport.frameSwapped.connect(self._first_frame_drawn)
+        else:                           # no first frame to wait for
+            QtCore.QTimer.singleShot(0, self, self._build_first_shown)
         self._build_menus()
         self._build_status()
 
@@ -59,17 +67,15 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ building
     def _build_docks(self) -> None:
-        from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
         from motion_composer.app.gui.playback import PlaybackBar
         from motion_composer.app.gui.quality_panel import QualityPanel
 
-        self.correspondence_panel = CorrespondencePanel(self.doc)
         self.quality_panel = QualityPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self._panels: dict = {}                     # the panels built so far (see _panel)
         self._quality_strip = None                  # built when needed (see _strip)
         docks = [
-            ("Correspondence", self.correspondence_panel,
+            ("Correspondence", QtWidgets.QWidget(),
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
             ("Binding", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
@@ -80,15 +86,14 @@ class MainWindow(QtWidgets.QMainWindow):
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
-            from motion_composer.app.gui.timeline import ConstraintTimeline
-            self.timeline = ConstraintTimeline(self.doc)
-            self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
-            docks += [("Constraints", self._timeline_page(),
+            import motion_composer.app.gui.timeline  # noqa: F401
+            docks += [("Constraints", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
                       ("Constraint", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "inspector")]
         except ImportError:
-            self.timeline = None
+            pass
+        self.quality_panel.qualityChanged.connect(self._quality_changed)
         for title, widget, area, name in docks:
             dock = QtWidgets.QDockWidget(title, self)
             dock.setObjectName(name)
@@ -99,7 +104,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
             self.timeline_dock.raise_()
         for name, dock in _LAZY_PANELS.items():
-            if getattr(self, f"{dock}_dock", None) is not None:
+            if name not in _FIRST_SHOWN and getattr(self, f"{dock}_dock", None) is not None:
                 getattr(self, f"{dock}_dock").visibilityChanged.connect(
                     lambda shown, name=name: shown and self._panel(name))
         # the bottom docks' titles and tabs run down their left side: their height goes to
@@ -133,15 +138,14 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
 
-    def _timeline_page(self) -> QtWidgets.QWidget:
+    def _timeline_page(self, timeline) -> QtWidgets.QWidget:
         """The constraint timeline, and under it the quality strip (:attr:`quality_strip`)
         once there are quality figures."""
         page = QtWidgets.QWidget()
         self._timeline_box = QtWidgets.QVBoxLayout(page)
         self._timeline_box.setContentsMargins(0, 0, 0, 0)
         self._timeline_box.setSpacing(0)
-        self._timeline_box.addWidget(self.timeline, 1)
-        self.quality_panel.qualityChanged.connect(self._quality_changed)
+        self._timeline_box.addWidget(timeline, 1)
         return page
 
     def _quality_changed(self, quality) -> None:
@@ -170,9 +174,21 @@ class MainWindow(QtWidgets.QMainWindow):
                                  "for; None without the constraint timeline).")
 
     # ------------------------------------------------------------------ panels built when shown
+    def _first_frame_drawn(self) -> None:
+        self.viewport.frameSwapped.disconnect(self._first_frame_drawn)
+        QtCore.QTimer.singleShot(0, self, self._build_first_shown)
+
+    def _build_first_shown(self) -> None:
+        """Build the panels in view at start (:data:`_FIRST_SHOWN`), once the viewport has
+        drawn its first frame: the window shows the project without waiting for them (their
+        docks are in place, empty for that moment). Each is built earlier if asked for."""
+        for name in _FIRST_SHOWN:
+            self._panel(name)
+
     def _panel(self, name: str):
-        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time its dock shows or
-        it is asked for (its attribute): they all start behind another tab, and the window's
+        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time it is asked for
+        (its attribute), its dock shows (those behind another tab) or the viewport has drawn
+        its first frame (those in view at start, :meth:`_build_first_shown`): the window's
         first frame waits for none of them. None without the constraint timeline."""
         if name not in self._panels:
             dock = getattr(self, f"{_LAZY_PANELS[name]}_dock", None)
@@ -205,6 +221,14 @@ class MainWindow(QtWidgets.QMainWindow):
         elif name == "inspector":
             from motion_composer.app.gui.inspector import ConstraintInspector
             panel = ConstraintInspector(self.doc, self.timeline)
+        elif name == "correspondence_panel":
+            from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
+            panel = CorrespondencePanel(self.doc)
+        elif name == "timeline":
+            from motion_composer.app.gui.timeline import ConstraintTimeline
+            panel = ConstraintTimeline(self.doc)
+            panel.constraintSelected.connect(self.viewport.set_active_constraint)
+            return panel, self._timeline_page(panel)
         else:
             from motion_composer.app.gui.ik_panel import IKPanel
             panel = IKPanel(self.doc)
@@ -223,6 +247,12 @@ class MainWindow(QtWidgets.QMainWindow):
                         doc="The IK panel (built when first shown or asked for).")
     inspector = property(lambda self: self._panel("inspector"),
                          doc="The constraint inspector (built when first shown or asked for).")
+    correspondence_panel = property(
+        lambda self: self._panel("correspondence_panel"),
+        doc="The correspondence editor (built after the first frame or when asked for).")
+    timeline = property(lambda self: self._panel("timeline"),
+                        doc="The constraint timeline (built after the first frame or when "
+                            "asked for; None where it cannot be imported).")
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
         action = QtGui.QAction(text, self)

@@ -510,7 +510,9 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         surface = QtGui.QSurfaceFormat.defaultFormat()
         surface.setDepthBufferSize(24)
         self.setFormat(surface)
-        if gl_possible():
+        #: whether this view draws (OpenGL here): it then emits ``frameSwapped`` per frame
+        self.can_draw = gl_possible()
+        if self.can_draw:
             self.widget = QtWidgets.QWidget.createWindowContainer(self, parent)
             self.widget.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
         else:
