@@ -283,8 +283,8 @@ class _Label(GLGraphicsItem):
         self._image: QtGui.QImage | None = None      # the text drawn, None: to draw again
         self._origin = (0, 0)                         # [px] the baseline's start in it
         self._half_width = 0.0                        # [px] half the text's ink width
-        self._texture = None                          # GL name; filled from _image when None
-        self._uploaded = False
+        self._texture = None                          # its GL name, made on the first paint
+        self._uploaded = False                        # _image is in the texture
         self._quad = None                             # the unit square's vertex buffer
 
     def setData(self, *, pos=None, text: str | None = None) -> None:   # noqa: N802 (pyqtgraph)
