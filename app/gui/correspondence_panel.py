@@ -583,6 +583,8 @@ class CorrespondencePanel(QtWidgets.QWidget):
         document.selectionChanged.connect(self._selection_changed)
         self._sources_changed()
         self._motion_changed()
+        if any(document.selection):        # a panel built after a joint was selected
+            self._selection_changed(*document.selection)
 
     # ------------------------------------------------------------------ building
     def _make_action(self, text: str, slot, tip: str, shortcut=None) -> QtGui.QAction:

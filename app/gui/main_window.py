@@ -11,9 +11,15 @@ from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["MainWindow"]
 
-#: panels whose docks start behind another tab -> their dock's name (see MainWindow._panel)
+#: panels built by MainWindow._panel -> their dock's name
 _LAZY_PANELS = {"curve_editor": "curves", "binding_panel": "binding", "ik_panel": "ik",
-                "inspector": "inspector"}
+                "inspector": "inspector", "correspondence_panel": "correspondence",
+                "timeline": "timeline"}
+#: the panels of _LAZY_PANELS in view at start: built once the viewport has drawn its first
+#: frame (the others but the timeline when their dock is first shown). The constraint
+#: timeline, in view too, is built with the window: built after it was shown, a frame change
+#: soon after repainted it whole, where only its playhead should (test_gui_judging)
+_FIRST_SHOWN = ("correspondence_panel",)
 
 MAX_RECENT = 8
 #: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
@@ -38,6 +44,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
         self.viewport = Viewport(self.doc)
         self._build_docks()
+        self._panel("timeline")
+        if self.viewport.can_draw:
+            self.viewport.frameSwapped.connect(self._first_frame_drawn)
+        else:                           # no first frame to wait for
+            QtCore.QTimer.singleShot(0, self, self._build_first_shown)
         self._build_menus()
         self._build_status()
 
@@ -59,16 +70,15 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ building
     def _build_docks(self) -> None:
-        from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
         from motion_composer.app.gui.playback import PlaybackBar
         from motion_composer.app.gui.quality_panel import QualityPanel
 
-        self.correspondence_panel = CorrespondencePanel(self.doc)
         self.quality_panel = QualityPanel(self.doc)
         self.playback = PlaybackBar(self.doc)
         self._panels: dict = {}                     # the panels built so far (see _panel)
+        self._quality_strip = None                  # built when needed (see _strip)
         docks = [
-            ("Correspondence", self.correspondence_panel,
+            ("Correspondence", QtWidgets.QWidget(),
              QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "correspondence"),
             ("Binding", QtWidgets.QWidget(), QtCore.Qt.DockWidgetArea.RightDockWidgetArea,
              "binding"),
@@ -79,15 +89,14 @@ class MainWindow(QtWidgets.QMainWindow):
              "curves"),
         ]
         try:                                   # the constraint timeline and inspector
-            from motion_composer.app.gui.timeline import ConstraintTimeline
-            self.timeline = ConstraintTimeline(self.doc)
-            self.timeline.constraintSelected.connect(self.viewport.set_active_constraint)
-            docks += [("Constraints", self._timeline_page(),
+            import motion_composer.app.gui.timeline  # noqa: F401
+            docks += [("Constraints", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.BottomDockWidgetArea, "timeline"),
                       ("Constraint", QtWidgets.QWidget(),
                        QtCore.Qt.DockWidgetArea.RightDockWidgetArea, "inspector")]
         except ImportError:
-            self.timeline = None
+            pass
+        self.quality_panel.qualityChanged.connect(self._quality_changed)
         for title, widget, area, name in docks:
             dock = QtWidgets.QDockWidget(title, self)
             dock.setObjectName(name)
@@ -98,7 +107,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.tabifyDockWidget(self.curves_dock, self.timeline_dock)
             self.timeline_dock.raise_()
         for name, dock in _LAZY_PANELS.items():
-            if getattr(self, f"{dock}_dock", None) is not None:
+            if name not in _FIRST_SHOWN and getattr(self, f"{dock}_dock", None) is not None:
                 getattr(self, f"{dock}_dock").visibilityChanged.connect(
                     lambda shown, name=name: shown and self._panel(name))
         # the bottom docks' titles and tabs run down their left side: their height goes to
@@ -132,26 +141,57 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resizeDocks([self.curves_dock], [BOTTOM_DOCK_PX], QtCore.Qt.Orientation.Vertical)
         self.playback.install_shortcuts(self)
 
-    def _timeline_page(self) -> QtWidgets.QWidget:
-        """The constraint timeline with the quality strip under it, on the same frames (the
-        strip shows while there are quality figures)."""
-        from motion_composer.app.gui.quality_panel import QualityStrip
-        self.quality_strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+    def _timeline_page(self, timeline) -> QtWidgets.QWidget:
+        """The constraint timeline, and under it the quality strip (:attr:`quality_strip`)
+        once there are quality figures."""
         page = QtWidgets.QWidget()
-        box = QtWidgets.QVBoxLayout(page)
-        box.setContentsMargins(0, 0, 0, 0)
-        box.setSpacing(0)
-        box.addWidget(self.timeline, 1)
-        box.addWidget(self.quality_strip)
-        left = self.quality_strip.getAxis("left")
-        self.timeline.view.sigResized.connect(
-            lambda *_: left.setWidth(self.timeline.row_axis.width()))
+        self._timeline_box = QtWidgets.QVBoxLayout(page)
+        self._timeline_box.setContentsMargins(0, 0, 0, 0)
+        self._timeline_box.setSpacing(0)
+        self._timeline_box.addWidget(timeline, 1)
         return page
 
+    def _quality_changed(self, quality) -> None:
+        if quality is not None:
+            self._strip()               # it follows the figures from then on
+
+    def _strip(self):
+        """The quality strip under the timeline, on the timeline's frames; built the first
+        time there are quality figures or it is asked for (it is hidden until there are: the
+        window's first frame waits for no plot of them). None without the timeline."""
+        if self._quality_strip is None and self.timeline is not None:
+            from motion_composer.app.gui.quality_panel import QualityStrip
+            strip = QualityStrip(self.doc, self.quality_panel, link=self.timeline.view)
+            self._timeline_box.addWidget(strip)
+            left = strip.getAxis("left")
+
+            def align(*_args):              # its plot starts where the timeline's does
+                left.setWidth(self.timeline.row_axis.width())
+            self.timeline.view.sigResized.connect(align)
+            align()
+            self._quality_strip = strip
+        return self._quality_strip
+
+    quality_strip = property(lambda self: self._strip(),
+                             doc="The quality strip (built when there are figures or asked "
+                                 "for; None without the constraint timeline).")
+
     # ------------------------------------------------------------------ panels built when shown
+    def _first_frame_drawn(self) -> None:
+        self.viewport.frameSwapped.disconnect(self._first_frame_drawn)
+        QtCore.QTimer.singleShot(0, self, self._build_first_shown)
+
+    def _build_first_shown(self) -> None:
+        """Build the panels in view at start (:data:`_FIRST_SHOWN`), once the viewport has
+        drawn its first frame: the window shows the project without waiting for them (their
+        docks are in place, empty for that moment). Each is built earlier if asked for."""
+        for name in _FIRST_SHOWN:
+            self._panel(name)
+
     def _panel(self, name: str):
-        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time its dock shows or
-        it is asked for (its attribute): they all start behind another tab, and the window's
+        """The panel ``name`` of :data:`_LAZY_PANELS`, built the first time it is asked for
+        (its attribute), its dock shows (those behind another tab) or the viewport has drawn
+        its first frame (those in view at start, :meth:`_build_first_shown`): the window's
         first frame waits for none of them. None without the constraint timeline."""
         if name not in self._panels:
             dock = getattr(self, f"{_LAZY_PANELS[name]}_dock", None)
@@ -184,6 +224,14 @@ class MainWindow(QtWidgets.QMainWindow):
         elif name == "inspector":
             from motion_composer.app.gui.inspector import ConstraintInspector
             panel = ConstraintInspector(self.doc, self.timeline)
+        elif name == "correspondence_panel":
+            from motion_composer.app.gui.correspondence_panel import CorrespondencePanel
+            panel = CorrespondencePanel(self.doc)
+        elif name == "timeline":
+            from motion_composer.app.gui.timeline import ConstraintTimeline
+            panel = ConstraintTimeline(self.doc)
+            panel.constraintSelected.connect(self.viewport.set_active_constraint)
+            return panel, self._timeline_page(panel)
         else:
             from motion_composer.app.gui.ik_panel import IKPanel
             panel = IKPanel(self.doc)
@@ -202,6 +250,11 @@ class MainWindow(QtWidgets.QMainWindow):
                         doc="The IK panel (built when first shown or asked for).")
     inspector = property(lambda self: self._panel("inspector"),
                          doc="The constraint inspector (built when first shown or asked for).")
+    correspondence_panel = property(
+        lambda self: self._panel("correspondence_panel"),
+        doc="The correspondence editor (built after the first frame or when asked for).")
+    timeline = property(lambda self: self._panel("timeline"),
+                        doc="The constraint timeline (None where it cannot be imported).")
 
     def _action(self, menu, text, slot, shortcut=None, checkable=False, checked=False):
         action = QtGui.QAction(text, self)

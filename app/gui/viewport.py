@@ -37,6 +37,7 @@ from motion_composer.engine.quaternions import to_matrix
 
 import pyqtgraph.opengl as gl  # noqa: E402  (after app.gui.qt chose PySide6)
 from pyqtgraph.opengl import shaders  # noqa: E402
+from pyqtgraph.opengl.GLGraphicsItem import GLGraphicsItem  # noqa: E402
 from pyqtgraph.opengl.GLViewWidget import GLViewMixin  # noqa: E402
 from OpenGL import GL  # noqa: E402
 from PySide6 import QtOpenGL  # noqa: E402
@@ -107,6 +108,33 @@ TWO_SIDED = shaders.ShaderProgram("two_sided", [
             float fill = abs(dot(normal, normalize(vec3(-0.6, -0.2, 0.6))));
             vec3 rgb = v_color.rgb * (0.28 + 0.62 * key + 0.18 * fill);
             gl_FragColor = vec4(min(rgb, vec3(1.0)), v_color.a);
+        }
+    """)])
+
+
+#: a label's image on a quad given in window pixels (``u_rect``: left, top, width, height;
+#: ``u_view``: the window's width and height), its texels premultiplied
+LABEL_SHADER = shaders.ShaderProgram("label", [
+    shaders.VertexShader("""
+        uniform vec4 u_rect;
+        uniform vec2 u_view;
+        attribute vec4 a_position;
+        varying vec2 v_texcoord;
+        void main() {
+            vec2 p = u_rect.xy + a_position.xy * u_rect.zw;
+            gl_Position = vec4(2.0 * p.x / u_view.x - 1.0, 1.0 - 2.0 * p.y / u_view.y,
+                               0.0, 1.0);
+            v_texcoord = a_position.xy;
+        }
+    """),
+    shaders.FragmentShader("""
+        #ifdef GL_ES
+        precision mediump float;
+        #endif
+        uniform sampler2D u_texture;
+        varying vec2 v_texcoord;
+        void main() {
+            gl_FragColor = texture2D(u_texture, v_texcoord);
         }
     """)])
 
@@ -226,6 +254,135 @@ class _Shapes:
     axes: list = field(default_factory=list)
 
 
+class _Label(GLGraphicsItem):
+    """A line of text over a point of the scene (view axes): its baseline's middle there,
+    drawn over everything, at whole pixels.
+
+    pyqtgraph's ``GLTextItem`` draws with a ``QPainter`` on the GL window: Qt's OpenGL paint
+    engine then builds its programs and glyph cache on the first texts, a one-time stall of
+    0.1 s and more under software GL (Mesa llvmpipe) that the window's first frame waited for,
+    and it saves and restores the GL state on every frame. Here Qt's raster engine draws the
+    text into an image once per change of text, which is drawn as one textured quad.
+
+    Attributes: ``pos`` (3,) and ``text``, as ``GLTextItem``'s; set them with :meth:`setData`.
+    """
+
+    #: blending of premultiplied texels, no depth test: over the skeletons and the mesh
+    GL_OPTIONS = {GL.GL_DEPTH_TEST: False, GL.GL_BLEND: True, GL.GL_CULL_FACE: False,
+                  "glBlendFunc": (GL.GL_ONE, GL.GL_ONE_MINUS_SRC_ALPHA)}
+    #: [px] room around the text's bounding box for its antialiased edges
+    PAD = 2
+
+    def __init__(self, font: QtGui.QFont, color: QtGui.QColor):
+        super().__init__()
+        self.setGLOptions(self.GL_OPTIONS)
+        self.font = QtGui.QFont(font)
+        self.color = QtGui.QColor(color)
+        self.pos = np.zeros(3)
+        self.text = ""
+        self._image: QtGui.QImage | None = None      # the text drawn, None: to draw again
+        self._origin = (0, 0)                         # [px] the baseline's start in it
+        self._half_width = 0.0                        # [px] half the text's ink width
+        self._texture = None                          # its GL name, made on the first paint
+        self._uploaded = False                        # _image is in the texture
+        self._quad = None                             # the unit square's vertex buffer
+
+    def setData(self, *, pos=None, text: str | None = None) -> None:   # noqa: N802 (pyqtgraph)
+        if pos is not None:
+            self.pos = np.array(pos, dtype=float).reshape(3)
+        if text is not None and text != self.text:
+            self.text = text
+            self._image = None
+        self.update()
+
+    def _draw_text(self, ratio: float) -> QtGui.QImage:
+        """The text in its colour on a transparent image at ``ratio`` device pixels per
+        pixel; sets where its baseline starts in it and half its ink's width (pixels)."""
+        metrics = QtGui.QFontMetrics(self.font)
+        box = metrics.boundingRect(self.text)
+        self._half_width = metrics.tightBoundingRect(self.text).width() / 2.0
+        pad = self.PAD
+        width, height = box.width() + 2 * pad, box.height() + 2 * pad
+        image = QtGui.QImage(max(1, round(width * ratio)), max(1, round(height * ratio)),
+                             QtGui.QImage.Format.Format_RGBA8888_Premultiplied)
+        image.setDevicePixelRatio(ratio)
+        image.fill(QtCore.Qt.GlobalColor.transparent)
+        self._origin = (pad - box.left(), pad - box.top())
+        painter = QtGui.QPainter(image)
+        painter.setRenderHints(QtGui.QPainter.RenderHint.Antialiasing |
+                               QtGui.QPainter.RenderHint.TextAntialiasing)
+        painter.setPen(self.color)
+        painter.setFont(self.font)
+        painter.drawText(QtCore.QPoint(*self._origin), self.text)
+        painter.end()
+        return image
+
+    def _upload(self, image: QtGui.QImage, smooth: bool) -> None:
+        if self._texture is None:
+            self._texture = GL.glGenTextures(1)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, self._texture)
+        filtering = GL.GL_LINEAR if smooth else GL.GL_NEAREST
+        GL.glTexParameteri(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_MIN_FILTER, filtering)
+        GL.glTexParameteri(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_MAG_FILTER, filtering)
+        GL.glTexParameteri(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_WRAP_S, GL.GL_CLAMP_TO_EDGE)
+        GL.glTexParameteri(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_WRAP_T, GL.GL_CLAMP_TO_EDGE)
+        w, h = image.width(), image.height()
+        rows = np.frombuffer(image.constBits(), dtype=np.uint8,
+                             count=image.sizeInBytes()).reshape(h, image.bytesPerLine())
+        GL.glPixelStorei(GL.GL_UNPACK_ALIGNMENT, 4)
+        GL.glTexImage2D(GL.GL_TEXTURE_2D, 0, GL.GL_RGBA, w, h, 0, GL.GL_RGBA,
+                        GL.GL_UNSIGNED_BYTE, np.ascontiguousarray(rows[:, :4 * w]))
+        GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
+
+    def paint(self) -> None:
+        view = self.view()
+        if not self.text or view is None or view.width() <= 0 or view.height() <= 0:
+            return
+        ratio = view.devicePixelRatio()
+        if self._image is None or self._image.devicePixelRatio() != ratio:
+            self._image = self._draw_text(ratio)
+            self._uploaded = False
+        if not self._uploaded:
+            self._upload(self._image, smooth=ratio != int(ratio))
+            self._uploaded = True
+        # the point in window pixels (y down), as GLTextItem maps it; none behind the eye
+        clip = self.mvpMatrix().map(QtGui.QVector4D(*self.pos, 1.0))
+        if clip.w() <= 0:
+            return
+        x = (clip.x() / clip.w() + 1.0) / 2.0 * view.width()
+        y = (1.0 - clip.y() / clip.w()) / 2.0 * view.height()
+        x -= self._half_width      # centred on its ink, baseline on the point: GLTextItem's
+        size = self._image.deviceIndependentSize()
+        left = round((x - self._origin[0]) * ratio) / ratio
+        top = round((y - self._origin[1]) * ratio) / ratio
+        if self._quad is None:
+            self._quad = QtOpenGL.QOpenGLBuffer(QtOpenGL.QOpenGLBuffer.Type.VertexBuffer)
+            self._quad.create()
+            self._quad.bind()
+            corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.float32)
+            self._quad.allocate(corners, corners.nbytes)
+            self._quad.release()
+        self.setupGLState()
+        context = QtGui.QOpenGLContext.currentContext()
+        program = LABEL_SHADER.program(
+            es2_compat=context.hasExtension(b"GL_ARB_ES2_compatibility"))
+        self._quad.bind()
+        GL.glVertexAttribPointer(0, 2, GL.GL_FLOAT, False, 0, None)
+        self._quad.release()
+        GL.glEnableVertexAttribArray(0)
+        GL.glActiveTexture(GL.GL_TEXTURE0)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, self._texture)
+        with LABEL_SHADER:
+            GL.glUniform4f(GL.glGetUniformLocation(program, "u_rect"), left, top,
+                           size.width(), size.height())
+            GL.glUniform2f(GL.glGetUniformLocation(program, "u_view"), view.width(),
+                           view.height())
+            GL.glUniform1i(GL.glGetUniformLocation(program, "u_texture"), 0)
+            GL.glDrawArrays(GL.GL_TRIANGLE_STRIP, 0, 4)
+        GL.glDisableVertexAttribArray(0)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
+
+
 class _Figure:
     """One skeleton's items: bones as a shaded mesh, joints as spheres, a name label."""
 
@@ -240,10 +397,8 @@ class _Figure:
         font = QtGui.QFont()
         font.setPointSizeF(10.5)
         font.setBold(True)
-        self.label = gl.GLTextItem(pos=(0.0, 0.0, 0.0), text="", font=font,
-                                   color=QtGui.QColor.fromRgbF(*[min(1.0, c * 1.15 + 0.1)
-                                                                 for c in color[:3]]))
-        self.label.setData(alignment=QtCore.Qt.AlignmentFlag.AlignHCenter)
+        self.label = _Label(font, QtGui.QColor.fromRgbF(*[min(1.0, c * 1.15 + 0.1)
+                                                          for c in color[:3]]))
         self.label.setDepthValue(100)                 # drawn last: over a skinned mesh
         view.addItem(self.mesh)
         view.addItem(self.joints)
@@ -355,7 +510,9 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         surface = QtGui.QSurfaceFormat.defaultFormat()
         surface.setDepthBufferSize(24)
         self.setFormat(surface)
-        if gl_possible():
+        #: whether this view draws (OpenGL here): it then emits ``frameSwapped`` per frame
+        self.can_draw = gl_possible()
+        if self.can_draw:
             self.widget = QtWidgets.QWidget.createWindowContainer(self, parent)
             self.widget.setFocusPolicy(QtCore.Qt.FocusPolicy.ClickFocus)
         else:
@@ -434,10 +591,6 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         document.selectionChanged.connect(lambda *_: self.refresh())
         document.constraintsChanged.connect(self.refresh)
         self._motion_changed()
-
-    def rect(self) -> QtCore.QRect:
-        """The view's rectangle in its own pixels (pyqtgraph's text items ask a widget's)."""
-        return QtCore.QRect(0, 0, self.width(), self.height())
 
     # ------------------------------------------------------------------ display options
     def option(self, name: str) -> bool:

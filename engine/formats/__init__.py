@@ -27,14 +27,19 @@ import stat
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import (ExportError, FBXError, FileFormatError, GLTFError, UnknownFormatError,
                       UnsupportedFormatError)
 from ..motion import Motion
 from .bvh import read_bvh, write_bvh
-from .fbx.scene import read_fbx, take_motion
-from .fbx.write import write_fbx
-from .gltf import Character, read_gltf, write_gltf
+
+if TYPE_CHECKING:
+    from .gltf import Character
+
+# The glTF and FBX modules (about 50 ms of import) load when a file of theirs is first read
+# or written, not with this package: reading a BVH clip or a project of BVH clips (the
+# window's demo) never needs them. Their names stay importable from here (_LAZY, at the end).
 
 __all__ = ["Format", "FORMATS", "BVH", "GLTF", "GLB", "FBX", "HEAD_BYTES", "sniff", "read_motion",
            "read_performer", "read_character", "output_format", "write_motion",
@@ -120,13 +125,23 @@ def _is_fbx(head: bytes) -> bool:
 
 
 # --------------------------------------------------------------------------- readers, writers
+def _read_gltf(path) -> Character:
+    from .gltf import read_gltf
+    return read_gltf(path)
+
+
+def _read_fbx(path) -> Character:
+    from .fbx.scene import read_fbx
+    return read_fbx(path)
+
+
 def _gltf_rest_motion(path, **bvh_overrides) -> Motion:
     """A glTF character's bind pose as a one-frame motion (glTF is metres and +Y up by
     definition, so the BVH reader's overrides do not apply)."""
     if bvh_overrides:
         raise GLTFError(f"{', '.join(sorted(bvh_overrides))} apply to BVH files only; glTF is "
                         "metres and +Y up by definition", path)
-    return read_gltf(path).rest_motion()
+    return _read_gltf(path).rest_motion()
 
 
 def _write_bvh(motion: Motion, path, character: Character | None, channels: str) -> None:
@@ -137,6 +152,7 @@ def _write_gltf(motion: Motion, path, character: Character | None, channels: str
     if channels != "all":
         raise ExportError(f"rotation-only channels are a BVH option; a glTF file "
                           f"({Path(path).name}) animates every joint by its own node")
+    from .gltf import write_gltf
     write_gltf(motion, character, path)
 
 
@@ -144,6 +160,7 @@ def _write_fbx(motion: Motion, path, character: Character | None, channels: str)
     if channels != "all":
         raise ExportError(f"rotation-only channels are a BVH option; an FBX file "
                           f"({Path(path).name}) animates every joint's translation and rotation")
+    from .fbx.write import write_fbx
     write_fbx(motion, path, character=character)
 
 
@@ -156,23 +173,27 @@ def _fbx_options(path, bvh_overrides: dict) -> None:
 def _fbx_rest_motion(path, take: str | None = None, **bvh_overrides) -> Motion:
     """An FBX character's bind pose (one frame), or its take ``take`` when named."""
     _fbx_options(path, bvh_overrides)
-    character = read_fbx(path)
-    return character.rest_motion() if take is None else take_motion(character, take)
+    character = _read_fbx(path)
+    if take is None:
+        return character.rest_motion()
+    from .fbx.scene import take_motion
+    return take_motion(character, take)
 
 
 def _fbx_take(path, take: str | None = None, **bvh_overrides) -> Motion:
     """An FBX file's take ``take`` (by default its first), a performer clip."""
     _fbx_options(path, bvh_overrides)
-    return take_motion(read_fbx(path), take)
+    from .fbx.scene import take_motion
+    return take_motion(_read_fbx(path), take)
 
 
 BVH = Format("BVH", "BVH motion", (".bvh",), (), _is_bvh, read_bvh, None, _write_bvh,
              motion=True, mesh=False)
 GLTF = Format("glTF", "glTF JSON", (".gltf",), (), _is_gltf_json, _gltf_rest_motion,
-              read_gltf, _write_gltf, motion=True, mesh=True)
+              _read_gltf, _write_gltf, motion=True, mesh=True)
 GLB = Format("GLB", "GLB, binary glTF", (".glb",), (".vrm",), _is_glb, _gltf_rest_motion,
-             read_gltf, _write_gltf, motion=True, mesh=True)
-FBX = Format("FBX", "FBX scene", (".fbx",), (), _is_fbx, _fbx_rest_motion, read_fbx,
+             _read_gltf, _write_gltf, motion=True, mesh=True)
+FBX = Format("FBX", "FBX scene", (".fbx",), (), _is_fbx, _fbx_rest_motion, _read_fbx,
              _write_fbx, motion=True, mesh=True, read_take=_fbx_take)
 
 #: every format read and written, in the order dialogs list them
@@ -359,3 +380,15 @@ def save_filters() -> str:
     (BVH) first."""
     return ";;".join(f"{fmt.description} ({_patterns(fmt.suffixes)})" for fmt in FORMATS
                      if fmt.write is not None)
+
+
+#: names this package gives from the glTF and FBX modules, loaded when first asked for
+_LAZY = {"Character": ".gltf", "read_gltf": ".gltf", "write_gltf": ".gltf",
+         "read_fbx": ".fbx.scene", "take_motion": ".fbx.scene", "write_fbx": ".fbx.write"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
