@@ -285,7 +285,6 @@ class _Label(GLGraphicsItem):
         self._half_width = 0.0                        # [px] half the text's ink width
         self._texture = None                          # its GL name, made on the first paint
         self._uploaded = False                        # _image is in the texture
-        self._quad = None                             # the unit square's vertex buffer
 
     def setData(self, *, pos=None, text: str | None = None) -> None:   # noqa: N802 (pyqtgraph)
         if pos is not None:
@@ -355,20 +354,14 @@ class _Label(GLGraphicsItem):
         size = self._image.deviceIndependentSize()
         left = round((x - self._origin[0]) * ratio) / ratio
         top = round((y - self._origin[1]) * ratio) / ratio
-        if self._quad is None:
-            self._quad = QtOpenGL.QOpenGLBuffer(QtOpenGL.QOpenGLBuffer.Type.VertexBuffer)
-            self._quad.create()
-            self._quad.bind()
-            corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.float32)
-            self._quad.allocate(corners, corners.nbytes)
-            self._quad.release()
         self.setupGLState()
         context = QtGui.QOpenGLContext.currentContext()
         program = LABEL_SHADER.program(
             es2_compat=context.hasExtension(b"GL_ARB_ES2_compatibility"))
-        self._quad.bind()
-        GL.glVertexAttribPointer(0, 2, GL.GL_FLOAT, False, 0, None)
-        self._quad.release()
+        # the unit square's four corners from client memory (no buffer object to keep for
+        # eight numbers; the view's compatibility context reads them at the draw)
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
+        GL.glVertexAttribPointer(0, 2, GL.GL_FLOAT, False, 0, _UNIT_SQUARE)
         GL.glEnableVertexAttribArray(0)
         GL.glActiveTexture(GL.GL_TEXTURE0)
         GL.glBindTexture(GL.GL_TEXTURE_2D, self._texture)
@@ -381,6 +374,10 @@ class _Label(GLGraphicsItem):
             GL.glDrawArrays(GL.GL_TRIANGLE_STRIP, 0, 4)
         GL.glDisableVertexAttribArray(0)
         GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
+
+
+#: the corners of a label's quad, drawn as a triangle strip and scaled by its shader
+_UNIT_SQUARE = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.float32)
 
 
 class _Figure:
