@@ -15,7 +15,8 @@ from .motion import Motion
 from .quaternions import cmul, crot
 from .skeleton import Skeleton
 
-__all__ = ["WorldPose", "forward_kinematics", "fk_arrays", "fk_components", "joint_major"]
+__all__ = ["WorldPose", "forward_kinematics", "fk_arrays", "fk_components", "fk_joints",
+           "joint_major"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,6 +96,48 @@ def fk_components(skeleton: Skeleton, rotations: np.ndarray, translations: np.nd
     else:
         end_p = np.empty((3, 0, F))
     return world_q, world_p, end_p
+
+
+def fk_joints(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
+              joints) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations ``(F, n, 4)`` and positions ``(F, n, 3)`` [m] of ``joints`` (indices)
+    alone, from the arrays :func:`fk_arrays` takes: only those joints and their ancestors are
+    placed (a foot's chain is 5 or 6 joints of a body's 30 to 100), one depth level at a time
+    in :func:`fk_components`' arithmetic, so the values are its values bit for bit (each
+    joint's depend on its ancestors' alone). For the few effectors a caller looks at over a
+    whole clip: the feet for contacts, a floor plane's joints."""
+    joints = [int(j) for j in joints]
+    rotations = np.asarray(rotations, dtype=float)
+    translations = np.asarray(translations, dtype=float)
+    J, F = skeleton.num_joints, rotations.shape[0]
+    chain = np.array(sorted({0, *joints, *(int(a) for j in joints
+                                          for a in skeleton.ancestors(j))}), dtype=np.intp)
+    where = np.full(J, -1, dtype=np.intp)
+    where[chain] = np.arange(len(chain))
+    slot = np.full(J, -1, dtype=np.intp)
+    if translations.shape[1] == J and J != len(skeleton.translated):
+        slot[:] = np.arange(J)
+    else:
+        slot[skeleton.translated] = np.arange(len(skeleton.translated))
+    slot = slot[chain]
+    local_q = joint_major(rotations[:, chain])                               # (4, n, F)
+    local_t = joint_major(translations[:, slot[slot >= 0]])                  # (3, m, F)
+    slot[slot >= 0] = np.arange(int((slot >= 0).sum()))
+    offsets = skeleton.offsets[chain].T[:, :, None]                          # (3, n, 1)
+    world_q = np.empty((4, len(chain), F))
+    world_p = np.empty((3, len(chain), F))
+    world_q[:, 0] = local_q[:, 0]
+    world_p[:, 0] = local_t[:, slot[0]] if slot[0] >= 0 else offsets[:, 0]
+    depth = skeleton.depth[chain]
+    for d in range(1, int(depth.max(initial=0)) + 1):
+        here = np.flatnonzero(depth == d)
+        up = where[skeleton.parents[chain[here]]]
+        parent_q = world_q[:, up]
+        world_q[:, here] = cmul(parent_q, local_q[:, here])
+        world_p[:, here] = world_p[:, up] + crot(parent_q,
+                                                 _local_translations(here, slot, offsets, local_t))
+    picked = where[joints]
+    return world_q[:, picked].T, world_p[:, picked].T
 
 
 def _local_translations(joints: np.ndarray, slot: np.ndarray, offsets: np.ndarray,

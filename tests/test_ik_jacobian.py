@@ -7,6 +7,8 @@ import pytest
 from motion_composer.engine.correction.constraints import KINDS
 from motion_composer.engine.correction.ik import (IKOptions, Task, _Structure, quat_to_rotvec, rotvec_to_quat,
                                   solve_frames, task_error_and_jacobian)
+from conftest import shared_path
+from motion_composer.engine import read_bvh
 from motion_composer.engine.kinematics import fk_arrays
 from motion_composer.engine.quaternions import qmul
 from ik_fixtures import walk_on_holden
@@ -173,17 +175,22 @@ def test_the_solvers_quaternion_products_are_the_engines_bit_for_bit():
                 assert np.array_equal(np.signbit(got), np.signbit(want))
 
 
-def test_the_positions_of_some_joints_are_forward_kinematics_bit_for_bit():
-    """ik.joint_positions places the joints asked for and their ancestors only (the floor's
-    check of the attraction posture): fk_arrays' positions to the last bit."""
-    from motion_composer.engine.correction.ik import joint_positions
+def test_the_poses_of_some_joints_are_forward_kinematics_bit_for_bit():
+    """kinematics.fk_joints places the joints asked for and their ancestors only (the feet
+    for contacts, the floor's check of the attraction posture): fk_arrays' rotations and
+    positions to the last bit, with the root's translation alone or every joint's."""
+    from motion_composer.engine.kinematics import fk_joints
     _, _, _, composed = walk_on_holden()
-    sk = composed.skeleton
-    frames = np.array([0, 5, 250, 600, 900])
-    rot, tra = composed.rotations[frames], composed.translations[frames]
-    want = fk_arrays(sk, rot, tra, end_sites=False).positions
-    for joints in ([sk.index[n] for n in sk.names[-3:]], [0], list(range(sk.num_joints))):
-        assert np.array_equal(joint_positions(sk, rot, tra, joints), want[:, joints])
+    bandai = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))   # every joint translated
+    for motion in (composed, bandai):
+        sk = motion.skeleton
+        frames = np.array([0, 5, 150, 190])
+        rot, tra = motion.rotations[frames], motion.translations[frames]
+        want = fk_arrays(sk, rot, tra, end_sites=False)
+        for joints in ([sk.index[n] for n in sk.names[-3:]], [0], list(range(sk.num_joints))):
+            q, p = fk_joints(sk, rot, tra, joints)
+            assert np.array_equal(p, want.positions[:, joints])
+            assert np.array_equal(q, want.rotations[:, joints])
 
 
 @pytest.mark.parametrize("private", [True, False], ids=["numpy's gufunc", "the fallback"])

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constraints import Constraint
-from ..kinematics import fk_arrays
+from ..kinematics import fk_arrays, fk_joints
 from ..motion import Motion
-from ..quaternions import cmul, crot, qconj, qmul, qrot, quat_between
+from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
@@ -111,47 +111,19 @@ FK_CHUNK = 4096
 def _foot_poses(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
                 joints) -> tuple[dict, dict]:
     """World positions ``{joint index: (F, 3)}`` [m] and rotations ``{joint index: (F, 4)}``
-    of ``joints`` (indices) over a clip's local ``rotations`` and ``translations``
-    (``(F, K, 3)`` for ``skeleton.translated``, or ``(F, J, 3)``), by forward kinematics in
-    chunks of :data:`FK_CHUNK` frames.
-
-    Only the joints' chains are placed (the joints and their ancestors: a leg's 5 or 6
-    joints of a body's 30 to 100), in :func:`~engine.kinematics.fk_components`' arithmetic
-    (each joint's world values depend on its ancestors' alone, with the same operations in
-    the same order: the same values bit for bit), so that neither the per-frame cost nor the
-    per-level overhead of the whole body's forward kinematics is paid for the feet."""
+    of ``joints`` (indices) over a clip's local ``rotations`` and ``translations``, by forward
+    kinematics of their chains alone (:func:`~engine.kinematics.fk_joints`) in chunks of
+    :data:`FK_CHUNK` frames."""
     joints = sorted(set(joints))
     F = len(rotations)
-    J = skeleton.num_joints
-    parents = skeleton.parents
-    depth = skeleton.depth
-    chain = sorted({a for j in joints for a in skeleton.ancestors(j)} | set(joints),
-                   key=lambda k: (depth[k], k))
-    slot = np.full(J, -1, dtype=np.intp)
-    if translations.shape[1] == J and J != len(skeleton.translated):
-        slot[:] = np.arange(J)
-    else:
-        slot[skeleton.translated] = np.arange(len(skeleton.translated))
-    offsets = skeleton.offsets
     pos = {j: np.empty((F, 3)) for j in joints}
     rot = {j: np.empty((F, 4)) for j in joints}
     for lo in range(0, F, FK_CHUNK):
         hi = min(F, lo + FK_CHUNK)
-        world_q, world_p = {}, {}
-        for j in chain:
-            local_q = np.ascontiguousarray(rotations[lo:hi, j].T)                 # (4, n)
-            local_t = (np.ascontiguousarray(translations[lo:hi, slot[j]].T) if slot[j] >= 0
-                       else offsets[j][:, None])                           # (3, n) or (3, 1)
-            up = int(parents[j])
-            if up < 0:
-                world_q[j] = local_q
-                world_p[j] = np.broadcast_to(local_t, (3, hi - lo))
-            else:
-                world_q[j] = cmul(world_q[up], local_q)
-                world_p[j] = world_p[up] + crot(world_q[up], local_t)
-        for j in joints:
-            pos[j][lo:hi] = world_p[j].T
-            rot[j][lo:hi] = world_q[j].T
+        world_q, world_p = fk_joints(skeleton, rotations[lo:hi], translations[lo:hi], joints)
+        for k, j in enumerate(joints):
+            pos[j][lo:hi] = world_p[:, k]
+            rot[j][lo:hi] = world_q[:, k]
     return pos, rot
 
 

@@ -59,8 +59,9 @@ import numpy as np
 
 from .constraints import ConstraintError
 from .displacement import DisplacementMap
-from .ik import IKOptions, Task, joint_positions, quat_to_rotvec, solve_frames
+from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
 from ..errors import MotionComposerError
+from ..kinematics import fk_joints
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize
 
@@ -280,7 +281,7 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
     for lo in range(0, len(free_frames), problem.chunk_frames):
         f = free_frames[lo:lo + problem.chunk_frames]
         # those joints alone (fk_arrays' positions bit for bit)
-        pose = joint_positions(sk, attraction_rot[f], attraction_tra[f], joints)
+        _, pose = fk_joints(sk, attraction_rot[f], attraction_tra[f], joints)
         for k, j in enumerate(joints):
             position[j][f] = pose[:, k]
     out = list(entries)

@@ -578,42 +578,6 @@ def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndar
     return levels, skeleton.offsets[fk_joints].T[:, :, None]
 
 
-class _Chains:
-    """What :func:`_fk_partial` needs to place some joints: ``fk_joints`` (them and their
-    ancestors), ``fk_levels``, ``fk_offsets``, and ``index`` the joints' positions among
-    ``fk_joints``."""
-
-    def __init__(self, skeleton: Skeleton, joints):
-        needed = set()
-        for j in joints:
-            needed.add(int(j))
-            needed.update(int(a) for a in skeleton.ancestors(int(j)))
-        needed.add(0)
-        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
-        self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
-        local = {int(j): k for k, j in enumerate(self.fk_joints)}
-        self.index = np.array([local[int(j)] for j in joints], dtype=np.intp)
-
-
-def joint_positions(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray,
-                    joints) -> np.ndarray:
-    """``(F, len(joints), 3)`` [m] the world positions of ``joints`` from local ``rotations
-    (F, J, 4)`` and the translated joints' ``translations (F, K, 3)``: forward kinematics of
-    those joints and their ancestors only, bit for bit the positions of
-    :func:`~engine.kinematics.fk_arrays` (the same products in the same order; a test checks
-    it)."""
-    joints = tuple(int(j) for j in joints)
-    layouts = _LAYOUTS.setdefault(skeleton, {})
-    chains = layouts.get(("positions", joints))
-    if chains is None:
-        if len(layouts) >= _LAYOUTS_PER_SKELETON:
-            layouts.clear()
-        chains = layouts[("positions", joints)] = _Chains(skeleton, joints)
-    slot = {int(j): k for k, j in enumerate(skeleton.translated)}
-    _, wp = _fk_partial(skeleton, chains, rotations, translations, slot)
-    return wp[:, chains.index].transpose(2, 1, 0)
-
-
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
                 slot: dict) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
