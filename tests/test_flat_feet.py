@@ -17,29 +17,15 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from test_foot_contacts import CASES, IDS, _path
-from motion_composer.engine.conversion.automap import automap
+from test_foot_contacts import CASES, IDS, solve_case
 from motion_composer.engine.correction.contacts import find_feet
-from motion_composer.engine.formats import read_motion
 from motion_composer.engine.kinematics import fk_arrays
-from motion_composer.engine.project import Project, Source
 from motion_composer.engine.scene import Scene
 
 DEMO = REPO / "resources" / "demo" / "demo.mcp"
 
 #: [deg] how far the held foot's heading may be from the converted foot's over a flat
 HEADING = 2.0
-
-
-def _scene(case) -> Scene:
-    if case == "demo":
-        return Scene.open(DEMO)
-    (pw, pn), (tw, tn) = case
-    performer, target = read_motion(_path(pw, pn)), read_motion(_path(tw, tn))
-    project = Project(performer=Source(str(_path(pw, pn))), target=Source(str(_path(tw, tn))),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True)
-    return Scene(project, performer, target)
 
 
 def _headings(motion, ankle: str, toe: str, flats) -> np.ndarray:
@@ -60,8 +46,11 @@ def _flats(constraints, ankle: str) -> list[tuple[int, int]]:
 
 @pytest.fixture(scope="module", params=["demo"] + CASES, ids=["demo"] + IDS)
 def solved(request):
-    scene = _scene(request.param)
-    return scene, scene.solve(regenerate=True)
+    if request.param == "demo":
+        scene = Scene.open(DEMO)
+        return scene, scene.solve(regenerate=True)
+    scene, solution, _ = solve_case(request.param)        # test_foot_contacts.py's solves
+    return scene, solution
 
 
 def test_a_flat_foot_is_held_at_the_converted_foots_heading(solved):

@@ -22,6 +22,8 @@ Each clip and character pair is solved once (module-scoped fixture).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -111,17 +113,24 @@ def relative_angle(q: np.ndarray, r: np.ndarray) -> np.ndarray:
     return 2.0 * np.arccos(np.clip(np.abs(np.sum(q * r, axis=-1)), -1.0, 1.0))
 
 
-@pytest.fixture(scope="module", params=CASES, ids=IDS)
-def solved(request):
-    (pw, pn), (tw, tn) = request.param
+@functools.lru_cache(maxsize=None)
+def solve_case(case):
+    """A pair of :data:`CASES` solved with automatic contacts, once per session (this module
+    and test_flat_feet.py read the same solves; none changes them): ``(scene, solution,
+    target file)``."""
+    (pw, pn), (tw, tn) = case
     performer_file, target_file = _path(pw, pn), _path(tw, tn)
     performer, target = read_motion(performer_file), read_motion(target_file)
     project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True)
     scene = Scene(project, performer, target)
-    solution = scene.solve(regenerate=True)
-    return scene, solution, target_file
+    return scene, scene.solve(regenerate=True), target_file
+
+
+@pytest.fixture(scope="module", params=CASES, ids=IDS)
+def solved(request):
+    return solve_case(request.param)
 
 
 def _feet(scene):
