@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import cto_matrix, qconj, qmul, qnormalize
+from ..quaternions import cmul_small, crot_small, cto_matrix, qconj, qmul, qmul_small, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -517,52 +517,6 @@ class _Structure:
                 [self.point_group[ti] for ti in members]))
 
 
-#: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
-#: ``b`` that ``a``'s x, y and z multiply, and its sign (:func:`_cmul`)
-_MUL_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]])
-_MUL_SIGN = np.array([[1.0, -1.0, 1.0, -1.0], [1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0]])
-
-
-def _cmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.cmul` of component arrays ``a, b (4, n, B)`` bit for bit
-    (the same products, signs and sums in the same order; a test checks it) in a few calls
-    on whole arrays instead of four rows: the FK of a small batch costs the calls, not the
-    arithmetic."""
-    p = a[:3, None] * (b[_MUL_INDEX] * _MUL_SIGN[:, :, None, None])
-    out = a[3] * b
-    out += p[0]
-    out += p[1]
-    out += p[2]
-    return out
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.qmul` of quaternions ``a, b (..., 4)`` of one shape, bit
-    for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
-    p = a[..., :3, None] * (b[..., _MUL_INDEX] * _MUL_SIGN)
-    out = a[..., 3:4] * b
-    out += p[..., 0, :]
-    out += p[..., 1, :]
-    out += p[..., 2, :]
-    return out
-
-
-def _crot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.crot` of ``q (4, n, B)`` rotating ``v (3, n, B or 1)``
-    bit for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
-    u, w = q[:3], q[3]
-    u1, u2 = u[[1, 2, 0]], u[[2, 0, 1]]
-    t = u1 * v[[2, 0, 1]]
-    t -= u2 * v[[1, 2, 0]]
-    t *= 2.0
-    out = w * t
-    out += v
-    cross = u1 * t[[2, 0, 1]]
-    cross -= u2 * t[[1, 2, 0]]
-    out += cross
-    return out
-
-
 def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndarray]:
     """For :func:`_fk_partial`: the FK levels ``(joints, parents)`` of ``fk_joints`` (closed
     under ancestors, sorted) by depth below the root, as positions among them, and their
@@ -599,8 +553,8 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra:
     wp[:, 0] = local_t[:, 0]
     for here, up in structure.fk_levels:
         parent_q = wq[:, up]
-        wq[:, here] = _cmul(parent_q, local_q[:, here])
-        wp[:, here] = wp[:, up] + _crot(parent_q, local_t[:, here])
+        wq[:, here] = cmul_small(parent_q, local_q[:, here])
+        wp[:, here] = wp[:, up] + crot_small(parent_q, local_t[:, here])
     return wq, wp
 
 
@@ -997,7 +951,7 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
-    dz[:, 3:] = quat_to_rotvec(_qmul(home, qconj(cur))).reshape(nb, -1)
+    dz[:, 3:] = quat_to_rotvec(qmul_small(home, qconj(cur))).reshape(nb, -1)
     dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
     coef = _solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
@@ -1023,7 +977,7 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
-    new = qnormalize(_qmul(rotvec_to_quat(step), cur))
+    new = qnormalize(qmul_small(rotvec_to_quat(step), cur))
     for j, limit in options.joint_limits:
         if j in structure.col:
             k = int(np.searchsorted(joints, j))
