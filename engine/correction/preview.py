@@ -205,7 +205,10 @@ class WindowSolver:
         cut = Motion._trusted(composed.skeleton, composed.rotations[first:last + 1],
                               composed.translations[first:last + 1], composed.frame_time,
                               composed.name)
-        part = enforce(cut, shifted, options=self.options, pins=True, still=self.still).motion
+        # frames lo..hi alone are spliced: the rest of [first, last] is solved only where
+        # they depend on it (the ramps' key postures)
+        part = enforce(cut, shifted, options=self.options, pins=True, still=self.still,
+                       frames=(lo - first, hi - first)).motion
         return part, first
 
     def preview(self, constraints: list, base_constraints: list, base_motion):
