@@ -48,6 +48,12 @@ _MUL_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]])
 _MUL_SIGN = np.array([[1.0, -1.0, 1.0, -1.0], [1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0]])
 _MUL_INDEX.setflags(write=False)
 _MUL_SIGN.setflags(write=False)
+#: the components ``[1, 2, 0]`` and ``[2, 0, 1]`` of a vector part (``_ROT_U``) and the
+#: ones they multiply in a cross product ``u x v`` (``_ROT_V``), for :func:`crot_small`
+_ROT_U = np.array([[1, 2, 0], [2, 0, 1]])
+_ROT_V = np.array([[2, 0, 1], [1, 2, 0]])
+_ROT_U.setflags(write=False)
+_ROT_V.setflags(write=False)
 
 
 def qmul_small(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -474,16 +480,14 @@ def crot_small(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """:func:`crot` of float component arrays: ``q (4, ...)`` rotating ``v (3, ...)``
     (broadcasting), bit for bit (the same arithmetic in the same order), in a few calls on
     whole arrays instead of one per component: for small batches, as :func:`cmul_small`."""
-    u, w = q[:3], q[3]
-    u1, u2 = u[[1, 2, 0]], u[[2, 0, 1]]
-    t = u1 * v[[2, 0, 1]]
-    t -= u2 * v[[1, 2, 0]]
+    u = q[_ROT_U]                       # (2, 3, ...): u's components turned once, twice
+    p = u * v[_ROT_V]
+    t = p[0] - p[1]                     # t = 2 u x v
     t *= 2.0
-    out = w * t
-    out += v
-    cross = u1 * t[[2, 0, 1]]
-    cross -= u2 * t[[1, 2, 0]]
-    out += cross
+    out = q[3] * t
+    out += v                            # (v + w t) + (u x t), as crot sums them
+    p = u * t[_ROT_V]
+    out += p[0] - p[1]
     return out
 
 

@@ -431,7 +431,10 @@ class _Structure:
         for t in tasks:
             needed.add(t.joint)
             needed.update(skeleton.ancestors(t.joint))
-        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
+        # by depth below the root (the root first), so that each FK level is a slice
+        depth = skeleton.depth
+        self.fk_joints = np.array(sorted(needed, key=lambda j: (int(depth[j]), j)),
+                                  dtype=np.intp)
         self.levels = sorted({t.priority for t in tasks})
         self.row0 = np.cumsum([0] + [t.rows for t in tasks])
         self.k = int(self.row0[-1])
@@ -454,6 +457,11 @@ class _Structure:
         local = {int(j): k for k, j in enumerate(self.fk_joints)}
         parents = skeleton.parents
         self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
+        # the FK joints whose local translation is the clip's (not their offset), and where
+        # that is among the translated joints
+        slot = {int(j): k for k, j in enumerate(skeleton.translated)}
+        self.fk_moved = [k for k, j in enumerate(self.fk_joints.tolist()) if j in slot]
+        self.fk_moved_slot = [slot[int(self.fk_joints[k])] for k in self.fk_moved]
         self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
                                        dtype=np.intp)
         self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
@@ -518,43 +526,46 @@ class _Structure:
 
 
 def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndarray]:
-    """For :func:`_fk_partial`: the FK levels ``(joints, parents)`` of ``fk_joints`` (closed
-    under ancestors, sorted) by depth below the root, as positions among them, and their
-    offsets ``(3, n, 1)``."""
+    """For :func:`_fk_partial`: the FK levels of ``fk_joints`` (closed under ancestors, sorted
+    by depth below the root) as ``(slice, parents)``, the level's joints and their parents'
+    positions among them, and their offsets ``(3, n, 1)``."""
     local = {int(j): k for k, j in enumerate(fk_joints)}
     parents = skeleton.parents
     depth = skeleton.depth[fk_joints]
     levels = []
     for d in range(1, int(depth.max(initial=0)) + 1):
         here = np.flatnonzero(depth == d)
+        if not len(here):
+            continue
         up = np.array([local[int(parents[fk_joints[h]])] for h in here], dtype=np.intp)
-        levels.append((here, up))
+        levels.append((slice(int(here[0]), int(here[-1]) + 1), up))
     return levels, skeleton.offsets[fk_joints].T[:, :, None]
 
 
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
                 slot: dict) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
-    (closed under ancestors, sorted: the root first) as component arrays, one depth level at a
-    time, from local rotations ``rot (B, J, 4)`` and the translated joints' translations
-    ``tra (B, K, 3)``. A level whose joints are not translated turns their offsets ``(3, m,
-    1)`` as they are (broadcast over the batch)."""
+    (closed under ancestors, sorted by depth: the root first) as component arrays, one depth
+    level at a time, from local rotations ``rot (B, J, 4)`` and the translated joints'
+    translations ``tra (B, K, 3)`` (``slot``: each translated joint's place there, as
+    ``structure.fk_moved_slot`` holds it). A level whose joints are not translated turns their
+    offsets ``(3, m, 1)`` as they are (broadcast over the batch)."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
     local_q = rot[:, joints].transpose(2, 1, 0)                                 # (4, n, B)
-    moved = [k for k, j in enumerate(joints.tolist()) if j in slot]
+    moved = structure.fk_moved
     local_t = structure.fk_offsets
     if moved:
         local_t = np.repeat(local_t, B, axis=2)
-        local_t[:, moved] = tra[:, [slot[int(joints[k])] for k in moved]].transpose(2, 1, 0)
+        local_t[:, moved] = tra[:, structure.fk_moved_slot].transpose(2, 1, 0)
     wq = np.empty((4, n, B))
     wp = np.empty((3, n, B))
     wq[:, 0] = local_q[:, 0]
     wp[:, 0] = local_t[:, 0]
-    for here, up in structure.fk_levels:
+    for here, up in structure.fk_levels:            # a level's joints: a slice
         parent_q = wq[:, up]
         wq[:, here] = cmul_small(parent_q, local_q[:, here])
-        wp[:, here] = wp[:, up] + crot_small(parent_q, local_t[:, here])
+        np.add(wp[:, up], crot_small(parent_q, local_t[:, here]), out=wp[:, here])
     return wq, wp
 
 
