@@ -763,7 +763,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             frames = np.arange(len(active)) if every else frames
             out = np.empty((len(frames), structure.n))
             for polish in (False, True):
-                sel = np.flatnonzero(polishing[frames] == polish)
+                sel = (polishing[frames] == polish).nonzero()[0]
                 if len(sel) == len(frames) and every:
                     f = sel = slice(None)
                 elif len(sel):
@@ -789,15 +789,15 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         size = np.abs(dq * structure.colscale).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
-        frames = np.flatnonzero(check & held.any(axis=1))
+        frames = (check & held.any(axis=1)).nonzero()[0]
         if len(frames):
             free = step(frames, acting[frames][:, rows.task])
             stay = _pushed_through(structure, active[frames], err[frames], jac[frames], free,
                                    held[frames])
             # where the step without any hold pushes several through, each is asked again
             # with the others held: one may be kept up only by the others' hold
-            several = np.flatnonzero(stay.sum(axis=1) > 1)
-            for ti in np.flatnonzero(stay[several].any(axis=0)):
+            several = (stay.sum(axis=1) > 1).nonzero()[0]
+            for ti in stay[several].any(axis=0).nonzero()[0]:
                 sub = several[stay[several, ti]]
                 f = frames[sub]
                 others = held[f].copy()
@@ -809,24 +809,23 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                                                 only)[:, ti]
             # one released at a time (an active set): the others' answers assumed it held
             stay |= held[frames] & (np.cumsum(held[frames] & ~stay, axis=1) > 1)
-            release = np.flatnonzero(np.any(held[frames] & ~stay, axis=1))
+            release = (held[frames] & ~stay).any(axis=1).nonzero()[0]
             frames, stay = frames[release], stay[release]
             held[frames] = stay
             dq[frames] = free[release]
             settled[frames] = False
-            again = np.flatnonzero(stay.any(axis=1))
+            again = stay.any(axis=1).nonzero()[0]
             if len(again):
                 dq[frames[again]] = step(frames[again],
                                          (acting | held)[frames[again]][:, rows.task])
         # a frame that stops with a lower level unmet (out of reach, or against a higher one)
         # polishes: the first level alone, restored from the lower levels' push
-        short = settled & ~polishing & np.any(np.abs(err_on[:, lower]) > rows.tol[lower],
-                                              axis=1)
+        short = settled & ~polishing & (np.abs(err_on[:, lower]) > rows.tol[lower]).any(axis=1)
         polish_all[active[short]] = True
         settled &= ~short
         pinned = (on @ structure.pin_matrix) > 0
         held_all[active] = (held | acting) & on & ~pinned
-        if np.all(settled):
+        if settled.all():
             iterations[active] -= 1
             break
         keep = ~settled
@@ -854,9 +853,9 @@ def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
     bound (``err`` and ``jac``: every task's rows, acting or not, of the ``active``
     frames)."""
     out = np.zeros_like(idle)
-    for ti in np.flatnonzero(idle.any(axis=0)):
+    for ti in idle.any(axis=0).nonzero()[0]:
         task = structure.tasks[ti]
-        frames = np.flatnonzero(idle[:, ti])
+        frames = idle[:, ti].nonzero()[0]
         rows = slice(structure.row0[ti], structure.row0[ti] + task.rows)
         after = err[frames, rows] - np.einsum("bkn,bn->bk", jac[frames, rows], dq[frames])
         out[frames, ti] = task.kind.acts(task.goal[active[frames]], after)
@@ -904,7 +903,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
     behind = np.zeros(nb)                   # how far the higher levels are from being met
     for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
-        on = np.flatnonzero((w[:, level] > 0).any(axis=1))
+        on = (w[:, level] > 0).any(axis=1).nonzero()[0]
         some = len(on) > 0
         if len(on) == nb:
             on = slice(None)                # every frame: views instead of copies
