@@ -290,16 +290,19 @@ def cto_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions as component arrays
     ``(4, ...)`` (:func:`components`)."""
     x, y, z, w = q
+    # each product once (the same values as taken twice)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz, xw, yw, zw = x * y, x * z, y * z, x * w, y * w, z * w
     out = np.empty(q.shape[1:] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    out[..., 0, 0] = 1 - 2 * (yy + zz)
+    out[..., 0, 1] = 2 * (xy - zw)
+    out[..., 0, 2] = 2 * (xz + yw)
+    out[..., 1, 0] = 2 * (xy + zw)
+    out[..., 1, 1] = 1 - 2 * (xx + zz)
+    out[..., 1, 2] = 2 * (yz - xw)
+    out[..., 2, 0] = 2 * (xz - yw)
+    out[..., 2, 1] = 2 * (yz + xw)
+    out[..., 2, 2] = 1 - 2 * (xx + yy)
     return out
 
 

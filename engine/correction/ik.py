@@ -581,7 +581,10 @@ def _point_jacobians(structure: _Structure, positions: np.ndarray,
         m = frames[structure.pair_unknown]                                      # (P, B, 3, 3)
         u0, u1, u2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]
         d0, d1, d2 = d[..., 0:1], d[..., 1:2], d[..., 2:3]
-        blocks = np.stack([u1 * d2 - u2 * d1, u2 * d0 - u0 * d2, u0 * d1 - u1 * d0])
+        blocks = np.empty((3,) + u0.shape)
+        np.subtract(u1 * d2, u2 * d1, out=blocks[0])
+        np.subtract(u2 * d0, u0 * d2, out=blocks[1])
+        np.subtract(u0 * d1, u1 * d0, out=blocks[2])
     out = []
     for lo, hi in structure.point_bounds:
         point = np.empty((B, 3, 3 + 3 * (hi - lo)))
