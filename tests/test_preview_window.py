@@ -94,3 +94,26 @@ def test_a_moved_goal_previews_as_the_full_solve_where_ramps_keyed_outside_ease_
         assert gap < 1e-6, (name, lo, hi, gap)      # [m] the full solve's to rounding
         checked += 1
     assert checked == 2
+
+
+def test_a_solve_of_some_frames_gives_the_whole_solves_values_there():
+    """enforce(frames=(lo, hi)) solves only what those frames depend on (themselves, the key
+    postures of the ramps easing them and the frames those start from): bit for bit the
+    solve of every frame on lo..hi, and no correction outside."""
+    project, performer, target = open_project(DEMO)
+    scene = Scene(project, performer, target)
+    some = [c for c in scene.constraints if c.smooth_out < 250 and c.kind != "plane"]
+    assert len(some) >= 6
+    whole = enforce(scene.edited, some, options=project.ik_options)
+    # ramps keyed past the window's edge ease its frames: LeftFoot #1's input ramp (18, 32)
+    # in the first, its output ramp (89, 103) in the second
+    for lo, hi in ((20, 28), (100, 138), (150, 200)):
+        part = enforce(scene.edited, some, options=project.ik_options, frames=(lo, hi))
+        assert np.array_equal(part.motion.rotations[lo:hi + 1],
+                              whole.motion.rotations[lo:hi + 1])
+        assert np.array_equal(part.motion.translations[lo:hi + 1],
+                              whole.motion.translations[lo:hi + 1])
+        outside = np.ones(scene.num_frames, dtype=bool)
+        outside[lo:hi + 1] = False
+        assert not part.rotvecs[outside].any() and not part.root[outside].any()
+        assert not part.iterations[outside].any() and part.iterations[lo:hi + 1].any()
