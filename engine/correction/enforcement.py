@@ -726,9 +726,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             spliced into the motion shown). The postures they depend on are solved as in a
             solve of every frame, each on its own, so those frames get its values bit for
             bit; the others are left out where nothing wanted depends on them, and the
-            correction is zero outside ``lo..hi`` (no residuals, no iterations there). A
-            warm start solves every frame (each starts from the one before). ``None`` (the
-            default): every frame.
+            correction is zero outside ``lo..hi`` (no residuals, no iterations there).
+            Ignored with ``warm_start``, where each frame starts from the one before: every
+            frame is solved and kept. ``None`` (the default): every frame.
     """
     from ..describe import stature
 
