@@ -745,6 +745,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     held_all = np.zeros((B, len(tasks)), dtype=bool)
     polish_all = np.zeros(B, dtype=bool)
     lower = slice(rows.levels[1].start if len(rows.levels) > 1 else structure.k, structure.k)
+    # the attraction posture of the unknown joints, taken once (the whole posture only for
+    # joint limits)
+    attraction_joints = attraction_rot[:, joints]
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
         err, jac, on, acting = _evaluate(skeleton, structure, r, t, slot, active)
@@ -757,7 +760,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             polish_all[active] = True
         polishing = polish_all[active]
         cur = r[:, joints]
-        home, home_root = attraction_rot[active][:, joints], attraction_root[active]
+        home, home_root = attraction_joints[active], attraction_root[active]
 
         def step(frames, rows_on):
             """The step of ``frames`` (all of them: ``None``) with the rows ``rows_on (n, K)``
@@ -835,7 +838,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
         r, t = _apply_step(dq * structure.colscale, r, t, cur, structure,
-                           attraction_rot[active], options)
+                           attraction_rot[active] if options.joint_limits else None,
+                           options)
         rot[active] = r
         tra[active] = t
     unsorted = np.empty_like(residual)
@@ -972,12 +976,12 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
 
 
 def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
-                structure: _Structure, home: np.ndarray,
+                structure: _Structure, home: np.ndarray | None,
                 options: IKOptions) -> tuple[np.ndarray, np.ndarray]:
     """The posture ``(r, t)`` after the step ``dq (b, N)``: the root moves, the unknown
     joints (``cur (b, C, 4)`` now) turn, the whole step scaled down so that no joint turns
     more than ``options.step_cap``, and limited joints are held within their angle of the
-    attraction posture ``home (b, J, 4)``."""
+    attraction posture ``home (b, J, 4)`` (not needed without joint limits)."""
     joints = structure.joints
     nb = len(dq)
     t = t.copy()
