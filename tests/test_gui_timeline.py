@@ -170,15 +170,19 @@ def test_changed_window_and_overlap(solved):
     right = next(c for c in problem if c.name == "contact RightFoot 0-128")
     assert right.range == (10, 10, 105, 105)
     assert problem[[c.name for c in problem].index(new.name)] is new
-    # a window holding ramps needs their key postures: the right foot's output ramp its end
-    # (128) and smooth_out (142), the left foot's input ramp its smooth_in (109); the left
-    # foot's contact 123-213 runs on to 213, clipped at 142
+    # a window holding ramps needs their key postures, those the solve blends: the right
+    # foot's output ramp eases out the correction at its end (128), the left foot's input
+    # ramp eases in the one at its start (123), each posture without them starting from the
+    # frame next to it in the ramp (129, 122); all inside the window, so [L, H] is the
+    # window: the right foot's contact is clipped to start at 120 (keeping its output ramp),
+    # the left foot's contact 123-213 to end at 140 (keeping its input ramp from 109). The
+    # postures at a ramp's smooth_in and smooth_out (109, 142) decide nothing in the window
     problem = window_problem(after, 120, 140)
     names = [c.name for c in problem]
     right = problem[names.index("contact RightFoot 0-128")]
     left = problem[names.index("contact LeftFoot 123-213")]
-    assert right.range == (109, 109, 128, 142)
-    assert left.range == (109, 123, 142, 142)
+    assert right.range == (120, 120, 128, 142)
+    assert left.range == (109, 123, 140, 140)
     assert all(109 <= c.smooth_in and c.smooth_out <= 142 for c in problem)
 
 

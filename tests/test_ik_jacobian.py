@@ -154,27 +154,6 @@ def test_rotation_vector_helpers_are_inverse_and_match_scipy():
     np.testing.assert_allclose(quat_to_rotvec(q), v, atol=1e-9)
 
 
-def test_the_solvers_quaternion_products_are_the_engines_bit_for_bit():
-    """The solver's FK multiplies and turns component arrays in a few whole-array calls
-    (ik._cmul, ik._crot; ik._qmul the quaternions of its steps): the same values as
-    quaternions.cmul, crot and qmul to the last bit,
-    signed zeros included, with a batch of one and offsets broadcast over the batch."""
-    from motion_composer.engine.correction.ik import _cmul, _crot, _qmul
-    from motion_composer.engine.quaternions import cmul, crot
-    rng = np.random.default_rng(7)
-    for shape in [(1, 1), (3, 19), (5, 40)]:
-        for _ in range(10):
-            a, b = rng.normal(size=(4,) + shape), rng.normal(size=(4,) + shape)
-            v = rng.normal(size=(3,) + shape)
-            a[:, 0, 0], b[:, 0, 0], v[:, 0, 0] = 0.0, -0.0, -0.0
-            for got, want in ((_cmul(a, b), cmul(a, b)), (_crot(a, v), crot(a, v)),
-                              (_qmul(a.T, b.T), qmul(a.T, b.T)),
-                              (_crot(a, v[:, :, :1]), crot(a, np.repeat(v[:, :, :1],
-                                                                         shape[1], axis=2)))):
-                assert np.array_equal(got, want)
-                assert np.array_equal(np.signbit(got), np.signbit(want))
-
-
 def test_the_poses_of_some_joints_are_forward_kinematics_bit_for_bit():
     """kinematics.fk_joints places the joints asked for and their ancestors only (the feet
     for contacts, the floor's check of the attraction posture): fk_arrays' rotations and

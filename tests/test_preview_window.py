@@ -59,3 +59,61 @@ def test_a_moved_contact_previews_in_its_window_as_the_full_solve():
         full = enforce(scene.edited, after, options=project.ik_options).motion
         gap = np.abs(_positions(motion) - _positions(full))[lo:hi + 1].max()
         assert gap < 1e-4, (lo, hi, gap)             # [m] the window: the full solve
+
+
+def test_a_moved_goal_previews_as_the_full_solve_where_ramps_keyed_outside_ease_its_window():
+    """A goal moved reaches its constraint's whole range; ramps of other constraints ease the
+    window's edge frames in or out, keyed on frames beyond the window (another contact's
+    input ramp keyed at its ``start`` after ``hi``, one's output ramp keyed at its ``end``
+    before ``lo``). Their key postures must be solved with the constraints active there and
+    next to them: the window's frames are then the full solve's. (The window problem once
+    took a ramp's ``smooth_in`` and ``smooth_out`` for its keys, and these windows were up to
+    10 mm off the full solve at their edge.)"""
+    from motion_composer.engine.correction.constraints import Constraint
+    project, performer, target = open_project(DEMO)
+    scene = Scene(project, performer, target)
+    constraints = list(scene.constraints)
+    moved = {c.name: i for i, c in enumerate(constraints)}
+    checked = 0
+    for name in ("contact RightFoot #2", "contact LeftFoot #8"):
+        i = moved[name]
+        c = constraints[i]
+        after = list(constraints)
+        after[i] = Constraint.from_dict({**c.to_dict(),
+                                         "goal": {"point": c.goal["point"] + [0.01, 0, 0]}})
+        lo, hi = changed_window(constraints, after)
+        outside = [x for x in after if x.enabled and x.smooth_in <= hi and x.smooth_out >= lo
+                   and ((x.start - x.smooth_in >= 2 and x.start > hi) or
+                        (x.smooth_out - x.end >= 2 and x.end < lo))]
+        assert outside, (name, lo, hi)         # a ramp keyed outside eases the window
+        motion, mode = scene.preview(after, base_constraints=constraints,
+                                     base_motion=scene.edited, whole=False)
+        assert mode == "window"
+        full = enforce(scene.edited, after, options=project.ik_options).motion
+        gap = np.abs(_positions(motion) - _positions(full))[lo:hi + 1].max()
+        assert gap < 1e-6, (name, lo, hi, gap)      # [m] the full solve's to rounding
+        checked += 1
+    assert checked == 2
+
+
+def test_a_solve_of_some_frames_gives_the_whole_solves_values_there():
+    """enforce(frames=(lo, hi)) solves only what those frames depend on (themselves, the key
+    postures of the ramps easing them and the frames those start from): bit for bit the
+    solve of every frame on lo..hi, and no correction outside."""
+    project, performer, target = open_project(DEMO)
+    scene = Scene(project, performer, target)
+    some = [c for c in scene.constraints if c.smooth_out < 250 and c.kind != "plane"]
+    assert len(some) >= 6
+    whole = enforce(scene.edited, some, options=project.ik_options)
+    # ramps keyed past the window's edge ease its frames: LeftFoot #1's input ramp (18, 32)
+    # in the first, its output ramp (89, 103) in the second
+    for lo, hi in ((20, 28), (100, 138), (150, 200)):
+        part = enforce(scene.edited, some, options=project.ik_options, frames=(lo, hi))
+        assert np.array_equal(part.motion.rotations[lo:hi + 1],
+                              whole.motion.rotations[lo:hi + 1])
+        assert np.array_equal(part.motion.translations[lo:hi + 1],
+                              whole.motion.translations[lo:hi + 1])
+        outside = np.ones(scene.num_frames, dtype=bool)
+        outside[lo:hi + 1] = False
+        assert not part.rotvecs[outside].any() and not part.root[outside].any()
+        assert not part.iterations[outside].any() and part.iterations[lo:hi + 1].any()

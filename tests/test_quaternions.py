@@ -182,6 +182,36 @@ def test_component_functions_give_the_interleaved_values_bit_for_bit():
                                   twist_about(a, axis))
 
 
+def test_small_batch_forms_give_the_general_values_bit_for_bit():
+    """qmul_small, cmul_small and crot_small (a few whole-array calls, for the solver's small
+    batches) give qmul's, cmul's and crot's values to the last bit on random data, signed
+    zeros included: a batch of one, component arrays of one to three trailing dimensions,
+    per-joint constants broadcast over the batch, and interleaved quaternions broadcasting."""
+    from motion_composer.engine.quaternions import (cmul, cmul_small, crot, crot_small,
+                                                    qmul_small)
+    rng = _rng(95)
+
+    def same(got, want):
+        assert got.shape == want.shape
+        assert np.array_equal(got, want)
+        assert np.array_equal(np.signbit(got), np.signbit(want))
+
+    for shape in [(1, 1), (3, 19), (5, 40), (7,), (2, 3, 5)]:
+        for _ in range(10):
+            a, b = rng.normal(size=(4,) + shape), rng.normal(size=(4,) + shape)
+            v = rng.normal(size=(3,) + shape)
+            first = (slice(None),) + (0,) * len(shape)
+            a[first], b[first], v[first] = 0.0, -0.0, -0.0
+            same(cmul_small(a, b), cmul(a, b))
+            same(crot_small(a, v), crot(a, v))
+            same(qmul_small(a.T, b.T), qmul(a.T, b.T))
+            if len(shape) >= 2:                 # offsets (3, n, 1) broadcast over the batch
+                one = v[..., :1]
+                same(crot_small(a, one), crot(a, np.repeat(one, shape[-1], axis=-1)))
+                same(cmul_small(a, b[..., :1]), cmul(a, b[..., :1]))
+                same(qmul_small(a.T, b[..., :1].T), qmul(a.T, b[..., :1].T))
+
+
 @pytest.mark.parametrize("order", ALL_ORDERS)
 def test_cfrom_euler_gives_from_eulers_values_bit_for_bit(order):
     """Euler angles as component rows ``(n, Jg, F)``, as the BVH reader holds them, give

@@ -226,6 +226,9 @@ class _Problem:
     locked: frozenset = frozenset()
     #: ``(F,)`` per frame the frame a warm start begins from (-1: none); ``None``: ``f - 1``
     previous: np.ndarray | None = None
+    #: ``(F,)`` the frames whose result is wanted (:func:`enforce`'s ``frames``); ``None``:
+    #: every frame
+    wanted: np.ndarray | None = None
 
     @property
     def skeleton(self):
@@ -296,13 +299,17 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
     return out
 
 
-def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=None):
+def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=None,
+           only=None):
     """Solve the frames that ``entries`` cover: a list of (constraint index, frames, per-frame
     task goals), as :func:`_where_needed` leaves them, each from the attraction posture, or
     from ``start`` (rot, tra), which then receives the solved frames in place (a second
     solve over a long clip's arrays costs no copy of them). Entries share task slots where
-    they do not overlap in time, so all frames form one batch. Returns rot, tra, residual
-    per constraint, iterations."""
+    they do not overlap in time, so all frames form one batch. ``only`` (a mask ``(F,)``,
+    batch solves only) solves those of the frames alone: the slots are assigned over every
+    entry's frames first, so that the frames solved get the same tasks, in the same slots,
+    as in the solve of all (each frame of a batch is solved on its own: the same values).
+    Returns rot, tra, residual per constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
     rot, tra = (attraction_rot.copy(), attraction_tra.copy()) if start is None else start
     residual = Residuals(F, len(problem.cons))
@@ -313,7 +320,11 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     covered = np.zeros(F, dtype=bool)
     for slot in slots:
         covered |= slot["weight"] > 0
+    if only is not None and not problem.warm_start:
+        covered &= only
     frames = np.flatnonzero(covered)
+    if not len(frames):
+        return rot, tra, residual, iters
     tasks = [Task(sl["kind"], sl["joint"], sl["goal"][frames], sl["weight"][frames],
                   sl["priority"])
              for sl in slots]
@@ -577,16 +588,17 @@ def _pass_one(problem: _Problem):
     entries = _where_needed(virtual, _virtual_entries(problem, src, removed),
                             virtual.composed.rotations, virtual.composed.translations)
     clip = np.arange(len(src)) < F
+    needed = _needed_virtual(problem, units, deltas, inner, len(src))
     rot_v, tra_v, residual_v, iters_v = _solve(virtual, _restricted(entries, clip),
                                                virtual.composed.rotations,
-                                               virtual.composed.translations)
+                                               virtual.composed.translations, only=needed)
     if not clip.all():
         _start_from_inner(virtual.composed, rot_v, tra_v, inner, ~clip)
         # each from its start, in the paper's scheme too; solved into rot_v, tra_v
         _, _, residual_k, iters_k = _solve(
             dataclasses.replace(virtual, previous=np.full(len(src), -1, np.intp)),
             _restricted(entries, ~clip), virtual.composed.rotations,
-            virtual.composed.translations, start=(rot_v, tra_v))
+            virtual.composed.translations, start=(rot_v, tra_v), only=needed)
         residual_v.extend(residual_k)
         iters_v[~clip] = iters_k[~clip]
     rot, tra, blended = _blend(problem, rot_v, tra_v, src, units, deltas)
@@ -596,6 +608,28 @@ def _pass_one(problem: _Problem):
     for _, frames, _ in entries:
         solved[src[frames]] = True
     return rot, tra, _map_residuals(residual_v, src, clip, F), iters, solved, blended
+
+
+def _needed_virtual(problem: _Problem, units, deltas, inner, count: int):
+    """``(V,)`` the virtual frames (:func:`_virtual_frames`) whose postures the frames of
+    ``problem.wanted`` depend on (``None``: all, every frame wanted): those wanted; the key
+    postures with and without the constraints of each ramp with an inner frame wanted
+    (:func:`_blend`); and the clip frame each such key posture without them starts from
+    (:func:`_start_from_inner`). Every posture is solved on its own from its start, so the
+    others can be left out."""
+    wanted = problem.wanted
+    if wanted is None:
+        return None
+    F = problem.num_frames
+    needed = np.zeros(count, dtype=bool)
+    needed[:F] = wanted
+    for k, with_, without in deltas:
+        lo, hi = units[k][0], units[k][1]
+        if wanted[lo + 1:hi].any():
+            needed[[with_, without]] = True
+    keys = np.flatnonzero(needed[F:]) + F
+    needed[inner[keys]] = True
+    return needed
 
 
 def _start_from_inner(composed: Motion, rot, tra, inner, frames) -> None:
@@ -635,7 +669,7 @@ def _pass_two(problem: _Problem, rot, tra, blended):
     closer = dataclasses.replace(problem, options=dataclasses.replace(
         options, settle=options.settle * 0.1),
         previous=np.full(problem.num_frames, -1, dtype=np.intp))
-    return _solve(closer, entries, rot, tra)
+    return _solve(closer, entries, rot, tra, only=problem.wanted)
 
 
 def _restricted(entries, mask: np.ndarray) -> list:
@@ -665,7 +699,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
             chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
-            still: frozenset | None = None) -> Correction:
+            still: frozenset | None = None, frames: tuple[int, int] | None = None
+            ) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -687,6 +722,13 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         still: the joints the correction leaves alone; ``None`` (the default): those the
             composed motion holds still (:func:`_still_joints`). A solve of a few frames cut
             from a clip (the live preview's window) passes the whole clip's.
+        frames: ``(lo, hi)``: only frames ``lo..hi`` are wanted (the live preview's window,
+            spliced into the motion shown). The postures they depend on are solved as in a
+            solve of every frame, each on its own, so those frames get its values bit for
+            bit; the others are left out where nothing wanted depends on them, and the
+            correction is zero outside ``lo..hi`` (no residuals, no iterations there).
+            Ignored with ``warm_start``, where each frame starts from the one before: every
+            frame is solved and kept. ``None`` (the default): every frame.
     """
     from ..describe import stature
 
@@ -696,8 +738,18 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
+    wanted = None
+    if frames is not None:
+        lo, hi = (int(x) for x in frames)
+        if not 0 <= lo <= hi < composed.num_frames:
+            raise ValueError(f"frames must be (lo, hi) with 0 <= lo <= hi < "
+                             f"{composed.num_frames}, not {frames!r}")
+        if not warm_start:
+            wanted = np.zeros(composed.num_frames, dtype=bool)
+            wanted[lo:hi + 1] = True
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
-                       _still_joints(composed) if still is None else frozenset(still))
+                       _still_joints(composed) if still is None else frozenset(still),
+                       wanted=wanted)
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1, residual, iters, changed, blended = _pass_one(problem)
@@ -709,6 +761,10 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     residual.extend(residual2)
     iters[blended] = iters2[blended]
     changed |= blended
+    if wanted is not None:                      # the wanted frames' correction alone
+        changed &= wanted
+        iters[~wanted] = 0
+        residual = residual.outside(~wanted)
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)

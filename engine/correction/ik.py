@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import limits
 from ..errors import IKOptionsError
-from ..quaternions import cto_matrix, qconj, qmul, qnormalize
+from ..quaternions import cmul_small, crot_small, cto_matrix, qconj, qmul, qmul_small, qnormalize
 from ..skeleton import Skeleton
 
 if TYPE_CHECKING:
@@ -431,7 +431,10 @@ class _Structure:
         for t in tasks:
             needed.add(t.joint)
             needed.update(skeleton.ancestors(t.joint))
-        self.fk_joints = np.array(sorted(needed), dtype=np.intp)
+        # by depth below the root (the root first), so that each FK level is a slice
+        depth = skeleton.depth
+        self.fk_joints = np.array(sorted(needed, key=lambda j: (int(depth[j]), j)),
+                                  dtype=np.intp)
         self.levels = sorted({t.priority for t in tasks})
         self.row0 = np.cumsum([0] + [t.rows for t in tasks])
         self.k = int(self.row0[-1])
@@ -454,6 +457,11 @@ class _Structure:
         local = {int(j): k for k, j in enumerate(self.fk_joints)}
         parents = skeleton.parents
         self.fk_levels, self.fk_offsets = _fk_levels(skeleton, self.fk_joints)
+        # the FK joints whose local translation is the clip's (not their offset), and where
+        # that is among the translated joints
+        slot = {int(j): k for k, j in enumerate(skeleton.translated)}
+        self.fk_moved = [k for k, j in enumerate(self.fk_joints.tolist()) if j in slot]
+        self.fk_moved_slot = [slot[int(self.fk_joints[k])] for k in self.fk_moved]
         self.unknown_parent = np.array([local.get(int(parents[j]), -1) for j in self.joints],
                                        dtype=np.intp)
         self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
@@ -517,90 +525,47 @@ class _Structure:
                 [self.point_group[ti] for ti in members]))
 
 
-#: per output component of a quaternion product ``a * b`` (x, y, z, w), the component of
-#: ``b`` that ``a``'s x, y and z multiply, and its sign (:func:`_cmul`)
-_MUL_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]])
-_MUL_SIGN = np.array([[1.0, -1.0, 1.0, -1.0], [1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0]])
-
-
-def _cmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.cmul` of component arrays ``a, b (4, n, B)`` bit for bit
-    (the same products, signs and sums in the same order; a test checks it) in a few calls
-    on whole arrays instead of four rows: the FK of a small batch costs the calls, not the
-    arithmetic."""
-    p = a[:3, None] * (b[_MUL_INDEX] * _MUL_SIGN[:, :, None, None])
-    out = a[3] * b
-    out += p[0]
-    out += p[1]
-    out += p[2]
-    return out
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.qmul` of quaternions ``a, b (..., 4)`` of one shape, bit
-    for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
-    p = a[..., :3, None] * (b[..., _MUL_INDEX] * _MUL_SIGN)
-    out = a[..., 3:4] * b
-    out += p[..., 0, :]
-    out += p[..., 1, :]
-    out += p[..., 2, :]
-    return out
-
-
-def _crot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """:func:`~engine.quaternions.crot` of ``q (4, n, B)`` rotating ``v (3, n, B or 1)``
-    bit for bit (a test checks it), in a few calls on whole arrays (:func:`_cmul`)."""
-    u, w = q[:3], q[3]
-    u1, u2 = u[[1, 2, 0]], u[[2, 0, 1]]
-    t = u1 * v[[2, 0, 1]]
-    t -= u2 * v[[1, 2, 0]]
-    t *= 2.0
-    out = w * t
-    out += v
-    cross = u1 * t[[2, 0, 1]]
-    cross -= u2 * t[[1, 2, 0]]
-    out += cross
-    return out
-
-
 def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndarray]:
-    """For :func:`_fk_partial`: the FK levels ``(joints, parents)`` of ``fk_joints`` (closed
-    under ancestors, sorted) by depth below the root, as positions among them, and their
-    offsets ``(3, n, 1)``."""
+    """For :func:`_fk_partial`: the FK levels of ``fk_joints`` (closed under ancestors, sorted
+    by depth below the root) as ``(slice, parents)``, the level's joints and their parents'
+    positions among them, and their offsets ``(3, n, 1)``."""
     local = {int(j): k for k, j in enumerate(fk_joints)}
     parents = skeleton.parents
     depth = skeleton.depth[fk_joints]
     levels = []
     for d in range(1, int(depth.max(initial=0)) + 1):
         here = np.flatnonzero(depth == d)
+        if not len(here):
+            continue
         up = np.array([local[int(parents[fk_joints[h]])] for h in here], dtype=np.intp)
-        levels.append((here, up))
+        levels.append((slice(int(here[0]), int(here[-1]) + 1), up))
     return levels, skeleton.offsets[fk_joints].T[:, :, None]
 
 
 def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
                 slot: dict) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
-    (closed under ancestors, sorted: the root first) as component arrays, one depth level at a
-    time, from local rotations ``rot (B, J, 4)`` and the translated joints' translations
-    ``tra (B, K, 3)``. A level whose joints are not translated turns their offsets ``(3, m,
-    1)`` as they are (broadcast over the batch)."""
+    (closed under ancestors, sorted by depth: the root first) as component arrays, one depth
+    level at a time, from local rotations ``rot (B, J, 4)`` and the translated joints'
+    translations ``tra (B, K, 3)`` (``slot``: each translated joint's place there, as
+    ``structure.fk_moved_slot`` holds it). A level whose joints are not translated turns their
+    offsets ``(3, m, 1)`` as they are (broadcast over the batch)."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
     local_q = rot[:, joints].transpose(2, 1, 0)                                 # (4, n, B)
-    moved = [k for k, j in enumerate(joints.tolist()) if j in slot]
+    moved = structure.fk_moved
     local_t = structure.fk_offsets
     if moved:
         local_t = np.repeat(local_t, B, axis=2)
-        local_t[:, moved] = tra[:, [slot[int(joints[k])] for k in moved]].transpose(2, 1, 0)
+        local_t[:, moved] = tra[:, structure.fk_moved_slot].transpose(2, 1, 0)
     wq = np.empty((4, n, B))
     wp = np.empty((3, n, B))
     wq[:, 0] = local_q[:, 0]
     wp[:, 0] = local_t[:, 0]
-    for here, up in structure.fk_levels:
+    for here, up in structure.fk_levels:            # a level's joints: a slice
         parent_q = wq[:, up]
-        wq[:, here] = _cmul(parent_q, local_q[:, here])
-        wp[:, here] = wp[:, up] + _crot(parent_q, local_t[:, here])
+        wq[:, here] = cmul_small(parent_q, local_q[:, here])
+        np.add(wp[:, up], crot_small(parent_q, local_t[:, here]), out=wp[:, here])
     return wq, wp
 
 
@@ -616,7 +581,10 @@ def _point_jacobians(structure: _Structure, positions: np.ndarray,
         m = frames[structure.pair_unknown]                                      # (P, B, 3, 3)
         u0, u1, u2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]
         d0, d1, d2 = d[..., 0:1], d[..., 1:2], d[..., 2:3]
-        blocks = np.stack([u1 * d2 - u2 * d1, u2 * d0 - u0 * d2, u0 * d1 - u1 * d0])
+        blocks = np.empty((3,) + u0.shape)
+        np.subtract(u1 * d2, u2 * d1, out=blocks[0])
+        np.subtract(u2 * d0, u0 * d2, out=blocks[1])
+        np.subtract(u0 * d1, u1 * d0, out=blocks[2])
     out = []
     for lo, hi in structure.point_bounds:
         point = np.empty((B, 3, 3 + 3 * (hi - lo)))
@@ -777,6 +745,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     held_all = np.zeros((B, len(tasks)), dtype=bool)
     polish_all = np.zeros(B, dtype=bool)
     lower = slice(rows.levels[1].start if len(rows.levels) > 1 else structure.k, structure.k)
+    # the attraction posture of the unknown joints, taken once (the whole posture only for
+    # joint limits)
+    attraction_joints = attraction_rot[:, joints]
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
         err, jac, on, acting = _evaluate(skeleton, structure, r, t, slot, active)
@@ -789,7 +760,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             polish_all[active] = True
         polishing = polish_all[active]
         cur = r[:, joints]
-        home, home_root = attraction_rot[active][:, joints], attraction_root[active]
+        home, home_root = attraction_joints[active], attraction_root[active]
 
         def step(frames, rows_on):
             """The step of ``frames`` (all of them: ``None``) with the rows ``rows_on (n, K)``
@@ -798,7 +769,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
             frames = np.arange(len(active)) if every else frames
             out = np.empty((len(frames), structure.n))
             for polish in (False, True):
-                sel = np.flatnonzero(polishing[frames] == polish)
+                sel = (polishing[frames] == polish).nonzero()[0]
                 if len(sel) == len(frames) and every:
                     f = sel = slice(None)
                 elif len(sel):
@@ -824,15 +795,15 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         size = np.abs(dq * structure.colscale).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
-        frames = np.flatnonzero(check & held.any(axis=1))
+        frames = (check & held.any(axis=1)).nonzero()[0]
         if len(frames):
             free = step(frames, acting[frames][:, rows.task])
             stay = _pushed_through(structure, active[frames], err[frames], jac[frames], free,
                                    held[frames])
             # where the step without any hold pushes several through, each is asked again
             # with the others held: one may be kept up only by the others' hold
-            several = np.flatnonzero(stay.sum(axis=1) > 1)
-            for ti in np.flatnonzero(stay[several].any(axis=0)):
+            several = (stay.sum(axis=1) > 1).nonzero()[0]
+            for ti in stay[several].any(axis=0).nonzero()[0]:
                 sub = several[stay[several, ti]]
                 f = frames[sub]
                 others = held[f].copy()
@@ -844,31 +815,31 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                                                 only)[:, ti]
             # one released at a time (an active set): the others' answers assumed it held
             stay |= held[frames] & (np.cumsum(held[frames] & ~stay, axis=1) > 1)
-            release = np.flatnonzero(np.any(held[frames] & ~stay, axis=1))
+            release = (held[frames] & ~stay).any(axis=1).nonzero()[0]
             frames, stay = frames[release], stay[release]
             held[frames] = stay
             dq[frames] = free[release]
             settled[frames] = False
-            again = np.flatnonzero(stay.any(axis=1))
+            again = stay.any(axis=1).nonzero()[0]
             if len(again):
                 dq[frames[again]] = step(frames[again],
                                          (acting | held)[frames[again]][:, rows.task])
         # a frame that stops with a lower level unmet (out of reach, or against a higher one)
         # polishes: the first level alone, restored from the lower levels' push
-        short = settled & ~polishing & np.any(np.abs(err_on[:, lower]) > rows.tol[lower],
-                                              axis=1)
+        short = settled & ~polishing & (np.abs(err_on[:, lower]) > rows.tol[lower]).any(axis=1)
         polish_all[active[short]] = True
         settled &= ~short
         pinned = (on @ structure.pin_matrix) > 0
         held_all[active] = (held | acting) & on & ~pinned
-        if np.all(settled):
+        if settled.all():
             iterations[active] -= 1
             break
         keep = ~settled
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
         r, t = _apply_step(dq * structure.colscale, r, t, cur, structure,
-                           attraction_rot[active], options)
+                           attraction_rot[active] if options.joint_limits else None,
+                           options)
         rot[active] = r
         tra[active] = t
     unsorted = np.empty_like(residual)
@@ -889,9 +860,9 @@ def _pushed_through(structure: _Structure, active: np.ndarray, err: np.ndarray,
     bound (``err`` and ``jac``: every task's rows, acting or not, of the ``active``
     frames)."""
     out = np.zeros_like(idle)
-    for ti in np.flatnonzero(idle.any(axis=0)):
+    for ti in idle.any(axis=0).nonzero()[0]:
         task = structure.tasks[ti]
-        frames = np.flatnonzero(idle[:, ti])
+        frames = idle[:, ti].nonzero()[0]
         rows = slice(structure.row0[ti], structure.row0[ti] + task.rows)
         after = err[frames, rows] - np.einsum("bkn,bn->bk", jac[frames, rows], dq[frames])
         out[frames, ti] = task.kind.acts(task.goal[active[frames]], after)
@@ -939,7 +910,7 @@ def _levels_step(err: np.ndarray, jac: np.ndarray, rows_on: np.ndarray, rows: _R
     behind = np.zeros(nb)                   # how far the higher levels are from being met
     for level in rows.levels[:1] if polishing else rows.levels:
         # the frames where this level has a task: elsewhere its rows are zero and add nothing
-        on = np.flatnonzero((w[:, level] > 0).any(axis=1))
+        on = (w[:, level] > 0).any(axis=1).nonzero()[0]
         some = len(on) > 0
         if len(on) == nb:
             on = slice(None)                # every frame: views instead of copies
@@ -997,7 +968,7 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
     dz[:, 0:3] = home_root - root
-    dz[:, 3:] = quat_to_rotvec(_qmul(home, qconj(cur))).reshape(nb, -1)
+    dz[:, 3:] = quat_to_rotvec(qmul_small(home, qconj(cur))).reshape(nb, -1)
     dz *= gain / colscale
     ns_lam2 = (options.nullspace_damping * options.scale) ** 2
     coef = _solve(gram + ns_lam2 * _eye(gram.shape[1]), stacked @ dz[..., None])
@@ -1005,12 +976,12 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
 
 
 def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
-                structure: _Structure, home: np.ndarray,
+                structure: _Structure, home: np.ndarray | None,
                 options: IKOptions) -> tuple[np.ndarray, np.ndarray]:
     """The posture ``(r, t)`` after the step ``dq (b, N)``: the root moves, the unknown
     joints (``cur (b, C, 4)`` now) turn, the whole step scaled down so that no joint turns
     more than ``options.step_cap``, and limited joints are held within their angle of the
-    attraction posture ``home (b, J, 4)``."""
+    attraction posture ``home (b, J, 4)`` (not needed without joint limits)."""
     joints = structure.joints
     nb = len(dq)
     t = t.copy()
@@ -1023,7 +994,7 @@ def _apply_step(dq: np.ndarray, r: np.ndarray, t: np.ndarray, cur: np.ndarray,
     shrink = np.minimum(1.0, options.step_cap / np.maximum(biggest, 1e-12))
     step = step * shrink[:, None, None]
     t[:, 0] += dq[:, 0:3] * (shrink[:, None] - 1.0)
-    new = qnormalize(_qmul(rotvec_to_quat(step), cur))
+    new = qnormalize(qmul_small(rotvec_to_quat(step), cur))
     for j, limit in options.joint_limits:
         if j in structure.col:
             k = int(np.searchsorted(joints, j))

@@ -5,9 +5,10 @@ are the *window* ``[lo, hi]`` covering the changed constraints' old and new ``[s
 smooth_out]`` (a drag of one side's handles reaches that side only, :func:`affected_frames`).
 :func:`window_problem` cuts the constraint set down to what decides the window's frames: the
 constraints overlapping it, plus those active at the pass-one key postures that its ramps take
-(a ramp in the window eases from the posture at its ``smooth_in``, or towards the ones at its
-``end`` and ``smooth_out``, section 3.3), each with its active range clipped to the frames
-``[L, H]`` spanning the window and those keys. Every frame of the window then sees the same
+(a ramp in the window eases in the correction its constraints make at its ``start``, or out
+the one at its ``end``, section 3.3; the posture without them there starts from the frame
+next to the key inside the ramp), each with its active range clipped to the frames ``[L,
+H]`` spanning the window and those keys. Every frame of the window then sees the same
 tasks and the same key postures as in the full solve, so the window is the full solve's (to
 the solver's tolerance; a test checks it); :func:`splice` puts its frames into the motion shown
 before the change.
@@ -93,10 +94,15 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
     """The constraints that decide frames ``lo..hi``, cut to the frames that matter.
 
     * every enabled constraint overlapping ``[lo, hi]``;
-    * the key frames its ramps need from pass one, where a ramp reaches into the window: an
-      input ramp its ``smooth_in``, an output ramp its ``end`` and ``smooth_out``;
-      ``[L, H]`` spans the window and those keys;
-    * every other enabled constraint active at one of those keys (it shapes that key posture);
+    * the key frames its ramps need from pass one, where a ramp eases frames of the window
+      (:mod:`~engine.correction.enforcement`: a ramp adds the correction its constraints
+      make at its key frame, ``start`` of an input ramp, ``end`` of an output one), and the
+      frame next to each inside the ramp (``start - 1``, ``end + 1``), whose correction the
+      key posture without the ramp's constraints starts from; ``[L, H]`` spans the window
+      and those frames;
+    * every other enabled constraint active at one of those frames (it shapes that key
+      posture, or the one it starts from), with its ramp if that is keyed on the same key
+      frame and side (the ramps keyed on one frame are taken off it in turn);
     * each constraint's active range clipped to ``[L, H]``, dropping a ramp that lies wholly
       outside (a clipped end has no ramp: what lies beyond does not reach the window).
 
@@ -111,12 +117,17 @@ def _window_ranges(constraints: list, lo: int, hi: int) -> list:
     """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
     problem)``."""
     inside = overlapping(constraints, lo, hi)
-    keys = set()
+    # the ramps whose eased frames meet the window (a ramp of fewer than two frames eases
+    # nothing, enforcement._ramp_units): their key frames by side, and the frames next to
+    # them inside the ramp, whose corrections the key postures without them start from
+    rising, falling, keys = set(), set(), set()
     for c in inside:
-        if c.smooth_in < c.start and c.smooth_in <= hi and c.start >= lo:
-            keys.add(c.smooth_in)
-        if c.end < c.smooth_out and c.end <= hi and c.smooth_out >= lo:
-            keys.update((c.end, c.smooth_out))
+        if c.start - c.smooth_in >= 2 and c.smooth_in + 1 <= hi and c.start - 1 >= lo:
+            rising.add(c.start)
+            keys.update((c.start - 1, c.start))
+        if c.smooth_out - c.end >= 2 and c.end + 1 <= hi and c.smooth_out - 1 >= lo:
+            falling.add(c.end)
+            keys.update((c.end, c.end + 1))
     outside_keys = sorted(k for k in keys if not lo <= k <= hi)
     L, H = min([lo, *keys]), max([hi, *keys])
     chosen = list(inside)
@@ -128,8 +139,15 @@ def _window_ranges(constraints: list, lo: int, hi: int) -> list:
         if not any(c is x for x in chosen):
             continue
         si, st, en, so = c.range
-        if c not in inside:                     # only its active frames at the keys
-            si, so = st, en
+        if c not in inside:
+            # only its active frames at the keys, and a ramp keyed on a key frame on the
+            # same side: ramps keyed on one frame are taken off its posture in turn, the
+            # shortest first (enforcement._virtual_frames), so it decides the posture the
+            # window's ramp starts from
+            if st not in rising:
+                si = st
+            if en not in falling:
+                so = en
         if st < L:
             si = st = min(L, en)
         if en > H:
@@ -205,7 +223,10 @@ class WindowSolver:
         cut = Motion._trusted(composed.skeleton, composed.rotations[first:last + 1],
                               composed.translations[first:last + 1], composed.frame_time,
                               composed.name)
-        part = enforce(cut, shifted, options=self.options, pins=True, still=self.still).motion
+        # frames lo..hi alone are spliced: the rest of [first, last] is solved only where
+        # they depend on it (the ramps' key postures)
+        part = enforce(cut, shifted, options=self.options, pins=True, still=self.still,
+                       frames=(lo - first, hi - first)).motion
         return part, first
 
     def preview(self, constraints: list, base_constraints: list, base_motion):
