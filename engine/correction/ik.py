@@ -542,13 +542,13 @@ def _fk_levels(skeleton: Skeleton, fk_joints: np.ndarray) -> tuple[list, np.ndar
     return levels, skeleton.offsets[fk_joints].T[:, :, None]
 
 
-def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
-                slot: dict) -> tuple[np.ndarray, np.ndarray]:
+def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
+                tra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World rotations ``(4, n, B)`` and positions ``(3, n, B)`` [m] of ``structure.fk_joints``
     (closed under ancestors, sorted by depth: the root first) as component arrays, one depth
     level at a time, from local rotations ``rot (B, J, 4)`` and the translated joints'
-    translations ``tra (B, K, 3)`` (``slot``: each translated joint's place there, as
-    ``structure.fk_moved_slot`` holds it). A level whose joints are not translated turns their
+    translations ``tra (B, K, 3)`` (each translated joint's place there:
+    ``structure.fk_moved_slot``). A level whose joints are not translated turns their
     offsets ``(3, m, 1)`` as they are (broadcast over the batch)."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
@@ -596,13 +596,13 @@ def _point_jacobians(structure: _Structure, positions: np.ndarray,
 
 
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
-              slot: dict, select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
     the task acts there or not, with ``on (B, T)`` (its weight is not zero) and ``acting
     (B, T)`` (on, and for a one-sided task violated). ``select`` picks the frames of the
     tasks' goals that ``rot`` holds (all by default)."""
     B = rot.shape[0]
-    wq, wp = _fk_partial(skeleton, structure, rot, tra, slot)
+    wq, wp = _fk_partial(skeleton, structure, rot, tra)
     positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
     frames = np.empty((len(structure.unknown_parent), B, 3, 3))
     frames[structure.parent_root] = _EYE3
@@ -655,7 +655,7 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
 
 
 def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
-                            tra: np.ndarray, slot: dict, select=None):
+                            tra: np.ndarray, select=None):
     """Errors ``(B, K)`` and Jacobians ``(B, K, N)`` of the tasks at the current posture.
 
     Each task's rows are its kind's error and Jacobian at the posture. Columns: root
@@ -664,7 +664,7 @@ def task_error_and_jacobian(skeleton: Skeleton, structure: _Structure, rot: np.n
     not applied here.
     ``select`` picks the frames of the tasks' goals that ``rot`` holds (all by default).
     """
-    err, jac, _, acting = _evaluate(skeleton, structure, rot, tra, slot, select)
+    err, jac, _, acting = _evaluate(skeleton, structure, rot, tra, select)
     rows = acting[:, np.repeat(np.arange(len(structure.tasks)), np.diff(structure.row0))]
     return np.where(rows, err, 0.0), np.where(rows[:, :, None], jac, 0.0)
 
@@ -730,7 +730,6 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     tasks = [tasks[i] for i in order]
     structure = _Structure(skeleton, tasks, locked, options)
     rows = _Rows(tasks, structure, options)
-    slot = {int(j): k for k, j in enumerate(skeleton.translated)}
     joints = structure.joints
     # joints that move nothing constrained sit at their attraction posture
     rot[:, structure.others] = attraction_rot[:, structure.others]
@@ -750,7 +749,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     attraction_joints = attraction_rot[:, joints]
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
-        err, jac, on, acting = _evaluate(skeleton, structure, r, t, slot, active)
+        err, jac, on, acting = _evaluate(skeleton, structure, r, t, active)
         err_on = np.where(acting[:, rows.task], err, 0.0)
         residual[active] = _task_norms(err_on, structure.row0)
         if it == options.max_iterations:

@@ -689,7 +689,6 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     frame."""
     import scipy.sparse as sparse
     sk = motion.skeleton
-    slot = {int(j): k for k, j in enumerate(sk.translated)}
     group = {jt.index: g for g, jt in enumerate(layout.joints)}
     # per rotated joint and keyed frame, d(turn) / d(rotation vector)
     turn = []
@@ -707,7 +706,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     sizes = {}
     for item, (frames, structure, weight, angular) in enumerate(tasks.items):
         err, jac = task_error_and_jacobian(sk, structure, motion.rotations[frames],
-                                           motion.translations[frames], slot)
+                                           motion.translations[frames])
         B, K = err.shape
         blocks = [(group[a], col) for a, col in
                   [(-1, 0)] + [(int(a), 3 + 3 * k) for k, a in enumerate(structure.joints)]
