@@ -34,7 +34,7 @@ def _image(qtbot, v) -> np.ndarray:
     """The viewport's pixels ``(H, W, 3)`` RGB, after it has drawn what it was last told."""
     v.update()
     qtbot.wait(30)
-    img = v.grabFramebuffer()
+    img = v.render_image()
     arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
         img.height(), img.bytesPerLine() // 4, 4)[:, :img.width(), :3][..., ::-1]
     return arr.astype(int)

@@ -193,7 +193,7 @@ def test_screenshot_of_the_demo(window, qtbot, tmp_path):
     if gl_available():
         # the viewport really drew: orange target bones in the picture
         import numpy as np
-        img = window.viewport.grabFramebuffer()
+        img = window.viewport.render_image()
         arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
             img.height(), img.bytesPerLine() // 4, 4)[..., :3][..., ::-1].astype(int)
         assert np.sum(np.all(np.abs(arr - (242, 153, 64)) < 40, axis=-1)) > 100

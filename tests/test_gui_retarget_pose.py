@@ -483,7 +483,7 @@ def test_esc_and_a_right_click_cancel_a_drag(view, qtbot):
 
 def _ring_pixels_drawn(v) -> list[int]:
     """How many pixels of each ring's colour the view shows."""
-    img = v.grabFramebuffer()
+    img = v.render_image()
     arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
         img.height(), img.bytesPerLine() // 4, 4)[..., :3][..., ::-1].astype(int)
     return [int(np.sum(np.all(np.abs(arr - np.array(c[:3]) * 255) < 40, axis=-1)))

@@ -24,7 +24,7 @@ def view(qtbot):
 
 
 def _pixels(v, rgb, tol=40):
-    img = v.grabFramebuffer()
+    img = v.render_image()
     ptr = img.constBits()
     arr = np.frombuffer(ptr, dtype=np.uint8).reshape(img.height(), img.bytesPerLine() // 4, 4)
     bgr = arr[..., :3][..., ::-1].astype(int)            # Format_RGB32 / ARGB32: B G R A
@@ -43,6 +43,39 @@ def test_both_skeletons_are_drawn_where_forward_kinematics_puts_them(view):
     # and they are really on screen: orange (target) and blue (performer) pixels
     assert _pixels(v, (242, 153, 64)) > 200
     assert _pixels(v, (115, 158, 217)) > 200
+
+
+def test_a_picture_taken_right_after_a_change_shows_the_change(view, qtbot):
+    """``render_image`` draws the view for the call: taken straight after a frame change
+    and a camera change (no event processed, no frame swapped in between), it is the
+    picture the view settles on, not the one before (``grabFramebuffer`` of the native GL
+    window read what was drawn last: ``--frame 900 --screenshot`` showed frame 0's camera)."""
+    doc, v = view
+    v.frame_all()
+    qtbot.waitUntil(lambda: not v.render_image().isNull(), timeout=WAIT_MS)
+    before = _array(v.render_image())
+    doc.set_frame(700)
+    v.set_view("top")
+    now = _array(v.render_image())
+    assert np.abs(now - before).sum(axis=-1).astype(bool).mean() > 0.01
+    with qtbot.waitSignal(v.frameSwapped, timeout=WAIT_MS):
+        v.update()
+    settled = _array(v.render_image())
+    np.testing.assert_array_equal(now, settled)
+    # and it shows the target where the top view puts it at frame 700: orange pixels around
+    # the root's projection
+    from motion_composer.app.gui.viewport import to_view
+    root = to_view(doc.pose("target").positions[700, 0]) + v.figures["target"].offset
+    x, y = v.project(root[None])[0]
+    ys, xs = np.nonzero(np.all(np.abs(now - (242, 153, 64)) < 40, axis=-1))
+    assert len(xs) > 50
+    assert np.hypot(xs.mean() - x, ys.mean() - y) < 0.25 * v.width()
+
+
+def _array(img) -> np.ndarray:
+    arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
+        img.height(), img.bytesPerLine() // 4, 4)[:, :img.width(), :3][..., ::-1]
+    return arr.astype(int)
 
 
 def test_the_view_follows_the_frame(view):

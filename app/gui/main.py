@@ -271,7 +271,7 @@ def self_test(app, window) -> str:
         window.viewport.frame_all()
         _wait(app, 0.3)
         viewport = window.viewport
-        image = viewport.grabFramebuffer()
+        image = viewport.render_image()
         if not viewport.isValid() or image.isNull():
             raise SelfTestFailure(f"the viewport has no OpenGL context on the "
                                   f"'{app.platformName()}' platform")

@@ -355,13 +355,13 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def screenshot(self) -> QtGui.QImage:
         """The window as drawn, the 3D view included (a native GL window, which
-        ``QWidget.grab`` leaves black, is painted in from its framebuffer)."""
+        ``QWidget.grab`` leaves black, is drawn for it: :meth:`Viewport.render_image`)."""
         image = self.grab().toImage()
         host = self.viewport.widget
-        if self.viewport.isExposed():
+        view = self.viewport.render_image()
+        if not view.isNull():
             painter = QtGui.QPainter(image)
-            painter.drawImage(host.mapTo(self, QtCore.QPoint(0, 0)),
-                              self.viewport.grabFramebuffer())
+            painter.drawImage(host.mapTo(self, QtCore.QPoint(0, 0)), view)
             painter.end()
         return image
 

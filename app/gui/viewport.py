@@ -1222,6 +1222,25 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._camera_set = (dict(state), self._view_camera())
         self._framed = True
 
+    # ------------------------------------------------------------------ pictures
+    def render_image(self) -> QtGui.QImage:
+        """The view as it stands now, drawn for this call: a null image where it cannot be
+        drawn (no OpenGL, or not shown yet).
+
+        ``grabFramebuffer`` of a ``QOpenGLWindow`` reads the window's framebuffer without
+        drawing it, and a change asks for a frame that Qt draws later (throttled to the
+        display's rate): read after ``update()`` it held whatever was drawn last, so a
+        screenshot taken right after a camera change or a frame change showed the view
+        before it (``--frame 900 --screenshot`` showed the camera of frame 0 with an old
+        pose). Here the scene is drawn into the back buffer and read back before any swap.
+        """
+        if not (self.can_draw and self.isExposed() and self.isValid()):
+            return QtGui.QImage()
+        self.makeCurrent()
+        self.paintGL()
+        GL.glFinish()
+        return self.grabFramebuffer()
+
     # ------------------------------------------------------------------ picking
     def project(self, points_view: np.ndarray) -> np.ndarray:
         """Pixel coordinates (x right, y down) of view-space points ``(N, 3)``."""
