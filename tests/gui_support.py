@@ -24,6 +24,23 @@ def require_gl():
                     "it when Xvfb is installed; the 'offscreen' Qt platform has no GL)")
 
 
+def view_pixels(view):
+    """The viewport's picture as drawn now (:meth:`Viewport.render_image`): ``(H, W, 3)`` RGB
+    integers."""
+    import numpy as np
+    img = view.render_image().convertToFormat(QtGui.QImage.Format.Format_RGB32)
+    arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
+        img.height(), img.bytesPerLine() // 4, 4)                     # B G R A per pixel
+    return arr[:, :img.width(), :3][..., ::-1].astype(int)
+
+
+def count_colour(pixels, rgb, tol: int = 40) -> int:
+    """How many of ``pixels`` (:func:`view_pixels`) are within ``tol`` of ``rgb`` in every
+    channel."""
+    import numpy as np
+    return int(np.sum(np.all(np.abs(pixels - np.asarray(rgb)) < tol, axis=-1)))
+
+
 def demo_document():
     """The bundled CMU walk on the bundled CMU T-pose skeleton, mapped, evaluated."""
     from motion_composer.app.gui.document import Document

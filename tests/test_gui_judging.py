@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gui_support import WAIT_MS, quiet_window, require_gl
+from gui_support import WAIT_MS, quiet_window, require_gl, view_pixels
 
 
 @pytest.fixture()
@@ -34,10 +34,7 @@ def _image(qtbot, v) -> np.ndarray:
     """The viewport's pixels ``(H, W, 3)`` RGB, after it has drawn what it was last told."""
     v.update()
     qtbot.wait(30)
-    img = v.render_image()
-    arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
-        img.height(), img.bytesPerLine() // 4, 4)[:, :img.width(), :3][..., ::-1]
-    return arr.astype(int)
+    return view_pixels(v)
 
 
 def _changed(before: np.ndarray, after: np.ndarray) -> np.ndarray:

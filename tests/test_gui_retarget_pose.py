@@ -483,11 +483,9 @@ def test_esc_and_a_right_click_cancel_a_drag(view, qtbot):
 
 def _ring_pixels_drawn(v) -> list[int]:
     """How many pixels of each ring's colour the view shows."""
-    img = v.render_image()
-    arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
-        img.height(), img.bytesPerLine() // 4, 4)[..., :3][..., ::-1].astype(int)
-    return [int(np.sum(np.all(np.abs(arr - np.array(c[:3]) * 255) < 40, axis=-1)))
-            for c in pose_gizmo.RING_COLORS]
+    from gui_support import count_colour, view_pixels
+    pixels = view_pixels(v)
+    return [count_colour(pixels, np.array(c[:3]) * 255) for c in pose_gizmo.RING_COLORS]
 
 
 def test_the_rings_are_drawn_over_the_figure(view, qtbot):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gui_support import WAIT_MS, demo_document, require_gl
+from gui_support import WAIT_MS, count_colour, demo_document, require_gl, view_pixels
 
 
 @pytest.fixture()
@@ -24,11 +24,7 @@ def view(qtbot):
 
 
 def _pixels(v, rgb, tol=40):
-    img = v.render_image()
-    ptr = img.constBits()
-    arr = np.frombuffer(ptr, dtype=np.uint8).reshape(img.height(), img.bytesPerLine() // 4, 4)
-    bgr = arr[..., :3][..., ::-1].astype(int)            # Format_RGB32 / ARGB32: B G R A
-    return int(np.sum(np.all(np.abs(bgr - rgb) < tol, axis=-1)))
+    return count_colour(view_pixels(v), rgb, tol)
 
 
 def test_both_skeletons_are_drawn_where_forward_kinematics_puts_them(view):
@@ -53,14 +49,14 @@ def test_a_picture_taken_right_after_a_change_shows_the_change(view, qtbot):
     doc, v = view
     v.frame_all()
     qtbot.waitUntil(lambda: not v.render_image().isNull(), timeout=WAIT_MS)
-    before = _array(v.render_image())
+    before = view_pixels(v)
     doc.set_frame(700)
     v.set_view("top")
-    now = _array(v.render_image())
+    now = view_pixels(v)
     assert np.abs(now - before).sum(axis=-1).astype(bool).mean() > 0.01
     with qtbot.waitSignal(v.frameSwapped, timeout=WAIT_MS):
         v.update()
-    settled = _array(v.render_image())
+    settled = view_pixels(v)
     np.testing.assert_array_equal(now, settled)
     # and it shows the target where the top view puts it at frame 700: orange pixels around
     # the root's projection
@@ -71,11 +67,6 @@ def test_a_picture_taken_right_after_a_change_shows_the_change(view, qtbot):
     assert len(xs) > 50
     assert np.hypot(xs.mean() - x, ys.mean() - y) < 0.25 * v.width()
 
-
-def _array(img) -> np.ndarray:
-    arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
-        img.height(), img.bytesPerLine() // 4, 4)[:, :img.width(), :3][..., ::-1]
-    return arr.astype(int)
 
 
 def test_the_view_follows_the_frame(view):
