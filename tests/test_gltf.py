@@ -1006,3 +1006,71 @@ def test_the_retarget_command_takes_a_gltf_character_and_writes_glb(tmp_path, ca
                  "-o", str(bvh)]) == 0
     from motion_composer.engine import read_bvh
     assert read_bvh(bvh).num_frames == 994
+
+
+# =========================================================================== required extensions
+ELY = "target_mixamo_ely.glb"
+
+
+def _ely_requiring(tmp_path, name: str, required: list[str], meshopt: bool = False) -> Path:
+    """Ely (shared data) rewritten to require ``required``; ``meshopt``: laid out as gltfpack
+    and glTF-Transform write EXT_meshopt_compression (every buffer view reads a placeholder
+    buffer without bytes; the extension points at the real, here uncompressed, data)."""
+    js, binary = unpack_glb(shared_path(ELY).read_bytes())
+    js["extensionsUsed"] = list(dict.fromkeys(js.get("extensionsUsed", []) +
+                                              [e for e in required if isinstance(e, str)]))
+    js["extensionsRequired"] = required
+    if meshopt:
+        js["buffers"].append({"byteLength": js["buffers"][0]["byteLength"],
+                              "extensions": {"EXT_meshopt_compression": {"fallback": True}}})
+        for view in js["bufferViews"]:
+            view["extensions"] = {"EXT_meshopt_compression": {
+                "buffer": 0, "byteOffset": view.get("byteOffset", 0),
+                "byteLength": view["byteLength"], "byteStride": 4,
+                "count": view["byteLength"] // 4, "mode": "ATTRIBUTES"}}
+            view["buffer"] = 1
+    path = tmp_path / name
+    path.write_bytes(pack_glb(js, binary))
+    return path
+
+
+def test_meshopt_compressed_file_is_refused_naming_the_extension(tmp_path, capsys):
+    """A file that requires EXT_meshopt_compression (gltfpack -cc, gltf-transform meshopt or
+    optimize) was read as if the extension were absent: its buffer views point at a
+    placeholder buffer, and the error named a missing buffer. It names the extension now,
+    from the reader and from the command line (one line, exit 2)."""
+    path = _ely_requiring(tmp_path, "ely_meshopt.glb",
+                          ["EXT_meshopt_compression", "KHR_mesh_quantization"], meshopt=True)
+    with pytest.raises(GLTFError) as info:
+        read_gltf(path)
+    err = info.value
+    assert err.where == "extensionsRequired" and err.path == str(path)
+    assert "EXT_meshopt_compression" in str(err) and "KHR_mesh_quantization" not in str(err)
+    from motion_composer.app.cli import main
+    code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(path),
+                 "-o", str(tmp_path / "out.bvh")])
+    out, errtext = capsys.readouterr()
+    assert code == 2 and not (tmp_path / "out.bvh").exists()
+    assert len(errtext.strip().splitlines()) == 1
+    assert "EXT_meshopt_compression" in errtext and str(path) in errtext
+
+
+def test_required_extensions_the_reader_handles_or_ignores(tmp_path):
+    """A required extension for appearance only (materials) or for quantized attributes
+    (read as integer accessors) does not stop the reading: the same character as without;
+    an unknown required extension is refused by name."""
+    plain = read_gltf(shared_path(ELY))
+    path = _ely_requiring(tmp_path, "ely_required.glb",
+                          ["KHR_materials_specular", "KHR_texture_transform",
+                           "KHR_mesh_quantization"])
+    again = read_gltf(path)
+    assert again.skeleton.names == plain.skeleton.names
+    assert np.array_equal(again.bind_positions, plain.bind_positions)
+    assert again.num_vertices == plain.num_vertices > 0
+    odd = _ely_requiring(tmp_path, "ely_instanced.glb", ["EXT_mesh_gpu_instancing"])
+    with pytest.raises(GLTFError, match="EXT_mesh_gpu_instancing") as info:
+        read_gltf(odd)
+    assert info.value.where == "extensionsRequired"
+    bad = _ely_requiring(tmp_path, "ely_bad_list.glb", [3])
+    with pytest.raises(GLTFError, match="list of extension names"):
+        read_gltf(bad)

@@ -345,3 +345,72 @@ def test_mapping_files_round_trip_and_bad_files_name_the_problem(tmp_path):
         Correspondence.load(bad)
     with pytest.raises(MappingError, match="no such mapping file"):
         Correspondence.load(tmp_path / "absent.json")
+
+
+def _under_an_armature_node(motion):
+    """``motion``'s skeleton under a new root ``Armature`` at the origin, as the FBX reader
+    gives a character Blender exported (its armature object is a node above the hips)."""
+    from motion_composer.engine.motion import Motion
+    from motion_composer.engine.skeleton import Skeleton
+    sk = motion.skeleton
+    wrapped = Skeleton(names=("Armature",) + sk.names,
+                       parents=np.concatenate([[-1], np.where(sk.parents < 0, 0,
+                                                              sk.parents + 1)]),
+                       offsets=np.vstack([np.zeros(3), sk.offsets]),
+                       channels=(("Xposition", "Yposition", "Zposition", "Zrotation",
+                                  "Xrotation", "Yrotation"),) + sk.channels)
+    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (motion.num_frames, 1, 1)),
+                          motion.rotations], axis=1)
+    tra = np.concatenate([np.zeros((motion.num_frames, 1, 3)), motion.translations], axis=1)
+    assert list(wrapped.translated) == [0] + [j + 1 for j in sk.translated]
+    return Motion(wrapped, rot, tra, motion.frame_time, name=motion.name)
+
+
+def test_a_node_above_the_target_hips_does_not_change_the_root_scale():
+    """Ely read from its glTF and from Blender's FBX of it (the same joints at the same places,
+    the FBX one under an ``Armature`` node at the origin) got different root scales for the
+    CMU walk (0.97 against 1.13): the hip height was measured above the lowest joint, the
+    origin node, instead of the feet the bound posture lifts. The ratio and the hips' path
+    are now the same with and without the node."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character
+    performer = read_bvh(clip_path("cmu_131_01_walk.bvh"))
+    plain = read_character(shared_path("target_mixamo_ely.glb")).rest_motion()
+    results = []
+    for target in (plain, _under_an_armature_node(plain)):
+        corr = automap(target.skeleton, performer.skeleton)
+        assert "Armature" not in corr.pairs
+        binding = bind(performer, target, corr)
+        out = retarget(performer, target, corr)
+        hips = forward_kinematics(out).positions[:, target.skeleton.index["mixamorig:Hips"]]
+        results.append((binding.hip_height_ratio, hips))
+    (ratio, hips), (ratio_wrapped, hips_wrapped) = results
+    assert ratio_wrapped == pytest.approx(ratio, rel=1e-12)
+    np.testing.assert_allclose(hips_wrapped, hips, atol=1e-9)
+
+
+@pytest.mark.parametrize("clip", ["bandai1_walk_normal_001.bvh", "cc3_cmu_02_01_walk.bvh"])
+def test_a_ground_level_root_on_a_node_above_the_hips_scales_by_the_hips(clip):
+    """A performer's ground-level root (Bandai's ``joint_Root``, CC3's) mapped to the node
+    above a target's hips (Blender's FBX ``Armature``) stands on the floor on both sides: it
+    has no height, and the root scale fell back to 1 (the character walked at the
+    performer's pace whatever its size). The ratio is measured at the hips below it: a
+    target twice as large gets twice the ratio, as the same target without the node does."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character
+    from motion_composer.engine.skeleton import Skeleton
+    performer = read_bvh(shared_path(clip))
+    plain = read_character(shared_path("target_mixamo_ely.glb")).rest_motion()
+    ratios = []
+    for size in (1.0, 2.0):
+        sk = plain.skeleton
+        grown = plain.replace(skeleton=Skeleton(names=sk.names, parents=sk.parents,
+                                                offsets=sk.offsets * size,
+                                                channels=sk.channels),
+                              translations=plain.translations * size)
+        target = _under_an_armature_node(grown)
+        corr = automap(target.skeleton, performer.skeleton)
+        assert corr.pairs.get("Armature") == performer.skeleton.names[0]
+        ratios.append(bind(performer, target, corr).hip_height_ratio)
+    assert ratios[0] != pytest.approx(1.0, abs=0.02)
+    assert ratios[1] == pytest.approx(2 * ratios[0], rel=1e-9)

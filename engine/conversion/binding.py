@@ -23,8 +23,11 @@ bone* in the performer's reference pose. Its steps:
   (what the converter turns, see :mod:`engine.conversion`), and the root figures below come
   from the latter.
 * the root: the hip-height ratio (target hips over performer hips, each above its lowest
-  point, in the bound and the reference pose), the default scale of the root's translation,
-  and the joints whose position follows their performer joint's (``driven``).
+  point, in the bound and the reference pose; the target's unmapped nodes above its body
+  root are not points of its body, and a body root on the floor is measured at the mapped
+  joint below it),
+  the default scale of the root's translation, and the joints whose position follows their
+  performer joint's (``driven``).
 """
 from __future__ import annotations
 
@@ -325,8 +328,21 @@ class _Bones:
     roll_by_bones: bool
 
 
-def _height_above_floor(positions: np.ndarray, joint: int) -> float:
-    return float(positions[joint, 1] - positions[:, 1].min())
+def _height_above_floor(positions: np.ndarray, joint: int,
+                        carriers: np.ndarray | None = None) -> float:
+    """How far ``joint`` is above the lowest of ``positions`` (``(J + E, 3)``: joints first,
+    then End Sites), leaving out the joints ``carriers`` (indices) names.
+
+    The target's hips are measured in the bound posture, above its lowest body point. A node
+    above the hips that no performer joint drives carries the body without being part of it:
+    the armature node Blender's FBX exporter puts above the hips sits at the origin, and
+    counted as the floor it measured the hips from there, not from the feet the bound posture
+    lifts (a target bound to a performer's wide stance): Ely read from its glTF and from
+    Blender's FBX of it got hip ratios of 0.97 and 1.13 for the same walk."""
+    keep = np.ones(len(positions), dtype=bool)
+    if carriers is not None:
+        keep[carriers] = False
+    return float(positions[joint, 1] - positions[keep, 1].min())
 
 
 def _align(from_dirs: np.ndarray, to_dirs: np.ndarray, roll_by_bones: bool) -> np.ndarray:
@@ -358,6 +374,53 @@ def _check_mapping(target: Skeleton, performer: Skeleton, corr: Correspondence) 
     for t, p in corr.pairs.items():
         mapped[target.index[t]] = performer.index[p]
     return mapped
+
+
+#: a body root lower than this fraction of the stature stands on the floor (a ground-level
+#: root): the hip height ratio is measured at the mapped joint below it
+_GROUND_LEVEL = 0.05
+
+
+def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, body_root: int,
+                      t_points: np.ndarray, p_points: np.ndarray) -> float:
+    """Target hip height over performer hip height (the default root scale), each above its
+    floor in its bound posture (``t_points``, ``p_points``: joints then End Sites).
+
+    Measured at the body root, or, when that stands on the floor on either side (Bandai's
+    ``joint_Root`` mapped to the ``Armature`` node Blender's FBX puts above the hips), at
+    the shallowest mapped joint under it that does not: a joint on the floor has no height
+    to compare, and the ratio fell back to 1 (a 3 m robot walked at the performer's pace).
+    The target's unmapped nodes above the body root are not points of its body (see
+    :func:`_height_above_floor`); the performer's points are all counted, as before."""
+    t_size = max(float(np.ptp(t_points[:, 1])), 1e-9)
+    p_size = max(float(np.ptp(p_points[:, 1])), 1e-9)
+    depth = np.zeros(tsk.num_joints, dtype=np.intp)
+    for j in range(1, tsk.num_joints):
+        depth[j] = depth[anchor[j]] + 1 if anchor[j] >= 0 else 0
+    below = [j for j in range(tsk.num_joints) if mapped[j] >= 0 and
+             (j == body_root or _crosses_to(tsk, body_root, j))]
+    carriers = []
+    p = tsk.parents[body_root]
+    while p >= 0:
+        carriers.append(p)
+        p = tsk.parents[p]
+    carriers = np.array(carriers, dtype=np.intp)
+    for j in sorted(below, key=lambda k: (depth[k], k)):
+        t_hip = _height_above_floor(t_points, j, carriers)
+        p_hip = _height_above_floor(p_points, int(mapped[j]))
+        if t_hip > _GROUND_LEVEL * t_size and p_hip > _GROUND_LEVEL * p_size:
+            return t_hip / p_hip
+    return 1.0
+
+
+def _crosses_to(skeleton: Skeleton, top: int, joint: int) -> bool:
+    """Whether ``top`` is a strict ancestor of ``joint``."""
+    p = skeleton.parents[joint]
+    while p >= 0:
+        if p == top:
+            return True
+        p = skeleton.parents[p]
+    return False
 
 
 def _nearest_mapped_ancestor(skeleton: Skeleton, mapped: np.ndarray) -> np.ndarray:
@@ -411,10 +474,9 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
         rest_world, rest_positions = posed.rotations[0], posed.positions[0]
     chain_of = _chain_of(tsk, options, aligned_positions)
 
-    t_hip = _height_above_floor(np.concatenate([aligned_positions, bound.end_positions[0]]),
-                                body_root)
-    p_hip = _height_above_floor(p_ref.all_positions, int(mapped[body_root]))
-    ratio = t_hip / p_hip if p_hip > 1e-9 else 1.0
+    ratio = _hip_height_ratio(tsk, mapped, anchor, body_root,
+                              np.concatenate([aligned_positions, bound.end_positions[0]]),
+                              p_ref.all_positions)
     return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
                    rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
                    aligned_world=aligned_world, aligned_local=aligned_local,

@@ -42,7 +42,9 @@ What the reader refuses, with the file and the JSON path (``accessors[12].count`
 truncated GLB, a bad magic or version, chunk lengths that run past the end, malformed JSON,
 missing or short buffers, indices out of range, accessors that overrun their buffer view,
 sparse indices out of range, non-increasing animation times, output counts that do not match
-their inputs. Sparse accessors, strided buffer views, normalized integers, ``matrix`` nodes,
+their inputs, and a file that requires an extension it does not decode (``extensionsRequired``:
+meshopt compression, GPU instancing, ...; required material, texture and light extensions are
+ignored, Draco-compressed primitives are left out with a note, quantized attributes are read). Sparse accessors, strided buffer views, normalized integers, ``matrix`` nodes,
 several skins sharing joints, unnamed joints (``joint_<node>``) and several root joints (joined
 under their common ancestor, or a new ``root``) are supported.
 """
@@ -326,7 +328,39 @@ def _parse_json(raw: bytes, path, where: str) -> dict:
     if asset["version"].split(".")[0] != "2":
         raise GLTFError(f"glTF version {asset['version']!r}; this reader takes glTF 2.x", path,
                         "asset.version")
+    _check_required_extensions(js, path)
     return js
+
+
+#: required extensions the reader handles: Draco-compressed primitives are left out with a
+#: note (the skeleton, skin and animations are read), quantized attributes are integer
+#: accessors (read like any other)
+_HANDLED_EXTENSIONS = frozenset({"KHR_draco_mesh_compression", "KHR_mesh_quantization"})
+#: extensions that change only how a file looks (materials, textures, lights): the reader
+#: reads no appearance, so a file that requires one is read without it
+_APPEARANCE_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_",
+                        "EXT_lights_")
+#: what the reader cannot decode, in words, for the message
+_UNDECODED = {"EXT_meshopt_compression": "meshopt-compressed buffer views",
+              "KHR_meshopt_compression": "meshopt-compressed buffer views"}
+
+
+def _check_required_extensions(js: dict, path) -> None:
+    """Refuse a file that requires an extension the reader does not decode: the spec asks a
+    loader to, and read without it the file gives wrong data (a meshopt-compressed buffer
+    view points at a placeholder buffer that holds no bytes, an instancing extension moves
+    meshes), not an error that names the cause."""
+    required = js.get("extensionsRequired", [])
+    if not isinstance(required, list) or not all(isinstance(e, str) for e in required):
+        raise GLTFError(f"expected a list of extension names, found {required!r}", path,
+                        "extensionsRequired")
+    missing = [e for e in required if e not in _HANDLED_EXTENSIONS
+               and not e.startswith(_APPEARANCE_PREFIXES)]
+    if missing:
+        what = "; ".join(f"{e} ({_UNDECODED[e]})" if e in _UNDECODED else e for e in missing)
+        raise GLTFError(f"the file requires {what}, which this reader does not decode; "
+                        f"expected a glTF file without it (write it again without that "
+                        f"compression or extension)", path, "extensionsRequired")
 
 
 def _parse_container(data: bytes, path) -> tuple[dict, bytes | None]:
