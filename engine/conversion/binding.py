@@ -398,29 +398,14 @@ def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, bod
     for j in range(1, tsk.num_joints):
         depth[j] = depth[anchor[j]] + 1 if anchor[j] >= 0 else 0
     below = [j for j in range(tsk.num_joints) if mapped[j] >= 0 and
-             (j == body_root or _crosses_to(tsk, body_root, j))]
-    carriers = []
-    p = tsk.parents[body_root]
-    while p >= 0:
-        carriers.append(p)
-        p = tsk.parents[p]
-    carriers = np.array(carriers, dtype=np.intp)
+             (j == body_root or body_root in tsk.ancestors(j))]
+    carriers = np.array(tsk.ancestors(body_root), dtype=np.intp)
     for j in sorted(below, key=lambda k: (depth[k], k)):
         t_hip = _height_above_floor(t_points, j, carriers)
         p_hip = _height_above_floor(p_points, int(mapped[j]))
         if t_hip > _GROUND_LEVEL * t_size and p_hip > _GROUND_LEVEL * p_size:
             return t_hip / p_hip
     return 1.0
-
-
-def _crosses_to(skeleton: Skeleton, top: int, joint: int) -> bool:
-    """Whether ``top`` is a strict ancestor of ``joint``."""
-    p = skeleton.parents[joint]
-    while p >= 0:
-        if p == top:
-            return True
-        p = skeleton.parents[p]
-    return False
 
 
 def _nearest_mapped_ancestor(skeleton: Skeleton, mapped: np.ndarray) -> np.ndarray:
