@@ -17,6 +17,9 @@ same readers, automatic map, project and :meth:`Scene.solve`), and one row is pr
   % of stature (rule 1; the test allows 0.1 %), over the performer's planted intervals;
 * ``floor``: the worst breach [mm] of a planted foot joint under its rest height over the
   character's floor (rule 2; positive = below, allowed 1 mm);
+* ``tip``: the same [mm] for the joints below each foot that no performer joint maps (a
+  toe's end joint such as Mixamo's ``*Toe_End``, separate toes): each foot joint stays at or
+  above its own rest height (rule 2); ``-`` where the character has none;
 * ``pop``: the worst angular-speed ratio of ``quality()["pops"]`` with its joint and frame
   (rule 3; allowed 1);
 * ``res``: the largest residual of a metric constraint [mm] (rule 4; allowed 1 mm) and of an
@@ -106,6 +109,7 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
     measure the rules. Returns the row (a dict)."""
     import test_foot_contacts as tfc
     from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.correction.contacts import find_feet
     from motion_composer.engine.describe import stature
     from motion_composer.engine.formats import read_character, read_motion, read_performer
     from motion_composer.engine.kinematics import fk_arrays
@@ -161,10 +165,10 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
             sk = motion.skeleton
             joints = sorted({sk.index[tj] for _, tj, _, _, _, _ in intervals})
             breach, breach_where = 0.0, ""
+            y = fk_arrays(sk, motion.rotations, motion.translations,
+                          end_sites=False).positions[..., 1]
             if joints:
                 floor, heights = tfc.rest_floor_and_heights(target_path, scene.target, joints)
-                y = fk_arrays(sk, motion.rotations, motion.translations,
-                              end_sites=False).positions[..., 1]
                 for _, tj, part, _, s, e in intervals:
                     j = sk.index[tj]
                     k = s + int(np.argmin(y[s:e + 1, j]))
@@ -173,6 +177,28 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
                         breach, breach_where = below, f"{part} {tj} {s}-{e} @{k}"
             row["floor_mm"] = breach * 1000.0
             row["floor_where"] = breach_where
+            # the same rule on the joints below each foot that no performer joint maps (a
+            # toe's end joint, separate toes), over the foot's planted intervals
+            by_performer = {p: t for t, p in scene.correspondence.pairs.items()}
+            below = {}
+            for ankle, toe in find_feet(scene.performer.skeleton):
+                if ankle in by_performer:
+                    t_ankle, t_toe = by_performer[ankle], by_performer.get(toe)
+                    below[ankle] = [k for k in range(sk.num_joints)
+                                    if sk.index[t_ankle] in sk.ancestors(k)
+                                    and sk.names[k] != t_toe]
+            tips = sorted({k for ks in below.values() for k in ks})
+            tip, tip_where = 0.0, ""
+            if tips and intervals:
+                floor, heights = tfc.rest_floor_and_heights(target_path, scene.target, tips)
+                for _, _, part, ankle, s, e in intervals:
+                    for k in below.get(ankle, ()):
+                        f = s + int(np.argmin(y[s:e + 1, k]))
+                        low = float(floor + heights[k] - y[f, k])
+                        if low > tip:
+                            tip, tip_where = low, f"{part} {sk.names[k]} {s}-{e} @{f}"
+            row["tip_mm"] = tip * 1000.0 if tips else None
+            row["tip_where"] = tip_where
             row["stature"] = stature(motion)
             q = solution.report["quality"]
             pops = q["pops"]
@@ -214,11 +240,11 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
 
 
 def _fmt(x, spec, empty="-"):
-    return empty if x is None else format(x, spec)
+    return empty.rjust(len(format(0.0, spec))) if x is None else format(x, spec)
 
 
 HEADER = (f"{'clip':40s} {'target':38s} {'frames':>6s} {'cont':>4s} {'cover':>6s} "
-          f"{'heel%':>7s} {'toe%':>7s} {'floor':>7s} {'pop':>6s} {'pop at':32s} "
+          f"{'heel%':>7s} {'toe%':>7s} {'floor':>7s} {'tip':>6s} {'pop':>6s} {'pop at':32s} "
           f"{'res mm':>7s} {'res deg':>7s} {'s':>6s}  notes")
 
 
@@ -234,6 +260,8 @@ def format_row(row: dict) -> str:
         flags.append("R1toe")
     if (row.get("floor_mm") or 0) > 1.0:
         flags.append("R2")
+    if (row.get("tip_mm") or 0) > 1.0:
+        flags.append("R2tip")
     if (row.get("pop") or 0) > 1.0:
         flags.append("R3")
     if (row.get("res_mm") or 0) > 1.0:
@@ -247,7 +275,8 @@ def format_row(row: dict) -> str:
             f"{row.get('contacts', 0):4d} {_fmt(row.get('cover'), '6.1%')} "
             f"{_fmt(None if row.get('heel') is None else 100 * row['heel'], '7.3f')} "
             f"{_fmt(None if row.get('toe') is None else 100 * row['toe'], '7.3f')} "
-            f"{_fmt(row.get('floor_mm'), '7.1f')} {_fmt(row.get('pop'), '6.2f')} "
+            f"{_fmt(row.get('floor_mm'), '7.1f')} {_fmt(row.get('tip_mm'), '6.1f')} "
+            f"{_fmt(row.get('pop'), '6.2f')} "
             f"{row.get('pop_where', ''):32s} {_fmt(row.get('res_mm'), '7.2f')} "
             f"{_fmt(row.get('res_deg'), '7.2f')} {_fmt(row.get('seconds'), '6.1f')}  {notes}")
 
