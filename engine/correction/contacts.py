@@ -403,7 +403,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
       mapped toe the ankle is pinned over the whole contact and its world orientation is
       held too (the converted orientation at the contact's middle frame);
     * on every frame each held foot joint stays at or above its planted height (a one-sided
-      plane: the floor rule).
+      plane: the floor rule), and so does each joint below a held foot whose height the
+      ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes).
 
     ``ground``: where the feet stand (:func:`target_ground`); by default the direct
     conversion's own (:func:`converted_ground`, on ``floor`` where given).
