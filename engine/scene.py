@@ -39,7 +39,7 @@ from .conversion.composer import compose
 from .conversion.converter import convert
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, floor_constraint
-from .correction.contacts import (contact_constraints, detect_contacts, find_feet,
+from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction.keyfit import solved_keys
@@ -362,9 +362,11 @@ class Scene:
                                        p.correspondence.pairs, p.contact_options,
                                        ground=ground)
         if p.floor is not None:
-            for ankle, toe in find_feet(self.target.skeleton):
-                for joint in (ankle, toe):
-                    if joint:
+            sk = self.target.skeleton
+            for ankle, toe in find_feet(sk):
+                below = [sk.names[k] for k in below_foot(sk, ankle, toe)]
+                for joint in (ankle, toe, *below):
+                    if joint and joint in ground.heights:
                         out.append(floor_constraint(joint, composed.num_frames,
                                                     p.floor + ground.heights[joint]))
         return out

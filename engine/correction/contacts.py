@@ -24,7 +24,7 @@ from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
            "find_feet", "horizontal_drift", "estimate_floor", "target_ground",
-           "converted_ground", "PART_MIN_FRAMES", "PART_HEIGHT"]
+           "converted_ground", "below_foot", "PART_MIN_FRAMES", "PART_HEIGHT"]
 
 #: a part's planted run is this many frames or more (a heel strike lasts a few frames)
 PART_MIN_FRAMES = 3
@@ -251,12 +251,23 @@ def target_ground(target: Motion, feet: list[tuple[str, str | None]], *,
     rest_floor = lowest if sole is None else min(float(sole), lowest)
     heights, flat = {}, {}
     for (ankle, toe), f in zip(feet, chosen):
-        for j in joints[ankle]:
+        for j in joints[ankle] + below_foot(sk, ankle, toe):
             heights[sk.names[j]] = float(y[f, j]) - rest_floor
         a = sk.index[ankle]
         flat[ankle] = (pose.rotations[f, a],
                        pose.positions[f, sk.index[toe]] - pose.positions[f, a] if toe else None)
     return Ground(rest_floor if floor is None else float(floor), heights, flat)
+
+
+def below_foot(skeleton: Skeleton, ankle: str, toe: str | None) -> list[int]:
+    """The joints below a foot other than its ``ankle`` and ``toe`` (indices): a toe's end
+    joint (Mixamo's ``*Toe_End``), separate toes (CC3's five per foot). They are foot joints
+    too: a plant that holds the ankle and the toe joint can still bend the toe's tip into the
+    floor, so the floor rule holds each of them at or above its own rest height."""
+    a = skeleton.index[ankle]
+    held = {a} | ({skeleton.index[toe]} if toe else set())
+    return [k for k in range(skeleton.num_joints)
+            if k not in held and a in skeleton.ancestors(k)]
 
 
 def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
@@ -392,7 +403,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
       mapped toe the ankle is pinned over the whole contact and its world orientation is
       held too (the converted orientation at the contact's middle frame);
     * on every frame each held foot joint stays at or above its planted height (a one-sided
-      plane: the floor rule).
+      plane: the floor rule), and so does each joint below a held foot whose height the
+      ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes).
 
     ``ground``: where the feet stand (:func:`target_ground`); by default the direct
     conversion's own (:func:`converted_ground`, on ``floor`` where given).
@@ -488,8 +500,18 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                                   auto=True, meta={"source": "contact",
                                                    "performer_joint": performer_joint}))
     # the floor rule: each held foot joint at or above its planted height over the floor,
-    # on every frame (one-sided: it acts only where the joint would go lower)
-    for joint in sorted({r[0] for r in runs if r[5] is not None}):
+    # on every frame (one-sided: it acts only where the joint would go lower); so are the
+    # joints below a held foot that the ground knows (a toe's end joint, separate toes),
+    # which follow the ankle and toe's performer joints
+    held = {r[0] for r in runs if r[5] is not None}
+    floors = {joint: pairs[joint] for joint in held}
+    for ankle, toe in feet_t:
+        if ankle in held:
+            for k in below_foot(sk, ankle, toe):
+                name = sk.names[k]
+                if name in ground.heights and name not in floors:
+                    floors[name] = pairs.get(name) or pairs[toe if toe in held else ankle]
+    for joint in sorted(floors):
         height = ground.floor + ground.heights[joint]
         out.append(Constraint(joint=joint, kind="plane",
                               goal={"point": [0.0, height, 0.0], "normal": [0, 1, 0],
@@ -497,7 +519,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                               smooth_in=0, start=0, end=F - 1, smooth_out=F - 1,
                               priority=priority, name=f"floor {joint}", auto=True,
                               meta={"source": "contact", "floor": True,
-                                    "performer_joint": pairs[joint]}))
+                                    "performer_joint": floors[joint]}))
     out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
 
