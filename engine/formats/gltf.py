@@ -44,7 +44,8 @@ missing or short buffers, indices out of range, accessors that overrun their buf
 sparse indices out of range, non-increasing animation times, output counts that do not match
 their inputs, and a file that requires an extension it does not decode (``extensionsRequired``:
 meshopt compression, GPU instancing, ...; required material, texture and light extensions are
-ignored, Draco-compressed primitives are left out with a note, quantized attributes are read). Sparse accessors, strided buffer views, normalized integers, ``matrix`` nodes,
+ignored, Draco-compressed primitives are left out with a note, quantized attributes are
+read). Sparse accessors, strided buffer views, normalized integers, ``matrix`` nodes,
 several skins sharing joints, unnamed joints (``joint_<node>``) and several root joints (joined
 under their common ancestor, or a new ``root``) are supported.
 """
