@@ -146,15 +146,7 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
             intervals, _, _ = tfc._intervals(scene)
             row["intervals"] = len(intervals)
             # the detector's cover of the performer's planted frames (heel intervals by ankle)
-            total = covered = 0
-            for _, _, _, ankle, s, e in intervals:
-                frames = np.arange(s, e + 1)
-                inside = np.zeros(len(frames), dtype=bool)
-                for c in contacts:
-                    if c.joint == ankle:
-                        inside |= (frames >= c.start) & (frames <= c.end)
-                total += len(frames)
-                covered += int(inside.sum())
+            covered, total = tfc.covered_frames(intervals, contacts)
             row["cover"] = covered / total if total else None
             for part in ("heel", "toe"):
                 excess, where = tfc._drift_excess(solved, part)

@@ -159,11 +159,9 @@ def _intervals(scene):
     return out, pos, size
 
 
-def test_the_detector_covers_the_planted_frames(solved):
-    scene, solution, _ = solved
-    intervals, _, _ = _intervals(scene)
-    assert intervals, "the clip has planted feet"
-    contacts = scene.contacts()
+def covered_frames(intervals, contacts) -> tuple[int, int]:
+    """``(covered, total)``: how many frames of the performer's planted ``intervals``
+    (:func:`_intervals`) lie in a detected contact of their foot (by ankle), of how many."""
     total = covered = 0
     for _, _, _, ankle, s, e in intervals:
         frames = np.arange(s, e + 1)
@@ -173,6 +171,14 @@ def test_the_detector_covers_the_planted_frames(solved):
                 inside |= (frames >= c.start) & (frames <= c.end)
         total += len(frames)
         covered += int(inside.sum())
+    return covered, total
+
+
+def test_the_detector_covers_the_planted_frames(solved):
+    scene, solution, _ = solved
+    intervals, _, _ = _intervals(scene)
+    assert intervals, "the clip has planted feet"
+    covered, total = covered_frames(intervals, scene.contacts())
     assert covered >= 0.9 * total, f"{covered} of {total} planted frames in contacts"
 
 
