@@ -352,3 +352,13 @@ def test_a_bad_flag_value_gives_one_line_and_exit_2(capsys, tmp_path, flag, valu
         assert err.count("\n") == 1 and err.startswith("motion-composer: error: ")
         assert words in err, err
     assert not (tmp_path / "x.bvh").exists() and not (tmp_path / "out").exists()
+
+
+def test_the_tolerance_grows_with_a_giant_and_only_with_a_giant():
+    """A task is met below ``tolerance``, or MIN_TOLERANCE of the character's size where that
+    is more: human sizes keep the setting as it is."""
+    from motion_composer.engine.correction.ik import MIN_TOLERANCE
+    assert IKOptions().met_below() == 1e-4
+    assert IKOptions(scale=1.8).met_below() == 1e-4
+    assert IKOptions(scale=60.0).met_below() == pytest.approx(MIN_TOLERANCE * 60.0)
+    assert IKOptions(scale=60.0, tolerance=0.01).met_below() == 0.01

@@ -168,7 +168,12 @@ class IKOptions:
 
     Attributes:
         tolerance: [m] a position or plane task is met below this error (orientation tasks
-            use ``tolerance / scale`` radians). Default 1e-4 (0.1 mm); positive.
+            use ``tolerance / scale`` radians); on a character larger than ``tolerance /
+            MIN_TOLERANCE`` (2 m at the default) at least :data:`MIN_TOLERANCE` times
+            ``scale`` (:meth:`met_below`): a tolerance of 0.1 mm on a 100 m giant (the glTF
+            fox is 105 m tall) is a millionth of it, which a stretched leg converges to so
+            slowly that the lower priorities it gates (a planted foot's orientation) never
+            run. Default 1e-4 (0.1 mm); positive.
         max_iterations: the cap of iterations per frame. Default 60; a whole number >= 0.
         damping: damped least squares lambda of the task levels, as a fraction of
             ``scale``. Larger is steadier near singularities (a stretched leg) and slower to
@@ -235,6 +240,14 @@ class IKOptions:
             object.__setattr__(self, "scale", _checked_number("scale", self.scale, 0.0, None,
                                                               True))
 
+    def met_below(self) -> float:
+        """[m] the error below which a position or plane task is met: ``tolerance``, or
+        :data:`MIN_TOLERANCE` times ``scale`` on a character large enough for that to be
+        more (with ``scale`` unset: ``tolerance``)."""
+        if self.scale is None:
+            return self.tolerance
+        return max(self.tolerance, MIN_TOLERANCE * self.scale)
+
 
 #: (field, lowest, highest or None, lowest excluded) of the real-valued settings
 _NUMBER_RANGES = (("tolerance", 0.0, None, True), ("damping", 0.0, None, True),
@@ -281,6 +294,11 @@ def _checked_limits(limits) -> tuple:
         out[int(joint)] = _checked_number("joint_limits", angle, 0.0, None, False)
     return tuple(sorted(out.items()))
 
+
+#: the tolerance's least share of the character's size (:meth:`IKOptions.met_below`): a
+#: giant's tasks are met at this fraction of its stature, a twentieth of a millimetre per metre
+#: (below the default tolerance on any character up to 2 m, which it leaves alone)
+MIN_TOLERANCE = 5e-5
 
 #: a polishing frame (only the first level acts) is done once its step is below this share
 #: of ``settle``: the first level restored to rounding, as polishing up to the cap would
@@ -685,7 +703,8 @@ class _Rows:
             here = np.flatnonzero([tasks[i].priority == lvl for i in self.task])
             self.levels.append(slice(int(here[0]), int(here[-1]) + 1))
         angular = np.concatenate([[t.kind.angular] * t.rows for t in tasks])
-        self.tol = np.where(angular, options.tolerance / options.scale, options.tolerance)
+        tol = options.met_below()
+        self.tol = np.where(angular, tol / options.scale, tol)
 
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
