@@ -38,7 +38,6 @@ ALLOCATOR = prepare(one_core=True)    # as motion-composer sets itself up
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import os  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402

@@ -28,7 +28,6 @@ from __future__ import annotations
 import json
 import re
 import struct
-from functools import lru_cache
 
 import pytest
 

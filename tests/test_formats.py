@@ -23,7 +23,7 @@ import pytest
 from motion_composer.app.cli import main
 from conftest import BUNDLED_BVH, REPO, SHARED_BVH, clip_path, shared_path
 from motion_composer.engine import formats
-from motion_composer.engine.errors import (BVHError, FBXError, FileFormatError, GLTFError,
+from motion_composer.engine.errors import (FBXError, FileFormatError, GLTFError,
                                            MotionComposerError, UnknownFormatError,
                                            UnsupportedFormatError)
 from motion_composer.engine.formats import (BVH, FBX, FORMATS, GLB, GLTF, HEAD_BYTES, open_filters, output_format,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from motion_composer.app.gui.import_options import ImportOptionsDialog
-from motion_composer.app.gui.qt import QtCore, QtWidgets
+from motion_composer.app.gui.qt import QtWidgets
 from gui_support import quiet_window
 from conftest import clip_path, shared_path
 from detect_cases import renamed, written_in

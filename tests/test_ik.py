@@ -11,7 +11,7 @@ from motion_composer.engine.correction.constraints import Constraint, Constraint
 from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts, horizontal_drift
 from motion_composer.engine.correction.enforcement import enforce
 from motion_composer.engine.correction.ik import IKOptions
-from motion_composer.engine.quaternions import qconj, qmul
+from motion_composer.engine.quaternions import qmul
 from motion_composer.engine.rotations import angle_between
 from ik_fixtures import run_on_bandai, walk_on_bandai, walk_on_holden
 

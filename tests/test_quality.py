@@ -95,7 +95,7 @@ def test_without_constraints_the_direct_conversion_is_measured():
 
 def test_a_hard_switch_is_a_one_frame_ramp_and_the_frames_around_it_are_measured(
         walk_solution):
-    performer, target = read_motion(WALK), read_motion(TPOSE)
+    performer = read_motion(WALK)
     composed = walk_solution.scene.composed
     hand = Constraint("LeftHand", "position", {"point": [0.3, 0.0, 0.3]}, 100, 100, 120, 120)
     assert ramps([hand], composed.num_frames) == [(99, 100), (120, 121)]
