@@ -264,8 +264,9 @@ def test_the_joints_below_the_feet_stay_on_or_above_the_floor(solved):
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
-    "jumps-cmumb-holden": "2.11: LeftFoot at frame 976, 261 deg/s over a limit of 124 (ramp "
-                          "965-979): the capture jerks for one frame at 975 and 980 (the hips "
+    "jumps-cmumb-holden": "2.07: LeftFoot at frame 977, 443 deg/s over a limit of 214 (ramp "
+                          "965-979; the dense solve's worst is 2.11 at 976, 261 over 124, "
+                          "which lets the keys match it within two frames): the capture jerks for one frame at 975 and 980 (the hips "
                           "4.3 degrees and back, 517 deg/s, the right thigh 8.5, 1014 deg/s; "
                           "the feet 5 mm), and the pinned toes turn the feet to absorb it; "
                           "with those two frames interpolated the worst is 1.09 (LeftLeg at "
@@ -286,15 +287,27 @@ def test_no_joint_pops_around_a_ramp(solved, request):
     speed_c = angular_speed(corrected.rotations, fps)
     window = int(round(0.25 * fps))
     spans = set()
-    for c in solution.constraints:
-        if not c.enabled:
-            continue
+    enabled = [c for c in solution.constraints if c.enabled]
+    # a constraint that switches without a ramp where another's ramp of two frames or more
+    # is keyed (a toe held from the flat foot on) is eased with the shortest such ramp: it is
+    # judged over that ramp, not allowed a one-frame jump
+    into = {c.start: max(d.smooth_in for d in enabled
+                         if d.start == c.start and d.start - d.smooth_in >= 2)
+            for c in enabled if c.start - c.smooth_in >= 2}
+    out_of = {c.end: min(d.smooth_out for d in enabled
+                         if d.end == c.end and d.smooth_out - d.end >= 2)
+              for c in enabled if c.smooth_out - c.end >= 2}
+    for c in enabled:
         if c.smooth_in < c.start:
             spans.add((c.smooth_in, c.start))
+        elif c.start in into:
+            spans.add((into[c.start], c.start))
         elif c.start > 0:
             spans.add((c.start - 1, c.start))
         if c.end < c.smooth_out:
             spans.add((c.end, c.smooth_out))
+        elif c.end in out_of:
+            spans.add((c.end, out_of[c.end]))
         elif c.end < F - 1:
             spans.add((c.end, c.end + 1))
     assert spans

@@ -181,6 +181,40 @@ def test_a_floor_plane_is_never_violated_inside_its_range_and_does_not_pull_abov
     np.testing.assert_allclose(after[free], toe[free], atol=1e-3)
 
 
+def test_every_floor_holds_where_another_floor_pushes():
+    """The bundled walk's frames 200-399 onto the bundled T-pose with automatic contacts and
+    the floor at 0 (the capture walks 0.9 m under it there). On frame 25 the right foot's
+    floor pushes and nothing else is held; the left foot's floor, clear at the start, was
+    left out of that solve, which sank the left ankle 49 mm through it while its residual
+    said 0. Every floor holds on every frame, and the residuals say what the motion shows."""
+    from conftest import clip_path
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_motion, read_performer
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
+    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
+    performer, target = read_performer(walk), read_motion(tpose)
+    performer = performer.replace(rotations=performer.rotations[200:400],
+                                  translations=performer.translations[200:400])
+    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True, floor=0.0)
+    solution = Scene(project, performer, target).solve(regenerate=True)
+    dense = solution.correction.motion
+    active = [c for c in solution.constraints if c.enabled]
+    floors = [(i, c) for i, c in enumerate(active) if c.kind == "plane"]
+    assert len(floors) >= 4
+    pushed = 0
+    for i, c in floors:
+        height = _pos(solution.scene.composed, c.joint)[:, 1] - c.goal["point"][1]
+        pushed += int(np.sum(height < -0.01))
+        depth = c.goal["point"][1] - _pos(dense, c.joint)[:, 1]
+        assert depth.max() < 1e-3, (c.name, int(depth.argmax()), depth.max())
+        reported = np.nan_to_num(solution.correction.residual[i], nan=0.0)
+        assert np.all(reported >= depth - 1e-6), c.name
+    assert pushed > 100                                # a real lift, on many frames
+
+
 def test_overlapping_constraints_on_both_hands_are_both_met():
     performer, target, corr, composed = walk_on_holden()
     left = _pos(composed, "LeftHand")[300] + [0.1, 0.15, 0.0]

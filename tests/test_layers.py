@@ -199,16 +199,18 @@ def test_a_jerk_of_the_capture_licenses_no_pop_of_the_keys_elsewhere():
 
 
 def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch):
-    """The bundled walk (frames 700-899) onto the bundled T-pose, automatic contacts, the
+    """The bundled walk (frames 100-299) onto the bundled T-pose, automatic contacts, the
     floor at 0: rounds of added keys leave the largest miss at 2-3 mm. The fit stops after
     STALLS such rounds in a row instead of running every round to the end; run to the end it
     takes more than twice the evaluations and still misses by more than TASK_LIMIT, so the
-    solve keeps the keys that follow the dense curves either way, and they hold the goals."""
+    solve keeps the keys that follow the dense curves either way, and they hold the goals.
+    (Not every stall is final: on frames 200-399, 400-599 and 750-949 of this walk the fit
+    stalls, and run to the end it fits within 0.5 mm in about twice the evaluations.)"""
     from motion_composer.engine.correction import keyfit
     walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
     performer, target = read_performer(walk), read_motion(tpose)
-    performer = performer.replace(rotations=performer.rotations[700:900],
-                                  translations=performer.translations[700:900])
+    performer = performer.replace(rotations=performer.rotations[100:300],
+                                  translations=performer.translations[100:300])
     project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True, floor=0.0)

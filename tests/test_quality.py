@@ -109,6 +109,21 @@ def test_a_hard_switch_is_a_one_frame_ramp_and_the_frames_around_it_are_measured
     assert np.degrees(speed[worst["frame"], joint]) == pytest.approx(worst["speed_deg_s"])
 
 
+def test_a_switch_eased_with_another_ramp_is_judged_over_that_ramp():
+    """A toe held from the flat foot on (no ramp of its own, switched on where the heel's and
+    the flat turn's input ramps end) is eased with the shortest of them (enforcement's
+    _virtual_frames), so the no-pop rule judges it over that ramp; a lone switch, or one next
+    to a ramp of one frame only, is still a one-frame span."""
+    heel = Constraint("LeftFoot", "position", {"point": [0.0, 0.1, 0.0]}, 10, 24, 50, 64)
+    flat = Constraint("LeftFoot", "orientation", {"quaternion": [0, 0, 0, 1]}, 16, 24, 50, 60)
+    toe = Constraint("LeftToeBase", "position", {"point": [0.0, 0.0, 0.1]}, 24, 24, 50, 50)
+    assert ramps([heel, flat, toe], 100) == [(10, 24), (16, 24), (50, 60), (50, 64)]
+    lone = Constraint("RightToeBase", "position", {"point": [0.0, 0.0, 0.1]}, 30, 30, 40, 40)
+    short = Constraint("RightFoot", "position", {"point": [0.0, 0.1, 0.0]}, 29, 30, 40, 41)
+    assert ramps([lone], 100) == [(29, 30), (40, 41)]
+    assert ramps([lone, short], 100) == [(29, 30), (40, 41)]
+
+
 def test_retarget_report_writes_the_quality_figures(tmp_path, capsys):
     report = tmp_path / "report.json"
     code = main(["retarget", str(WALK), "--target", str(TPOSE), "-o", str(tmp_path / "o.bvh"),

@@ -56,18 +56,33 @@ def angular_speed(motion: Motion) -> np.ndarray:
 def ramps(constraints, num_frames: int) -> list[tuple[int, int]]:
     """``(a, b)`` frame spans (``a < b``) over which constraints ease in or out: ``[smooth_in,
     start]`` and ``[end, smooth_out]``; a constraint that switches on or off within the clip
-    without a ramp gives the one-frame span around that switch."""
+    without a ramp gives the shortest ramp of two frames or more keyed on that frame and side
+    (which enforcement eases it with), else the one-frame span around that switch."""
     out = set()
     last = num_frames - 1
-    for c in constraints:
-        if not c.enabled:
-            continue
+    enabled = [c for c in constraints if c.enabled]
+    # the shortest input (output) ramp keyed on each frame: a constraint that switches on
+    # (off) there without a ramp of its own is eased with it (a toe held from the flat foot
+    # on, a heel planted as the foot's flat turn ends; see enforcement._virtual_frames), so
+    # it is judged over that ramp, not allowed a one-frame jump
+    rising: dict[int, int] = {}
+    falling: dict[int, int] = {}
+    for c in enabled:
+        if c.start - c.smooth_in >= 2:
+            rising[c.start] = max(rising.get(c.start, c.smooth_in), c.smooth_in)
+        if c.smooth_out - c.end >= 2:
+            falling[c.end] = min(falling.get(c.end, c.smooth_out), c.smooth_out)
+    for c in enabled:
         if c.smooth_in < c.start:
             out.add((c.smooth_in, c.start))
+        elif c.start in rising:
+            out.add((rising[c.start], c.start))
         elif c.start > 0:
             out.add((c.start - 1, c.start))
         if c.end < c.smooth_out:
             out.add((c.end, c.smooth_out))
+        elif c.end in falling:
+            out.add((c.end, falling[c.end]))
         elif c.end < last:
             out.add((c.end, c.end + 1))
     return sorted(out)
