@@ -198,14 +198,45 @@ def test_a_jerk_of_the_capture_licenses_no_pop_of_the_keys_elsewhere():
     assert not _pops_beyond_the_dense_solve(solution)
 
 
+def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
+    """The bundled walk's frames 750-949 onto the bundled T-pose (automatic contacts, the
+    floor at 0): rounds of added keys bring the largest miss to 0.62 mm, then keys added for
+    smaller misses move others and the fit stalls at 1.75 and 2.24 mm. It returns the keys
+    of its best evaluation within TASK_LIMIT, and the solve keeps them (it kept the
+    dense-following keys before)."""
+    from motion_composer.engine.correction import keyfit
+    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
+    performer, target = read_performer(walk), read_motion(tpose)
+    performer = performer.replace(rotations=performer.rotations[750:950],
+                                  translations=performer.translations[750:950])
+    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True, floor=0.0)
+    solution = Scene(project, performer, target).solve(regenerate=True)
+    stats: dict = {}
+    keys = keyfit.fit_to_tasks(solution.scene.edited, solution.constraints,
+                               solution.correction.rotvecs, solution.correction.root,
+                               stats=stats)
+    largest = stats["adding_misses_m"]
+    assert min(largest) <= keyfit.TASK_LIMIT < largest[-1]         # held, then lost
+    assert stats["worst_task_m"] <= min(largest)
+    errors = _goal_errors(keys.apply(solution.scene.edited), solution.constraints)
+    assert max(errors) <= keyfit.TASK_LIMIT + 1e-6
+    kept = solution.scene.displacement.curves                          # the solve kept them
+    assert kept.keys() == keys.curves.keys()
+    for name, curve in keys.curves.items():
+        assert np.array_equal(kept[name].frames, curve.frames), name
+        np.testing.assert_allclose(kept[name].values, curve.values, atol=1e-12, rtol=0)
+
+
 def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch):
     """The bundled walk (frames 100-299) onto the bundled T-pose, automatic contacts, the
-    floor at 0: rounds of added keys leave the largest miss at 2-3 mm. The fit stops after
-    STALLS such rounds in a row instead of running every round to the end; run to the end it
-    takes more than twice the evaluations and still misses by more than TASK_LIMIT, so the
-    solve keeps the keys that follow the dense curves either way, and they hold the goals.
-    (Not every stall is final: on frames 200-399, 400-599 and 750-949 of this walk the fit
-    stalls, and run to the end it fits within 0.5 mm in about twice the evaluations.)"""
+    floor at 0: rounds of added keys leave the largest miss at 2-3 mm, never within
+    TASK_LIMIT. The fit stops after STALLS such rounds in a row instead of running every
+    round to the end, which takes more than twice the evaluations; the solve then keeps the
+    keys that follow the dense curves, and they hold the goals. (A stall is a bet on time:
+    run to the end, this fit gets within the limit at its last rounds, as do frames 200-399
+    and 400-599 of this walk.)"""
     from motion_composer.engine.correction import keyfit
     walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
     performer, target = read_performer(walk), read_motion(tpose)
@@ -232,13 +263,14 @@ def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch
         run = run + 1 if keyfit.TASK_LIMIT < worst >= best else 0
         best = min(best, worst)
         assert run < k
-    # run to the end, the fit costs more and is still not kept
+    # run to the end, the fit costs more than twice as much (here it then gets within the
+    # limit, 0.7 mm: the stop is a bet on time, and it loses this one)
     monkeypatch.setattr(keyfit, "STALLS", 10 ** 6)
     unstopped: dict = {}
     keyfit.fit_to_tasks(*args, stats=unstopped)
     assert not unstopped["stalled"]
     assert unstopped["iterations"] > 2 * stopped["iterations"]
-    assert unstopped["worst_task_m"] > keyfit.TASK_LIMIT
+    assert stopped["worst_task_m"] > keyfit.TASK_LIMIT
     # the solve kept keys that follow the dense curves: every goal within 1 mm
     errors = _goal_errors(solution.motion, solution.constraints)
     assert errors and max(errors) < 1e-3
