@@ -12,10 +12,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 import json
+import math
 import os
 import sys
 
 from motion_composer.engine import MotionComposerError
+from motion_composer.engine.correction.enforcement import largest_residuals
 from motion_composer.engine.describe import describe_motion, joint_tree_lines
 from motion_composer.engine.units import AXES, UNITS
 
@@ -470,10 +472,8 @@ def cmd_retarget(args) -> int:
         atomic_write(args.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
     note = ""
     if result.correction is not None:
-        worst = max((c["max_residual"] or 0.0 for c in result.report["constraints"]),
-                    default=0.0)
         note = (f", {len(result.constraints)} constraints (largest residual "
-                f"{worst * 1000:.2f} mm)")
+                f"{_residual_text(largest_residuals(result.report['constraints']), 2)})")
     print(f"wrote {args.output}: {written.num_frames} frames at "
           f"{written.fps:.6g} fps onto {written.skeleton.num_joints} joints "
           f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")
@@ -588,10 +588,11 @@ def cmd_batch(args) -> int:
     for s in summaries:
         if s["status"] == "written":
             drift = s.get("contact_drift") or {}
+            largest = {"m": s["max_residual_m"], "rad": s.get("max_residual_rad")}
             extra = (f", contact drift {drift['direct_mean_m'] * 1000:.1f} -> "
                      f"{drift['corrected_mean_m'] * 1000:.2f} mm" if drift else "")
             print(f"  written  {Path(s['clip']).name} -> {s['output']} ({s['frames']} frames, "
-                  f"largest residual {s['max_residual_m'] * 1000:.3f} mm{extra})")
+                  f"largest residual {_residual_text(largest, 3)}{extra})")
         else:
             print(f"  failed   {Path(s['clip']).name}: {s['reason']}")
     if args.summary:
@@ -789,6 +790,15 @@ def _gui(argv: list[str]) -> int:
     if args.self_test:
         return run(self_test=True)
     return run(args.project, demo=args.demo, screenshot=args.screenshot, frame=args.frame)
+
+
+
+def _residual_text(largest: dict, digits: int) -> str:
+    """``0.00 mm`` (metric constraints), with ``, 0.74 deg`` where there are angular ones."""
+    text = f"{largest['m'] * 1000:.{digits}f} mm"
+    if largest.get("rad") is not None:
+        text += f", {math.degrees(largest['rad']):.{digits}f} deg"
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -21,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .correction.enforcement import largest_residuals
 from .errors import MotionComposerError
 
 __all__ = ["Recipe", "recipe_from_project", "process_clip", "run_batch", "output_path",
@@ -179,11 +180,10 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         out = output_path(recipe, clip, out_dir)
         write_bvh(result.motion, out)
-        residuals = [c["max_residual"] for c in result.report["constraints"]
-                     if c["max_residual"] is not None]
+        largest = largest_residuals(result.report["constraints"])
         summary.update(status="written", output=str(out), frames=result.motion.num_frames,
                        constraints=len(result.constraints),
-                       max_residual_m=max(residuals) if residuals else 0.0,
+                       max_residual_m=largest["m"], max_residual_rad=largest["rad"],
                        contact_drift=result.report.get("contact_drift"))
     except MotionComposerError as exc:
         summary["reason"] = " ".join(str(exc).split())

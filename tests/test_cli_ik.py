@@ -45,6 +45,13 @@ def test_auto_contacts_floor_and_report(tmp_path, mapping, capsys):
     assert code == 0, err
     assert "constraints" in text
     data = json.loads(report.read_text())
+    # the largest residual per unit: the contacts' in mm, the flat feet's turns in degrees
+    # (one figure mixed them: 0.013 rad printed as 13 mm)
+    metric = max(c["max_residual"] for c in data["constraints"]
+                 if c["residual_unit"] == "m" and c["max_residual"] is not None)
+    angular = max(c["max_residual"] for c in data["constraints"]
+                  if c["residual_unit"] == "rad" and c["max_residual"] is not None)
+    assert f"(largest residual {metric * 1000:.2f} mm, {np.degrees(angular):.2f} deg)" in text
     assert data["frames"] == 994
     drift = data["contact_drift"]
     assert drift["count"] >= 10

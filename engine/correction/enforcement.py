@@ -67,7 +67,8 @@ from ..kinematics import fk_joints
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize
 
-__all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "CHUNK_FRAMES"]
+__all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "largest_residuals",
+           "CHUNK_FRAMES"]
 
 #: Frames solved together at most: a long clip is solved in chunks of this many frames so
 #: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
@@ -908,4 +909,18 @@ def describe_residuals(correction: Correction, constraints) -> list[dict]:
                     else None,
                     "mean_residual": float(np.nanmean(window)) if np.any(np.isfinite(window))
                     else None})
+    return out
+
+
+def largest_residuals(rows) -> dict:
+    """The largest residual of :func:`describe_residuals` ``rows`` per unit: ``{"m": metres
+    (0.0 without a metric constraint), "rad": radians (None without an angular one)}``. A
+    position and an orientation are not one figure: 0.013 rad is no 13 mm."""
+    out = {"m": 0.0, "rad": None}
+    for row in rows:
+        value = row["max_residual"]
+        if value is None:
+            continue
+        unit = row["residual_unit"]
+        out[unit] = value if out[unit] is None else max(out[unit], value)
     return out
