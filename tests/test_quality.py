@@ -122,6 +122,9 @@ def test_a_switch_eased_with_another_ramp_is_judged_over_that_ramp():
     short = Constraint("RightFoot", "position", {"point": [0.0, 0.1, 0.0]}, 29, 30, 40, 41)
     assert ramps([lone], 100) == [(29, 30), (40, 41)]
     assert ramps([lone, short], 100) == [(29, 30), (40, 41)]
+    # a ramp of one frame is no ramp to enforcement either: the toe goes with the heel's
+    brief = Constraint("LeftToeBase", "position", {"point": [0.0, 0.0, 0.1]}, 23, 24, 50, 51)
+    assert ramps([heel, brief], 100) == [(10, 24), (50, 64)]
 
 
 def test_retarget_report_writes_the_quality_figures(tmp_path, capsys):

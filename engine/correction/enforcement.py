@@ -685,18 +685,19 @@ def _pass_two(problem: _Problem, rot, tra, blended):
 
 
 def _repair_boundaries(units) -> list:
-    """Per place where a ramp's key frame meets the frame next to it inside the ramp (where
-    the tasks held change): ``(key, inner, lo, hi, rising)`` with the longest ramp keyed
-    there (its inner frames ``lo + 1 .. hi - 1``)."""
+    """The places where the tasks held change at a ramp's key frame: per pair of frames
+    ``(a, a + 1)`` with an output ramp keyed on ``a`` or an input ramp keyed on ``a + 1``,
+    ``(a, sides)`` with ``sides`` the longest such ramp on each side, ``(lo, hi, rising)``
+    (its inner frames ``lo + 1 .. hi - 1``)."""
     longest: dict[tuple, tuple] = {}
     for lo, hi, rising, _ in units:
-        key = (hi, rising) if rising else (lo, rising)
+        key = (hi - 1, rising) if rising else (lo, rising)
         if key not in longest or hi - lo > longest[key][1] - longest[key][0]:
             longest[key] = (lo, hi)
-    out = []
-    for (key, rising), (lo, hi) in sorted(longest.items()):
-        out.append((key, key - 1 if rising else key + 1, lo, hi, rising))
-    return out
+    pairs: dict[int, list] = {}
+    for (a, rising), (lo, hi) in sorted(longest.items()):
+        pairs.setdefault(a, []).append((lo, hi, rising))
+    return sorted(pairs.items())
 
 
 def _repair_frames(units, wanted: np.ndarray) -> np.ndarray:
@@ -704,9 +705,9 @@ def _repair_frames(units, wanted: np.ndarray) -> np.ndarray:
     reads for them: the key frame and the frame next to it inside of each ramp with a wanted
     inner frame."""
     out = wanted.copy()
-    for key, inner, lo, hi, _ in _repair_boundaries(units):
-        if wanted[lo + 1:hi].any():
-            out[[key, inner]] = True
+    for a, sides in _repair_boundaries(units):
+        if any(wanted[lo + 1:hi].any() for lo, hi, _ in sides):
+            out[[a, a + 1]] = True
     return out
 
 
@@ -720,48 +721,64 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended):
     ramp's own correction: added to each of the ramp's frames times the ramp's share (the
     longest ramp keyed there), so that the repair flows from the key frame's into the ramp's
     own; the tasks held on those frames are then solved again from there. Returns rot, tra,
-    residuals and iterations of the frames solved again (``None`` where nothing changed)."""
+    residuals, iterations and the mask ``(F,)`` of the frames eased (``None`` where nothing
+    changes); ``rot2`` and ``tra2`` are overwritten."""
     F = problem.num_frames
     base = problem.composed.rotations
     want = problem.wanted
-    jump_rot = np.zeros((0, base.shape[1], 3))
     eased = np.zeros(F, dtype=bool)
     parts = []
-    for key, inner, lo, hi, rising in _repair_boundaries(units):
-        if not (blended[key] or blended[inner]):
+    for a, sides in _repair_boundaries(units):
+        pair = [a, a + 1]
+        if not blended[pair].any():
             continue                          # neither repaired: the blend holds there
-        t = np.arange(lo + 1, hi)
-        if want is not None:
-            t = t[want[t]]
-        if not len(t):
-            continue
-        pair = [key, inner]
         repair = (_offsets(rot2[pair], base[pair]) - _offsets(rot1[pair], base[pair]))
         shift = (tra2[pair, 0] - tra1[pair, 0])
         jump_rot, jump_tra = repair[0] - repair[1], shift[0] - shift[1]
         if not (np.any(jump_rot != 0.0) or np.any(jump_tra != 0.0)):
             continue
-        s = smoothstep((t - lo) / (hi - lo))
-        parts.append((t, s if rising else 1.0 - s, jump_rot, jump_tra))
-        eased[t] = True
+        # an input ramp on the left eases the frames before towards the repair after, an
+        # output ramp on the right the frames after towards the repair before; with both
+        # (a toe let go on the frame before the other heel is planted) each takes half,
+        # else each would take the whole jump and the two frames would swap their repairs
+        half = 1.0 / len(sides)
+        for lo, hi, rising in sides:
+            t = np.arange(lo + 1, hi)
+            if want is not None:
+                t = t[want[t]]
+            if not len(t):
+                continue
+            s = smoothstep((t - lo) / (hi - lo))
+            share = -half * s if rising else half * (1.0 - s)
+            parts.append((t, share, jump_rot, jump_tra))
+            eased[t] = True
     if not parts:
         return None
-    frames = np.flatnonzero(eased)
-    where = np.full(F, -1, dtype=np.intp)
-    where[frames] = np.arange(len(frames))
-    total = np.zeros((len(frames), base.shape[1], 3))
-    move = np.zeros((len(frames), 3))
-    for t, share, jr, jt in parts:
-        total[where[t]] += share[:, None, None] * jr[None]
-        move[where[t]] += share[:, None] * jt[None]
+    # the eased start postures, written into rot2 and tra2 (read above, not needed after),
+    # a chunk of frames at a time: bounded memory on a long clip
     from .ik import rotvec_to_quat
-    rot, tra = rot2.copy(), tra2.copy()
-    offset = _offsets(rot2[frames], base[frames]) + total
-    turned = np.any(total != 0.0, axis=-1)
-    r = rot[frames]
-    r[turned] = qnormalize(qmul(rotvec_to_quat(offset[turned]), base[frames][turned]))
-    rot[frames] = r
-    tra[frames, 0] += move
+    rot, tra = rot2, tra2
+    first = np.array([t[0] for t, _, _, _ in parts])
+    last = np.array([t[-1] for t, _, _, _ in parts])
+    frames = np.flatnonzero(eased)
+    for lo in range(0, len(frames), problem.chunk_frames):
+        f = frames[lo:lo + problem.chunk_frames]
+        where = np.full(F, -1, dtype=np.intp)
+        where[f] = np.arange(len(f))
+        total = np.zeros((len(f), base.shape[1], 3))
+        move = np.zeros((len(f), 3))
+        for k in np.flatnonzero((last >= f[0]) & (first <= f[-1])):
+            t, share, jr, jt = parts[k]
+            inside = (t >= f[0]) & (t <= f[-1])
+            total[where[t[inside]]] += share[inside, None, None] * jr[None]
+            move[where[t[inside]]] += share[inside, None] * jt[None]
+        here = base[f]
+        offset = _offsets(rot[f], here) + total
+        turned = np.any(total != 0.0, axis=-1)
+        r = rot[f]
+        r[turned] = qnormalize(qmul(rotvec_to_quat(offset[turned]), here[turned]))
+        rot[f] = r
+        tra[f, 0] += move
     # the entries over every blended frame, as pass two's: the same task slots, so that a
     # solve of some frames (``problem.wanted``) gives the same values bit for bit
     entries = _where_needed(problem, _restricted(_active_entries(problem.cons), blended), rot,

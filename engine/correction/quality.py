@@ -56,8 +56,9 @@ def angular_speed(motion: Motion) -> np.ndarray:
 def ramps(constraints, num_frames: int) -> list[tuple[int, int]]:
     """``(a, b)`` frame spans (``a < b``) over which constraints ease in or out: ``[smooth_in,
     start]`` and ``[end, smooth_out]``; a constraint that switches on or off within the clip
-    without a ramp gives the shortest ramp of two frames or more keyed on that frame and side
-    (which enforcement eases it with), else the one-frame span around that switch."""
+    without a ramp (or with a ramp of one frame) gives the shortest ramp of two frames or more
+    keyed on that frame and side (which enforcement eases it with), else the one-frame span
+    around that switch."""
     out = set()
     last = num_frames - 1
     enabled = [c for c in constraints if c.enabled]
@@ -73,13 +74,13 @@ def ramps(constraints, num_frames: int) -> list[tuple[int, int]]:
         if c.smooth_out - c.end >= 2:
             falling[c.end] = min(falling.get(c.end, c.smooth_out), c.smooth_out)
     for c in enabled:
-        if c.smooth_in < c.start:
+        if c.start - c.smooth_in >= 2:
             out.add((c.smooth_in, c.start))
-        elif c.start in rising:
+        elif c.start in rising:               # no ramp, or one of a frame: eased with it
             out.add((rising[c.start], c.start))
         elif c.start > 0:
             out.add((c.start - 1, c.start))
-        if c.end < c.smooth_out:
+        if c.smooth_out - c.end >= 2:
             out.add((c.end, c.smooth_out))
         elif c.end in falling:
             out.add((c.end, falling[c.end]))
