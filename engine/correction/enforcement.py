@@ -605,7 +605,16 @@ def _pass_one(problem: _Problem):
                                                virtual.composed.rotations,
                                                virtual.composed.translations, only=needed)
     if not clip.all():
-        _start_from_inner(virtual.composed, rot_v, tra_v, inner, ~clip)
+        # a key posture without its ramps that holds no task at all is the composed posture
+        # itself: started from its neighbour's correction it would stay there, unsolved, and
+        # keep what the neighbour holds and it does not (a toe let go on frame 138 of the
+        # CC3 walk onto the fox while the other foot is planted on 139: the planted foot's
+        # correction, 9 degrees of the leg, taken off at 138 and eased back in over the
+        # toe's ramp: a turn of 9 degrees in one frame)
+        held = np.zeros(len(src), dtype=bool)
+        for _, frames, _ in entries:
+            held[frames] = True
+        _start_from_inner(virtual.composed, rot_v, tra_v, inner, ~clip & held)
         # each from its start, in the paper's scheme too; solved into rot_v, tra_v
         _, _, residual_k, iters_k = _solve(
             dataclasses.replace(virtual, previous=np.full(len(src), -1, np.intp)),
