@@ -67,3 +67,21 @@ def run_on_bandai():
     target = read_bvh(shared_path("bandai1_walk_normal_001.bvh"))
     corr = Correspondence(MB_TO_BANDAI)
     return performer, target, corr, retarget(performer, target, corr)
+
+
+def walk_window_on_tpose(lo: int, hi: int):
+    """The bundled CMU walk's frames ``lo .. hi - 1`` onto the bundled T-pose, as
+    ``motion-composer retarget --auto-contacts --floor 0`` solves it (the capture walks
+    0.9 m under that floor on some of its frames): the :class:`Solution`."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_motion, read_performer
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
+    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
+    performer, target = read_performer(walk), read_motion(tpose)
+    performer = performer.replace(rotations=performer.rotations[lo:hi],
+                                  translations=performer.translations[lo:hi])
+    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True, floor=0.0)
+    return Scene(project, performer, target).solve(regenerate=True)

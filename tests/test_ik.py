@@ -13,7 +13,7 @@ from motion_composer.engine.correction.enforcement import enforce
 from motion_composer.engine.correction.ik import IKOptions
 from motion_composer.engine.quaternions import qmul
 from motion_composer.engine.rotations import angle_between
-from ik_fixtures import run_on_bandai, walk_on_bandai, walk_on_holden
+from ik_fixtures import run_on_bandai, walk_on_bandai, walk_on_holden, walk_window_on_tpose
 
 
 def _pos(motion, joint):
@@ -187,19 +187,7 @@ def test_every_floor_holds_where_another_floor_pushes():
     floor pushes and nothing else is held; the left foot's floor, clear at the start, was
     left out of that solve, which sank the left ankle 49 mm through it while its residual
     said 0. Every floor holds on every frame, and the residuals say what the motion shows."""
-    from conftest import clip_path
-    from motion_composer.engine.conversion.automap import automap
-    from motion_composer.engine.formats import read_motion, read_performer
-    from motion_composer.engine.project import Project, Source
-    from motion_composer.engine.scene import Scene
-    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
-    performer, target = read_performer(walk), read_motion(tpose)
-    performer = performer.replace(rotations=performer.rotations[200:400],
-                                  translations=performer.translations[200:400])
-    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True, floor=0.0)
-    solution = Scene(project, performer, target).solve(regenerate=True)
+    solution = walk_window_on_tpose(200, 400)
     dense = solution.correction.motion
     active = [c for c in solution.constraints if c.enabled]
     floors = [(i, c) for i, c in enumerate(active) if c.kind == "plane"]

@@ -205,14 +205,8 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     of its best evaluation within TASK_LIMIT, and the solve keeps them (it kept the
     dense-following keys before)."""
     from motion_composer.engine.correction import keyfit
-    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
-    performer, target = read_performer(walk), read_motion(tpose)
-    performer = performer.replace(rotations=performer.rotations[750:950],
-                                  translations=performer.translations[750:950])
-    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True, floor=0.0)
-    solution = Scene(project, performer, target).solve(regenerate=True)
+    from ik_fixtures import walk_window_on_tpose
+    solution = walk_window_on_tpose(750, 950)
     stats: dict = {}
     keys = keyfit.fit_to_tasks(solution.scene.edited, solution.constraints,
                                solution.correction.rotvecs, solution.correction.root,
@@ -238,14 +232,8 @@ def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch
     run to the end, this fit gets within the limit at its last rounds, as do frames 200-399
     and 400-599 of this walk.)"""
     from motion_composer.engine.correction import keyfit
-    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
-    performer, target = read_performer(walk), read_motion(tpose)
-    performer = performer.replace(rotations=performer.rotations[100:300],
-                                  translations=performer.translations[100:300])
-    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True, floor=0.0)
-    solution = Scene(project, performer, target).solve(regenerate=True)
+    from ik_fixtures import walk_window_on_tpose
+    solution = walk_window_on_tpose(100, 300)
     args = (solution.scene.edited, solution.constraints, solution.correction.rotvecs,
             solution.correction.root)
     stopped: dict = {}
