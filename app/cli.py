@@ -792,7 +792,6 @@ def _gui(argv: list[str]) -> int:
     return run(args.project, demo=args.demo, screenshot=args.screenshot, frame=args.frame)
 
 
-
 def _residual_text(largest: dict, digits: int) -> str:
     """``0.00 mm`` (metric constraints), with ``, 0.74 deg`` where there are angular ones."""
     text = f"{largest['m'] * 1000:.{digits}f} mm"

@@ -676,21 +676,22 @@ def _start_from_inner(composed: Motion, rot, tra, inner, frames) -> None:
     tra[v[shifted], 0] += tra[n[shifted], 0] - base_tra[n[shifted], 0]
 
 
-def _pass_two(problem: _Problem, rot, tra, blended):
-    """The tasks held on the ``blended`` frames solved again from the blend ``rot``, ``tra``
-    (the key postures' corrections added up meet them only nearly). Those frames
-    start next to their solution, so they settle to a tenth of the usual step: their tasks
-    end as close as a solve from afar brings them. Returns rot, tra, residuals, iterations."""
+def _pass_two(problem: _Problem, rot, tra, held, only=None):
+    """The tasks ``held`` (entries, :func:`_active_entries` on the blended frames) solved
+    again from the blend ``rot``, ``tra`` (the key postures' corrections added up meet them
+    only nearly), on the frames of ``only`` (a mask; ``None``: ``problem.wanted``). Those
+    frames start next to their solution, so they settle to a tenth of the usual step: their
+    tasks end as close as a solve from afar brings them. Returns rot, tra, residuals,
+    iterations."""
     options = problem.options
-    entries = _where_needed(problem, _restricted(_active_entries(problem.cons), blended), rot,
-                            tra)
+    entries = _where_needed(problem, held, rot, tra)
     # each from its blend, with a warm start too: the blend is next to the solution, and a
     # start from the frame before's could keep a one-sided task (a floor) holding a joint
     # the blend lifts off it
     closer = dataclasses.replace(problem, options=dataclasses.replace(
         options, settle=options.settle * 0.1),
         previous=np.full(problem.num_frames, -1, dtype=np.intp))
-    return _solve(closer, entries, rot, tra, only=problem.wanted)
+    return _solve(closer, entries, rot, tra, only=problem.wanted if only is None else only)
 
 
 def _repair_boundaries(units) -> list:
@@ -720,7 +721,7 @@ def _repair_frames(units, wanted: np.ndarray) -> np.ndarray:
     return out
 
 
-def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended):
+def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, held):
     """Pass two's repairs eased over the ramps. Pass two solves the tasks held on a ramp's
     frames again from the blend, and the repair it makes there (the result less the blend)
     depends on the tasks held: where a ramp's key frame, inside another ramp, holds a task
@@ -729,7 +730,9 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended):
     0.6 on the CMU walk onto the fox), a turn in one frame. That change is eased like the
     ramp's own correction: added to each of the ramp's frames times the ramp's share (the
     longest ramp keyed there), so that the repair flows from the key frame's into the ramp's
-    own; the tasks held on those frames are then solved again from there. Returns rot, tra,
+    own; the tasks ``held`` on those frames (pass two's) are then solved again from there,
+    as pass two solves them (the same entries over every blended frame, so the same task
+    slots: a solve of some frames gives the same values bit for bit). Returns rot, tra,
     residuals, iterations and the mask ``(F,)`` of the frames eased (``None`` where nothing
     changes); ``rot2`` and ``tra2`` are overwritten."""
     F = problem.num_frames
@@ -772,15 +775,14 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended):
     frames = np.flatnonzero(eased)
     for lo in range(0, len(frames), problem.chunk_frames):
         f = frames[lo:lo + problem.chunk_frames]
-        where = np.full(F, -1, dtype=np.intp)
-        where[f] = np.arange(len(f))
         total = np.zeros((len(f), base.shape[1], 3))
         move = np.zeros((len(f), 3))
         for k in np.flatnonzero((last >= f[0]) & (first <= f[-1])):
             t, share, jr, jt = parts[k]
             inside = (t >= f[0]) & (t <= f[-1])
-            total[where[t[inside]]] += share[inside, None, None] * jr[None]
-            move[where[t[inside]]] += share[inside, None] * jt[None]
+            row = np.searchsorted(f, t[inside])          # t lies in the eased frames f
+            total[row] += share[inside, None, None] * jr[None]
+            move[row] += share[inside, None] * jt[None]
         here = base[f]
         offset = _offsets(rot[f], here) + total
         turned = np.any(total != 0.0, axis=-1)
@@ -788,14 +790,7 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended):
         r[turned] = qnormalize(qmul(rotvec_to_quat(offset[turned]), here[turned]))
         rot[f] = r
         tra[f, 0] += move
-    # the entries over every blended frame, as pass two's: the same task slots, so that a
-    # solve of some frames (``problem.wanted``) gives the same values bit for bit
-    entries = _where_needed(problem, _restricted(_active_entries(problem.cons), blended), rot,
-                            tra)
-    closer = dataclasses.replace(problem, options=dataclasses.replace(
-        problem.options, settle=problem.options.settle * 0.1),
-        previous=np.full(F, -1, dtype=np.intp))
-    rot, tra, residual, iters = _solve(closer, entries, rot, tra, only=eased)
+    rot, tra, residual, iters = _pass_two(problem, rot, tra, held, only=eased)
     return rot, tra, residual, iters, eased
 
 
@@ -889,8 +884,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     if progress is not None:
         progress(0.5)
     t0 = time.perf_counter()
-    rot2, tra2, residual2, iters2 = _pass_two(reading, rot1, tra1, blended)
-    eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended)
+    held = _restricted(_active_entries(cons), blended)
+    rot2, tra2, residual2, iters2 = _pass_two(reading, rot1, tra1, held)
+    eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended, held)
     if eased is not None:
         rot2, tra2, residual3, iters3, again = eased
         residual2 = residual2.outside(again)

@@ -171,7 +171,7 @@ class IKOptions:
             use ``tolerance / scale`` radians); on a character larger than ``tolerance /
             MIN_TOLERANCE`` (2 m at the default) at least :data:`MIN_TOLERANCE` times
             ``scale`` (:meth:`met_below`): a tolerance of 0.1 mm on a 100 m giant (the glTF
-            fox is 105 m tall) is a millionth of it, which a stretched leg converges to so
+            fox is 61 m tall) is a millionth of it, which a stretched leg converges to so
             slowly that the lower priorities it gates (a planted foot's orientation) never
             run. Default 1e-4 (0.1 mm); positive.
         max_iterations: the cap of iterations per frame. Default 60; a whole number >= 0.
