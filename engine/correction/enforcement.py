@@ -84,6 +84,25 @@ STILL = 1e-12
 #: moved by mistake, whose corrections would pile up)
 MAX_OVERLAPPING_RAMPS = 8
 
+#: pass two's repairs are eased over the ramps (:func:`_ease_repairs`) at most this many
+#: times: the solve after each easing undoes part of it where the two frames of a boundary
+#: hold different tasks (one goal let go on frame 120, another held from 121: each frame's
+#: solve pulls the posture back towards its own goal), so the easing is repeated on the
+#: boundaries where the repair still jumps by more than :data:`EASE_AGAIN`
+EASE_ROUNDS = 8
+
+#: [rad] a repair that still changes by more than this between a ramp's key frame and its
+#: neighbour (at any joint; the root's shift as this fraction of the character's size), and
+#: by more than :data:`EASE_SHARE` of the composed motion's own turn in a frame there, is
+#: eased again (:func:`_still_jumps`)
+EASE_AGAIN = np.radians(0.25)
+EASE_SHARE = 0.25
+
+#: a boundary is eased again only while each easing shrinks its repair's jump (rotation
+#: vectors, the root's shift over the character's size) to at most this share of its size
+#: before
+EASE_SHRINK = 0.9
+
 
 @dataclass(frozen=True, eq=False)
 class Correction:
@@ -317,10 +336,12 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     task goals), as :func:`_where_needed` leaves them, each from the attraction posture, or
     from ``start`` (rot, tra), which then receives the solved frames in place (a second
     solve over a long clip's arrays costs no copy of them). Entries share task slots where
-    they do not overlap in time, so all frames form one batch. ``only`` (a mask ``(F,)``,
-    batch solves only) solves those of the frames alone: the slots are assigned over every
-    entry's frames first, so that the frames solved get the same tasks, in the same slots,
-    as in the solve of all (each frame of a batch is solved on its own: the same values).
+    they do not overlap in time, so all frames form one batch. ``only`` (a mask ``(F,)``)
+    solves those of the frames alone (with a warm start, only where none starts from a
+    frame left out: pass two's eased repairs, each from its own start): the slots are
+    assigned over every entry's frames first, so that the frames solved get the same tasks,
+    in the same slots, as in the solve of all (each frame of a batch is solved on its own:
+    the same values).
     Returns rot, tra, residual per constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
     rot, tra = (attraction_rot.copy(), attraction_tra.copy()) if start is None else start
@@ -332,7 +353,7 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     covered = np.zeros(F, dtype=bool)
     for slot in slots:
         covered |= slot["weight"] > 0
-    if only is not None and not problem.warm_start:
+    if only is not None:
         covered &= only
     frames = np.flatnonzero(covered)
     if not len(frames):
@@ -710,18 +731,50 @@ def _repair_boundaries(units) -> list:
     return sorted(pairs.items())
 
 
-def _repair_frames(units, wanted: np.ndarray) -> np.ndarray:
+def _repair_frames(units, wanted: np.ndarray, rounds: int = 1) -> np.ndarray:
     """``wanted`` (a mask ``(F,)``) and the frames whose pass-two repair :func:`_ease_repairs`
     reads for them: the key frame and the frame next to it inside of each ramp with a wanted
-    inner frame."""
+    inner frame; over ``rounds`` easings, those frames' own (each round reads the frames the
+    round before eased)."""
     out = wanted.copy()
-    for a, sides in _repair_boundaries(units):
-        if any(wanted[lo + 1:hi].any() for lo, hi, _ in sides):
-            out[[a, a + 1]] = True
+    for _ in range(rounds):
+        more = out.copy()
+        for a, sides in _repair_boundaries(units):
+            if any(out[lo + 1:hi].any() for lo, hi, _ in sides):
+                more[[a, a + 1]] = True
+        if np.array_equal(more, out):
+            break
+        out = more
     return out
 
 
-def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, held):
+def _still_jumps(problem: _Problem, a: int, jump_rot, jump_tra) -> bool:
+    """Whether a repair's jump between frames ``a`` and ``a + 1`` (rotation vectors ``(J,
+    3)``, the root's shift ``(3,)``) is still worth easing again: a joint turns by more than
+    :data:`EASE_AGAIN`, and by more than :data:`EASE_SHARE` of the composed motion's fastest
+    turn of that joint in one frame within a quarter second (:data:`~.quality.POP_WINDOW`),
+    or the root shifts by more than :data:`EASE_AGAIN` times the character's size and that
+    share of the composed root's fastest step. A jump small against the motion's own turns
+    there is lost in them, and each round of easing costs a solve of the ramp's frames."""
+    from .quality import POP_WINDOW
+    composed = problem.composed
+    w = max(1, int(round(POP_WINDOW * composed.fps)))
+    lo, hi = max(0, a - w), min(problem.num_frames, a + w + 2)
+    rot, tra = composed.rotations[lo:hi], composed.translations[lo:hi, 0]
+    if hi - lo < 2:
+        return False
+    d = qmul(rot[1:], qconj(rot[:-1]))
+    turn = 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3])).max(axis=0)
+    step = np.linalg.norm(np.diff(tra, axis=0), axis=-1).max()
+    size = problem.options.scale
+    if np.any(np.linalg.norm(jump_rot, axis=-1) > np.maximum(EASE_AGAIN, EASE_SHARE * turn)):
+        return True
+    return bool(np.linalg.norm(jump_tra) > max(EASE_AGAIN * size, EASE_SHARE * step))
+
+
+def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, held,
+                  again: bool = False, want: np.ndarray | None = None,
+                  history: dict | None = None):
     """Pass two's repairs eased over the ramps. Pass two solves the tasks held on a ramp's
     frames again from the blend, and the repair it makes there (the result less the blend)
     depends on the tasks held: where a ramp's key frame, inside another ramp, holds a task
@@ -732,12 +785,18 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, hel
     longest ramp keyed there), so that the repair flows from the key frame's into the ramp's
     own; the tasks ``held`` on those frames (pass two's) are then solved again from there,
     as pass two solves them (the same entries over every blended frame, so the same task
-    slots: a solve of some frames gives the same values bit for bit). Returns rot, tra,
-    residuals, iterations and the mask ``(F,)`` of the frames eased (``None`` where nothing
-    changes); ``rot2`` and ``tra2`` are overwritten."""
+    slots: a solve of some frames gives the same values bit for bit). Only the boundaries
+    whose repair jumps at all are eased (with ``again``: by more than :func:`_still_jumps`
+    allows), on the frames of ``want`` (a mask ``(F,)``; ``None``: all).
+
+    ``history`` (updated) holds per boundary the size of its jump in the round before: a
+    boundary whose jump the last easing did not shrink to :data:`EASE_SHRINK` of it is left
+    as it is.
+    Returns rot, tra, residuals, iterations and the mask ``(F,)`` of the frames eased
+    (``None`` where nothing changes); ``rot2`` and ``tra2`` are overwritten."""
     F = problem.num_frames
     base = problem.composed.rotations
-    want = problem.wanted
+    size = problem.options.scale
     eased = np.zeros(F, dtype=bool)
     parts = []
     for a, sides in _repair_boundaries(units):
@@ -747,8 +806,18 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, hel
         repair = (_offsets(rot2[pair], base[pair]) - _offsets(rot1[pair], base[pair]))
         shift = (tra2[pair, 0] - tra1[pair, 0])
         jump_rot, jump_tra = repair[0] - repair[1], shift[0] - shift[1]
-        if not (np.any(jump_rot != 0.0) or np.any(jump_tra != 0.0)):
+        if again:
+            if not _still_jumps(problem, a, jump_rot, jump_tra):
+                continue
+        elif not (np.any(jump_rot != 0.0) or np.any(jump_tra != 0.0)):
             continue
+        if history is not None:
+            # a boundary whose jump the last easing did not shrink by a tenth is left as it
+            # is: the solve after it undoes it all there
+            now = np.sqrt(jump_rot.ravel() @ jump_rot.ravel() + jump_tra @ jump_tra / size ** 2)
+            if a in history and now > EASE_SHRINK * history[a]:
+                continue
+            history[a] = now
         # an input ramp on the left eases the frames before towards the repair after, an
         # output ramp on the right the frames after towards the repair before; with both
         # (a toe let go on the frame before the other heel is planted) each takes half,
@@ -876,7 +945,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)
     reading = problem if wanted is None else dataclasses.replace(
-        problem, wanted=_repair_frames(units, wanted))
+        problem, wanted=_repair_frames(units, wanted, EASE_ROUNDS))
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1, residual, iters, changed, blended = _pass_one(reading)
@@ -886,8 +955,15 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     t0 = time.perf_counter()
     held = _restricted(_active_entries(cons), blended)
     rot2, tra2, residual2, iters2 = _pass_two(reading, rot1, tra1, held)
-    eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended, held)
-    if eased is not None:
+    history: dict = {}
+    for k in range(EASE_ROUNDS):
+        # each round eases the frames the later rounds read, and the wanted ones
+        eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended, held,
+                              k > 0,
+                              None if wanted is None else
+                              _repair_frames(units, wanted, EASE_ROUNDS - 1 - k), history)
+        if eased is None:
+            break
         rot2, tra2, residual3, iters3, again = eased
         residual2 = residual2.outside(again)
         residual2.extend(residual3)
