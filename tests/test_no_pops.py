@@ -110,14 +110,17 @@ def _two_hands(composed):
     return [left, right]
 
 
-def test_a_key_posture_without_its_ramp_that_holds_nothing_is_the_composed_one(monkeypatch):
-    """On frame 120 without the left hand's goal nothing is held: the posture its ramp eases
-    from is the composed one. It started from frame 121's correction (the right hand's) and,
-    with no task to solve, stayed there: the ramp then took the right hand's correction off
-    at 121 and eased it back in (on the CMU walk onto the fox, 9 degrees of the right leg
-    between frames 138 and 139)."""
+def test_the_key_postures_of_a_ramp_hold_the_goals_held_across_it(monkeypatch):
+    """The left hand is let go on frame 120 (ramp out to 135) and the right hand's goal held
+    from 121, across that ramp: both key postures of the left hand's ramp (with and without
+    its goal) hold the right hand's goal too, so that the ramp's correction is what the left
+    hand's goal adds to the right's. Each solved without the other's goal, the corrections
+    added up over the ramps missed both (the test below)."""
     from motion_composer.engine.correction import enforcement
+    from motion_composer.engine.motion import Motion
     _, _, _, composed = walk_on_holden()
+    cons = _two_hands(composed)
+    sk = composed.skeleton
     seen = {}
     blend = enforcement._blend
 
@@ -127,87 +130,33 @@ def test_a_key_posture_without_its_ramp_that_holds_nothing_is_the_composed_one(m
         return blend(problem, rot_v, tra_v, src, units, deltas)
 
     monkeypatch.setattr(enforcement, "_blend", spy)
-    enforce(composed, _two_hands(composed))
+    enforce(composed, cons)
     src, units = seen["src"], seen["units"]
-    out = [without for k, _, without in seen["deltas"] if units[k][:3] == (120, 135, False)]
-    assert len(out) == 1 and src[out[0]] == 120
-    assert np.array_equal(seen["rot_v"][out[0]], composed.rotations[120])
-    assert np.array_equal(seen["tra_v"][out[0]], composed.translations[120])
+    pairs = [(w, wo) for k, w, wo in seen["deltas"] if units[k][:3] == (120, 135, False)]
+    assert len(pairs) == 1
+    w, wo = pairs[0]
+    assert src[w] == src[wo] == 120 and w >= composed.num_frames     # postures of their own
+    pose = Motion._trusted(sk, seen["rot_v"][[w, wo]], seen["tra_v"][[w, wo]],
+                           composed.frame_time, "keys")
+    p = forward_kinematics(pose).positions
+    left, right = (c.goal["point"] for c in cons)
+    for k in (0, 1):
+        assert np.linalg.norm(p[k, sk.index["RightHand"]] - right) < 1e-3
+    assert np.linalg.norm(p[0, sk.index["LeftHand"]] - left) < 1e-3
+    assert np.linalg.norm(p[1, sk.index["LeftHand"]] - left) > 0.05
 
 
 def test_back_to_back_ramps_of_two_goals_ease_without_a_pop():
     """Two goals whose ramps meet back to back (one eased out from frame 120, the other in
-    to 121) ease without a pop. Each frame's pass-two repair holds its own goal (the left
-    hand on 120, the right on 121) and the solve after the easing undoes part of it: eased
-    once, Spine1 turned 1.93 times the limit at 121 (487 deg/s; not eased: 2.31). The
-    easing is repeated where the repair still jumps (enforcement.EASE_ROUNDS)."""
+    to 121) ease without a pop. Each ramp's correction was solved without the other's goal
+    (the left hand's at 120 without the right hand's, held from 121), and the two added up
+    missed both: pass two's repair held the left hand on 120 and the right on 121, and
+    Spine1 turned 1.93 times the limit at 121 (487 deg/s) even with the repair's jump
+    eased. The key postures now hold the goals held on the frame next to them inside the
+    ramp (enforcement._virtual_frames)."""
     performer, _, _, composed = walk_on_holden()
     cons = _two_hands(composed)
     result = enforce(composed, cons)
     q = quality(performer, composed, result.motion, cons, result.residual)
     assert max(c["max_residual"] for c in q["constraints"]) < 1e-3
     assert max(p["ratio"] for p in q["pops"]) <= 1.0, q["pops"][:2]
-
-
-def test_the_repair_is_eased_again_while_it_jumps(monkeypatch):
-    """The back-to-back goals above: each easing shrinks the repair's jump between frames 120
-    and 121 (Spine1's 4.9 degrees by about a fifth a round: each frame's solve after the
-    easing pulls the posture back towards its own goal), so it is eased again, every
-    round of EASE_ROUNDS (the composed spine hardly turns there: any jump shows)."""
-    from motion_composer.engine.correction import enforcement
-    _, _, _, composed = walk_on_holden()
-    jumps = []
-    ease = enforcement._ease_repairs
-
-    def spy(problem, units, rot1, tra1, rot2, tra2, blended, held, *more):
-        base = composed.rotations[[120, 121]]
-        repair = (enforcement._offsets(rot2[[120, 121]], base)
-                  - enforcement._offsets(rot1[[120, 121]], base))
-        jumps.append(np.linalg.norm(repair[0] - repair[1], axis=-1).max())
-        return ease(problem, units, rot1, tra1, rot2, tra2, blended, held, *more)
-
-    monkeypatch.setattr(enforcement, "_ease_repairs", spy)
-    enforce(composed, _two_hands(composed))
-    assert len(jumps) == enforcement.EASE_ROUNDS
-    assert all(b < enforcement.EASE_SHRINK * a for a, b in zip(jumps, jumps[1:]))
-    assert jumps[-1] < 0.4 * jumps[0]
-
-
-def test_a_repair_jump_the_easing_does_not_shrink_is_eased_once():
-    """The CMU walk onto Bandai with automatic contacts and a hand reach (benchmarks/
-    bench_ik.py's job): at the heel planted on frame 489 under the reach the repair jumps
-    0.54 degrees of the hips, and easing it again leaves it so (the solve after it undoes
-    it). No round after the first eases anything there: the rounds cost a solve each."""
-    from motion_composer.engine.conversion import retarget
-    from motion_composer.engine.conversion.automap import automap
-    from motion_composer.engine.correction import enforcement
-    from motion_composer.engine.correction.contacts import contact_constraints, detect_contacts
-    from ik_fixtures import walk_on_bandai
-    performer, target, _, _ = walk_on_bandai()
-    corr = automap(target.skeleton, performer.skeleton)
-    composed = retarget(performer, target, corr)
-    cons = contact_constraints(detect_contacts(performer), performer, composed, corr.pairs)
-    here = forward_kinematics(composed).positions[:, target.skeleton.index["Hand_L"]]
-    cons.append(Constraint("Hand_L", "position", {"point": here[500] + [0.10, 0.15, 0.05]},
-                           460, 480, 520, 540, priority=2, name="hand"))
-    rounds = []
-    ease = enforcement._ease_repairs
-    still = enforcement._still_jumps
-    asked = []
-
-    def spy(*args):
-        out = ease(*args)
-        rounds.append(0 if out is None else int(out[4].sum()))
-        return out
-
-    def jumps(problem, a, jump_rot, jump_tra):
-        out = still(problem, a, jump_rot, jump_tra)
-        asked.append((a, out))
-        return out
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(enforcement, "_ease_repairs", spy)
-        mp.setattr(enforcement, "_still_jumps", jumps)
-        enforce(composed, cons)
-    assert rounds[0] > 300 and rounds[1:] == [0]
-    assert (488, True) in asked            # it still jumps, but the easing did not shrink it

@@ -84,25 +84,6 @@ STILL = 1e-12
 #: moved by mistake, whose corrections would pile up)
 MAX_OVERLAPPING_RAMPS = 8
 
-#: pass two's repairs are eased over the ramps (:func:`_ease_repairs`) at most this many
-#: times: the solve after each easing undoes part of it where the two frames of a boundary
-#: hold different tasks (one goal let go on frame 120, another held from 121: each frame's
-#: solve pulls the posture back towards its own goal), so the easing is repeated on the
-#: boundaries where the repair still jumps by more than :data:`EASE_AGAIN`
-EASE_ROUNDS = 8
-
-#: [rad] a repair that still changes by more than this between a ramp's key frame and its
-#: neighbour (at any joint; the root's shift as this fraction of the character's size), and
-#: by more than :data:`EASE_SHARE` of the composed motion's own turn in a frame there, is
-#: eased again (:func:`_still_jumps`)
-EASE_AGAIN = np.radians(0.25)
-EASE_SHARE = 0.25
-
-#: a boundary is eased again only while each easing shrinks its repair's jump (rotation
-#: vectors, the root's shift over the character's size) to at most this share of its size
-#: before
-EASE_SHRINK = 0.9
-
 
 @dataclass(frozen=True, eq=False)
 class Correction:
@@ -483,18 +464,28 @@ def _virtual_frames(problem: _Problem, units):
 
     The ramps keyed on one frame and side are removed shortest first: each one's correction
     (:func:`_pass_one`) is then what its constraints add given the longer ramps' still held,
-    as they mostly are while the shorter one eases.
+    as they mostly are while the shorter one eases. In the same way the constraints held on
+    the ramps' inner frames but not on the key frame (another's ramp keyed on the frame next
+    to it, back to back: a toe let go on frame 72 while the other heel is planted on 73) are
+    held in the key postures too, at their goals on the frame next to the key frame (a key
+    posture with its ramps' constraints is then a posture of its own, not the clip frame's):
+    each ramp's correction is what it adds to the tasks held across it. Added up
+    separately, two corrections each solved without the other's goals missed both by far
+    (12 degrees of the hips apart on the CC3 walk onto the glTF fox), and pass two's repair
+    jumped between the two frames.
 
     Returns ``src (V,)`` each virtual frame's clip frame (the first ``F`` are the clip's
-    frames), per virtual frame the constraint indices it leaves out, per ramp ``(unit,
+    frames), per virtual frame the constraint indices it leaves out, per constraint the
+    virtual frames that hold it at its goal on their ``inner`` frame, per ramp ``(unit,
     virtual frame with its constraints, virtual frame without)``, and ``inner (V,)`` per
     virtual frame beyond the clip's the clip frame next to its key frame on the ramps' side
     (``start - 1`` of an input ramp, ``end + 1`` of an output one; -1 for the clip's own):
-    the frame whose tasks are the key frame's without the ramps'."""
+    the frame whose tasks are the key frame's without the ramps', and those added."""
     F = problem.num_frames
     src = list(range(F))
     inner_of = [-1] * F
     removed: list[tuple] = [()] * F
+    added: dict[int, list] = {}
     deltas = []
     groups: dict[tuple, list] = {}
     for k, (lo, hi, rising, _) in enumerate(units):
@@ -509,7 +500,14 @@ def _virtual_frames(problem: _Problem, units):
         eased = {i for k in ks for i in units[k][3]}
         switch = tuple(i for i, c in enumerate(cons) if i not in eased and
                        c.start <= key <= c.end and not c.start <= inner <= c.end)
-        before, gone = key, switch
+        extra = [i for i, c in enumerate(cons)
+                 if c.start <= inner <= c.end and not c.start <= key <= c.end]
+        before, gone, first = key, switch, len(src)
+        if extra:
+            src.append(key)
+            inner_of.append(inner)
+            removed.append(())
+            before = len(src) - 1
         for k in ks:
             gone = gone + tuple(units[k][3])
             src.append(key)
@@ -517,21 +515,26 @@ def _virtual_frames(problem: _Problem, units):
             removed.append(gone)
             deltas.append((k, before, len(src) - 1))
             before = len(src) - 1
-    return (np.array(src, dtype=np.intp), removed, deltas,
+        for i in extra:
+            added.setdefault(i, []).extend(range(first, len(src)))
+    return (np.array(src, dtype=np.intp), removed, added, deltas,
             np.array(inner_of, dtype=np.intp))
 
 
-def _virtual_entries(problem: _Problem, src, removed) -> list:
+def _virtual_entries(problem: _Problem, src, removed, added, inner) -> list:
     """Entries over virtual frames: each constraint where it is active at the clip frame (its
-    goal there), unless the virtual frame leaves it out."""
+    goal there), unless the virtual frame leaves it out, and on the virtual frames that add
+    it (its goal at their ``inner`` frame)."""
     F = problem.num_frames
     keys = np.arange(F, len(src))                # the key frames' postures without ramps
     entries = []
     for i, c in enumerate(problem.cons):
         more = keys[(src[keys] >= c.start) & (src[keys] <= c.end)]
         more = more[[i not in removed[v] for v in more]] if len(more) else more
-        held = np.concatenate([np.arange(c.start, c.end + 1), more]).astype(np.intp)
-        entries.append((i, held, c.kind_object.task_goals(c, src[held])))
+        extra = np.array(added.get(i, ()), dtype=np.intp)
+        held = np.concatenate([np.arange(c.start, c.end + 1), more, extra]).astype(np.intp)
+        at = np.concatenate([np.arange(c.start, c.end + 1), src[more], inner[extra]])
+        entries.append((i, held, c.kind_object.task_goals(c, at.astype(np.intp))))
     return entries
 
 
@@ -616,9 +619,9 @@ def _pass_one(problem: _Problem):
     F = problem.num_frames
     units = _ramp_units(problem.cons)
     _check_overlaps(problem, units)
-    src, removed, deltas, inner = _virtual_frames(problem, units)
+    src, removed, added, deltas, inner = _virtual_frames(problem, units)
     virtual = _virtual(problem, src)
-    entries = _where_needed(virtual, _virtual_entries(problem, src, removed),
+    entries = _where_needed(virtual, _virtual_entries(problem, src, removed, added, inner),
                             virtual.composed.rotations, virtual.composed.translations)
     clip = np.arange(len(src)) < F
     needed = _needed_virtual(problem, units, deltas, inner, len(src))
@@ -731,50 +734,18 @@ def _repair_boundaries(units) -> list:
     return sorted(pairs.items())
 
 
-def _repair_frames(units, wanted: np.ndarray, rounds: int = 1) -> np.ndarray:
+def _repair_frames(units, wanted: np.ndarray) -> np.ndarray:
     """``wanted`` (a mask ``(F,)``) and the frames whose pass-two repair :func:`_ease_repairs`
     reads for them: the key frame and the frame next to it inside of each ramp with a wanted
-    inner frame; over ``rounds`` easings, those frames' own (each round reads the frames the
-    round before eased)."""
+    inner frame."""
     out = wanted.copy()
-    for _ in range(rounds):
-        more = out.copy()
-        for a, sides in _repair_boundaries(units):
-            if any(out[lo + 1:hi].any() for lo, hi, _ in sides):
-                more[[a, a + 1]] = True
-        if np.array_equal(more, out):
-            break
-        out = more
+    for a, sides in _repair_boundaries(units):
+        if any(wanted[lo + 1:hi].any() for lo, hi, _ in sides):
+            out[[a, a + 1]] = True
     return out
 
 
-def _still_jumps(problem: _Problem, a: int, jump_rot, jump_tra) -> bool:
-    """Whether a repair's jump between frames ``a`` and ``a + 1`` (rotation vectors ``(J,
-    3)``, the root's shift ``(3,)``) is still worth easing again: a joint turns by more than
-    :data:`EASE_AGAIN`, and by more than :data:`EASE_SHARE` of the composed motion's fastest
-    turn of that joint in one frame within a quarter second (:data:`~.quality.POP_WINDOW`),
-    or the root shifts by more than :data:`EASE_AGAIN` times the character's size and that
-    share of the composed root's fastest step. A jump small against the motion's own turns
-    there is lost in them, and each round of easing costs a solve of the ramp's frames."""
-    from .quality import POP_WINDOW
-    composed = problem.composed
-    w = max(1, int(round(POP_WINDOW * composed.fps)))
-    lo, hi = max(0, a - w), min(problem.num_frames, a + w + 2)
-    rot, tra = composed.rotations[lo:hi], composed.translations[lo:hi, 0]
-    if hi - lo < 2:
-        return False
-    d = qmul(rot[1:], qconj(rot[:-1]))
-    turn = 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3])).max(axis=0)
-    step = np.linalg.norm(np.diff(tra, axis=0), axis=-1).max()
-    size = problem.options.scale
-    if np.any(np.linalg.norm(jump_rot, axis=-1) > np.maximum(EASE_AGAIN, EASE_SHARE * turn)):
-        return True
-    return bool(np.linalg.norm(jump_tra) > max(EASE_AGAIN * size, EASE_SHARE * step))
-
-
-def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, held,
-                  again: bool = False, want: np.ndarray | None = None,
-                  history: dict | None = None):
+def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, held):
     """Pass two's repairs eased over the ramps. Pass two solves the tasks held on a ramp's
     frames again from the blend, and the repair it makes there (the result less the blend)
     depends on the tasks held: where a ramp's key frame, inside another ramp, holds a task
@@ -785,18 +756,12 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, hel
     longest ramp keyed there), so that the repair flows from the key frame's into the ramp's
     own; the tasks ``held`` on those frames (pass two's) are then solved again from there,
     as pass two solves them (the same entries over every blended frame, so the same task
-    slots: a solve of some frames gives the same values bit for bit). Only the boundaries
-    whose repair jumps at all are eased (with ``again``: by more than :func:`_still_jumps`
-    allows), on the frames of ``want`` (a mask ``(F,)``; ``None``: all).
-
-    ``history`` (updated) holds per boundary the size of its jump in the round before: a
-    boundary whose jump the last easing did not shrink to :data:`EASE_SHRINK` of it is left
-    as it is.
-    Returns rot, tra, residuals, iterations and the mask ``(F,)`` of the frames eased
-    (``None`` where nothing changes); ``rot2`` and ``tra2`` are overwritten."""
+    slots: a solve of some frames gives the same values bit for bit). Returns rot, tra,
+    residuals, iterations and the mask ``(F,)`` of the frames eased (``None`` where nothing
+    changes); ``rot2`` and ``tra2`` are overwritten."""
     F = problem.num_frames
     base = problem.composed.rotations
-    size = problem.options.scale
+    want = problem.wanted
     eased = np.zeros(F, dtype=bool)
     parts = []
     for a, sides in _repair_boundaries(units):
@@ -806,18 +771,8 @@ def _ease_repairs(problem: _Problem, units, rot1, tra1, rot2, tra2, blended, hel
         repair = (_offsets(rot2[pair], base[pair]) - _offsets(rot1[pair], base[pair]))
         shift = (tra2[pair, 0] - tra1[pair, 0])
         jump_rot, jump_tra = repair[0] - repair[1], shift[0] - shift[1]
-        if again:
-            if not _still_jumps(problem, a, jump_rot, jump_tra):
-                continue
-        elif not (np.any(jump_rot != 0.0) or np.any(jump_tra != 0.0)):
+        if not (np.any(jump_rot != 0.0) or np.any(jump_tra != 0.0)):
             continue
-        if history is not None:
-            # a boundary whose jump the last easing did not shrink by a tenth is left as it
-            # is: the solve after it undoes it all there
-            now = np.sqrt(jump_rot.ravel() @ jump_rot.ravel() + jump_tra @ jump_tra / size ** 2)
-            if a in history and now > EASE_SHRINK * history[a]:
-                continue
-            history[a] = now
         # an input ramp on the left eases the frames before towards the repair after, an
         # output ramp on the right the frames after towards the repair before; with both
         # (a toe let go on the frame before the other heel is planted) each takes half,
@@ -945,7 +900,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)
     reading = problem if wanted is None else dataclasses.replace(
-        problem, wanted=_repair_frames(units, wanted, EASE_ROUNDS))
+        problem, wanted=_repair_frames(units, wanted))
     timings = {}
     t0 = time.perf_counter()
     rot1, tra1, residual, iters, changed, blended = _pass_one(reading)
@@ -955,15 +910,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     t0 = time.perf_counter()
     held = _restricted(_active_entries(cons), blended)
     rot2, tra2, residual2, iters2 = _pass_two(reading, rot1, tra1, held)
-    history: dict = {}
-    for k in range(EASE_ROUNDS):
-        # each round eases the frames the later rounds read, and the wanted ones
-        eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended, held,
-                              k > 0,
-                              None if wanted is None else
-                              _repair_frames(units, wanted, EASE_ROUNDS - 1 - k), history)
-        if eased is None:
-            break
+    eased = _ease_repairs(problem, units, rot1, tra1, rot2, tra2, blended, held)
+    if eased is not None:
         rot2, tra2, residual3, iters3, again = eased
         residual2 = residual2.outside(again)
         residual2.extend(residual3)
