@@ -491,6 +491,8 @@ def _virtual_frames(problem: _Problem, units):
     for k, (lo, hi, rising, _) in enumerate(units):
         groups.setdefault((hi if rising else lo, rising), []).append(k)
     cons = problem.cons
+    starts = np.array([c.start for c in cons], dtype=np.intp)
+    ends = np.array([c.end for c in cons], dtype=np.intp)
     for (key, rising), ks in sorted(groups.items()):
         ks.sort(key=lambda k: (units[k][1] - units[k][0], k))
         # constraints that switch on (off) at the key frame without a ramp of their own (a
@@ -498,10 +500,11 @@ def _virtual_frames(problem: _Problem, units):
         # without the ramps is then the one inside them
         inner = key - 1 if rising else key + 1
         eased = {i for k in ks for i in units[k][3]}
-        switch = tuple(i for i, c in enumerate(cons) if i not in eased and
-                       c.start <= key <= c.end and not c.start <= inner <= c.end)
-        extra = [i for i, c in enumerate(cons)
-                 if c.start <= inner <= c.end and not c.start <= key <= c.end]
+        at_key = (starts <= key) & (ends >= key)
+        at_inner = (starts <= inner) & (ends >= inner)
+        switch = tuple(i for i in np.flatnonzero(at_key & ~at_inner).tolist()
+                       if i not in eased)
+        extra = np.flatnonzero(at_inner & ~at_key).tolist()
         before, gone, first = key, switch, len(src)
         if extra:
             src.append(key)
