@@ -19,9 +19,11 @@ built on: no joint turns faster than the direct conversion plus 1.5 times the co
 over the ramp. Ramps keyed on the same frame are taken off it one at a time, shortest first,
 so that their corrections add up to the key posture's (with the first go the constraints
 that switch on or off there without a ramp of their own, such as a toe held from the flat
-foot on: the posture without the ramps is the one inside them). The posture without a ramp's
-constraints starts from the correction solved on the frame next to the key frame inside the
-ramp, which holds the same tasks: near a stretched leg, postures far apart meet the same
+foot on: the posture without the ramps is the one inside them). The key postures hold the
+goals held across the ramp too (another's ramp keyed back to back, on the frame next to the
+key frame), so that each ramp's correction is what it adds to them. A key posture of its own
+starts from the correction solved on the frame next to the key frame inside the ramp, which
+holds the same tasks as the posture without the ramp's constraints: near a stretched leg, postures far apart meet the same
 tasks, and one found from the composed posture instead can differ from its neighbour's by
 degrees, which the ramp would turn in one frame. The sum meets the tasks held on those
 frames (another foot's contact) only nearly; they are solved again from it (pass two), the
@@ -318,8 +320,9 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     from ``start`` (rot, tra), which then receives the solved frames in place (a second
     solve over a long clip's arrays costs no copy of them). Entries share task slots where
     they do not overlap in time, so all frames form one batch. ``only`` (a mask ``(F,)``)
-    solves those of the frames alone (with a warm start, only where none starts from a
-    frame left out: pass two's eased repairs, each from its own start): the slots are
+    solves those of the frames alone (with a warm start a frame starts from the one before
+    only where that one was solved in this call; pass two's eased repairs each start from
+    their own posture): the slots are
     assigned over every entry's frames first, so that the frames solved get the same tasks,
     in the same slots, as in the solve of all (each frame of a batch is solved on its own:
     the same values).
@@ -614,9 +617,9 @@ def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals
 
 def _pass_one(problem: _Problem):
     """The key postures and the blend over the ramps: the clip's frames solved from the
-    composed motion, then each key frame without its ramps' constraints
-    (:func:`_virtual_frames`) solved from the correction next to it on the ramps' side
-    (:func:`_start_from_inner`), then each ramp's correction eased in or out over it
+    composed motion, then each key posture of its own (without its ramps' constraints, or
+    with the goals held across the ramp: :func:`_virtual_frames`) solved from the correction
+    next to it on the ramps' side (:func:`_start_from_inner`), then each ramp's correction eased in or out over it
     (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
     frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
@@ -633,11 +636,11 @@ def _pass_one(problem: _Problem):
                                                virtual.composed.translations, only=needed)
     if not clip.all():
         # a key posture without its ramps that holds no task at all is the composed posture
-        # itself: started from its neighbour's correction it would stay there, unsolved, and
-        # keep what the neighbour holds and it does not (a toe let go on frame 138 of the
-        # CC3 walk onto the fox while the other foot is planted on 139: the planted foot's
-        # correction, 9 degrees of the leg, taken off at 138 and eased back in over the
-        # toe's ramp: a turn of 9 degrees in one frame)
+        # itself: started from a neighbour's correction it would stay there, unsolved, and
+        # keep what the neighbour holds and it does not (before key postures held the goals
+        # held across their ramps: a toe let go on frame 138 of the CC3 walk onto the fox
+        # while the other foot is planted on 139, the planted foot's correction, 9 degrees
+        # of the leg, was taken off at 138 and eased back in over the toe's ramp)
         held = np.zeros(len(src), dtype=bool)
         for _, frames, _ in entries:
             held[frames] = True
@@ -662,7 +665,7 @@ def _needed_virtual(problem: _Problem, units, deltas, inner, count: int):
     """``(V,)`` the virtual frames (:func:`_virtual_frames`) whose postures the frames of
     ``problem.wanted`` depend on (``None``: all, every frame wanted): those wanted; the key
     postures with and without the constraints of each ramp with an inner frame wanted
-    (:func:`_blend`); and the clip frame each such key posture without them starts from
+    (:func:`_blend`); and the clip frame each such key posture of its own starts from
     (:func:`_start_from_inner`). Every posture is solved on its own from its start, so the
     others can be left out."""
     wanted = problem.wanted
@@ -681,11 +684,12 @@ def _needed_virtual(problem: _Problem, units, deltas, inner, count: int):
 
 
 def _start_from_inner(composed: Motion, rot, tra, inner, frames) -> None:
-    """Start postures for the key frames without their ramps (``frames``, a mask over virtual
-    frames), written into ``rot`` and ``tra`` (which hold the composed posture there): the
-    composed posture with the correction solved at the ``inner`` clip frame (per joint its
-    rotation offset; the root's translation offset). That frame holds
-    the same tasks; a solve from the composed posture could end in another of the postures
+    """Start postures for the key postures of their own (``frames``, a mask over virtual
+    frames: without their ramps' constraints, or with the goals held across the ramps),
+    written into ``rot`` and ``tra`` (which hold the composed posture there): the composed
+    posture with the correction solved at the ``inner`` clip frame (per joint its rotation
+    offset; the root's translation offset). That frame holds the same tasks as the posture
+    without the ramps' constraints; a solve from the composed posture could end in another of the postures
     that meet them (a leg near its full stretch under a reach: 2.8 degrees of the hips and a
     centimetre of the root apart on the CMU walk onto Bandai), and the ramp would turn the
     difference in one frame."""

@@ -93,7 +93,9 @@ def retimed(c, rng: tuple, shift: int | None = None):
 def window_problem(constraints: list, lo: int, hi: int) -> list:
     """The constraints that decide frames ``lo..hi``, cut to the frames that matter.
 
-    * every enabled constraint overlapping ``[lo, hi]``;
+    * every enabled constraint overlapping ``[lo, hi]``, widened to the key frame and the
+      frame next to it of each ramp easing frames of the window (pass two's repair is eased
+      from those: :func:`~engine.correction.enforcement._ease_repairs`);
     * the key frames its ramps need from pass one, where a ramp eases frames of the window
       (:mod:`~engine.correction.enforcement`: a ramp adds the correction its constraints
       make at its key frame, ``start`` of an input ramp, ``end`` of an output one), and the
@@ -116,6 +118,18 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
 def _window_ranges(constraints: list, lo: int, hi: int) -> list:
     """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
     problem)``."""
+    inside = overlapping(constraints, lo, hi)
+    # pass two's repairs are eased over the ramps from the key frame and the frame next to it
+    # (enforcement._ease_repairs, over every ramp keyed on either: with ramps back to back,
+    # each takes half), so the frames the window's ramps read there are solved as the window
+    # is: with every constraint and ramp that reaches them
+    wide_lo, wide_hi = lo, hi
+    for c in inside:
+        if c.start - c.smooth_in >= 2 and c.smooth_in + 1 <= hi and c.start - 1 >= lo:
+            wide_lo, wide_hi = min(wide_lo, c.start - 1), max(wide_hi, c.start)
+        if c.smooth_out - c.end >= 2 and c.end + 1 <= hi and c.smooth_out - 1 >= lo:
+            wide_lo, wide_hi = min(wide_lo, c.end), max(wide_hi, c.end + 1)
+    lo, hi = wide_lo, wide_hi
     inside = overlapping(constraints, lo, hi)
     # the ramps whose eased frames meet the window (a ramp of fewer than two frames eases
     # nothing, enforcement._ramp_units): their key frames by side, and the frames next to
