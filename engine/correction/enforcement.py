@@ -23,9 +23,9 @@ foot on: the posture without the ramps is the one inside them). The key postures
 goals held across the ramp too (another's ramp keyed back to back, on the frame next to the
 key frame), so that each ramp's correction is what it adds to them. A key posture of its own
 starts from the correction solved on the frame next to the key frame inside the ramp, which
-holds the same tasks as the posture without the ramp's constraints: near a stretched leg, postures far apart meet the same
-tasks, and one found from the composed posture instead can differ from its neighbour's by
-degrees, which the ramp would turn in one frame. The sum meets the tasks held on those
+holds the same tasks as the posture without the ramp's constraints: near a stretched leg,
+postures far apart meet the same tasks, and one found from the composed posture instead can
+differ from its neighbour's by degrees, which the ramp would turn in one frame. The sum meets the tasks held on those
 frames (another foot's contact) only nearly; they are solved again from it (pass two), the
 posture each frame starts from and is pulled towards. That repair depends on the tasks held,
 which change at a ramp's key frame: the change is eased over the ramp like its correction,
@@ -322,10 +322,9 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     they do not overlap in time, so all frames form one batch. ``only`` (a mask ``(F,)``)
     solves those of the frames alone (with a warm start a frame starts from the one before
     only where that one was solved in this call; pass two's eased repairs each start from
-    their own posture): the slots are
-    assigned over every entry's frames first, so that the frames solved get the same tasks,
-    in the same slots, as in the solve of all (each frame of a batch is solved on its own:
-    the same values).
+    their own posture): the slots are assigned over every entry's frames first, so that the
+    frames solved get the same tasks, in the same slots, as in the solve of all (each frame
+    of a batch is solved on its own: the same values).
     Returns rot, tra, residual per constraint, iterations."""
     sk, F = problem.skeleton, problem.num_frames
     rot, tra = (attraction_rot.copy(), attraction_tra.copy()) if start is None else start
@@ -619,8 +618,8 @@ def _pass_one(problem: _Problem):
     """The key postures and the blend over the ramps: the clip's frames solved from the
     composed motion, then each key posture of its own (without its ramps' constraints, or
     with the goals held across the ramp: :func:`_virtual_frames`) solved from the correction
-    next to it on the ramps' side (:func:`_start_from_inner`), then each ramp's correction eased in or out over it
-    (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
+    next to it on the ramps' side (:func:`_start_from_inner`), then each ramp's correction
+    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
     frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
     units = _ramp_units(problem.cons)
@@ -689,10 +688,10 @@ def _start_from_inner(composed: Motion, rot, tra, inner, frames) -> None:
     written into ``rot`` and ``tra`` (which hold the composed posture there): the composed
     posture with the correction solved at the ``inner`` clip frame (per joint its rotation
     offset; the root's translation offset). That frame holds the same tasks as the posture
-    without the ramps' constraints; a solve from the composed posture could end in another of the postures
-    that meet them (a leg near its full stretch under a reach: 2.8 degrees of the hips and a
-    centimetre of the root apart on the CMU walk onto Bandai), and the ramp would turn the
-    difference in one frame."""
+    without the ramps' constraints; a solve from the composed posture could end in another
+    of the postures that meet them (a leg near its full stretch under a reach: 2.8 degrees of
+    the hips and a centimetre of the root apart on the CMU walk onto Bandai), and the ramp
+    would turn the difference in one frame."""
     base_rot, base_tra = composed.rotations, composed.translations
     v = np.flatnonzero(frames)
     n = inner[v]
