@@ -25,11 +25,12 @@ key frame), so that each ramp's correction is what it adds to them. A key postur
 starts from the correction solved on the frame next to the key frame inside the ramp, which
 holds the same tasks as the posture without the ramp's constraints: near a stretched leg,
 postures far apart meet the same tasks, and one found from the composed posture instead can
-differ from its neighbour's by degrees, which the ramp would turn in one frame. The sum meets the tasks held on those
-frames (another foot's contact) only nearly; they are solved again from it (pass two), the
-posture each frame starts from and is pulled towards. That repair depends on the tasks held,
-which change at a ramp's key frame: the change is eased over the ramp like its correction,
-and the ramp's frames are solved again from there (:func:`_ease_repairs`).
+differ from its neighbour's by degrees, which the ramp would turn in one frame. The sum
+meets the tasks held on those frames (another foot's contact) only nearly; they are solved
+again from it (pass two), the posture each frame starts from and is pulled towards. That
+repair depends on the tasks held, which change at a ramp's key frame: the change is eased
+over the ramp like its correction, and the ramp's frames are solved again from there
+(:func:`_ease_repairs`).
 
 (The paper moves the goal along a straight line over the input ramp and interpolates the
 joint values over the output ramp; solved from the converted motion the line's postures can
@@ -619,8 +620,8 @@ def _pass_one(problem: _Problem):
     composed motion, then each key posture of its own (without its ramps' constraints, or
     with the goals held across the ramp: :func:`_virtual_frames`) solved from the correction
     next to it on the ramps' side (:func:`_start_from_inner`), then each ramp's correction
-    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
-    frames solved and the frames blended (both ``(F,)``)."""
+    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's
+    frames), iterations, the frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
     units = _ramp_units(problem.cons)
     _check_overlaps(problem, units)
