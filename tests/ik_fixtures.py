@@ -85,3 +85,19 @@ def walk_window_on_tpose(lo: int, hi: int):
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True, floor=0.0)
     return Scene(project, performer, target).solve(regenerate=True)
+
+
+def two_hands(composed, left_range=(90, 100, 120, 135)):
+    """Two hand goals back to back on the bundled walk onto the T-pose
+    (:func:`walk_on_holden`'s ``composed``): the left hand 15 cm above its frame-110 place,
+    let go at frame 120 (ramp out to 135; ``left_range``), and the right hand's goal above
+    its frame-130 place held from 121 (ramp in from 106)."""
+    from motion_composer.engine.correction.constraints import Constraint
+    from motion_composer.engine.kinematics import forward_kinematics
+    sk = composed.skeleton
+    p = forward_kinematics(composed).positions
+    left = Constraint("LeftHand", "position", {"point": p[110, sk.index["LeftHand"]]
+                                               + [0.1, 0.15, 0.05]}, *left_range)
+    right = Constraint("RightHand", "position", {"point": p[130, sk.index["RightHand"]]
+                                                 + [-0.1, 0.2, 0.1]}, 106, 121, 140, 155)
+    return [left, right]

@@ -101,13 +101,8 @@ def test_a_ramp_starts_from_the_posture_next_to_it_under_a_reach():
 def _two_hands(composed):
     """The left hand let go at frame 120 (ramp out to 135) and the right hand's goal held
     from 121 (ramp in from 106)."""
-    sk = composed.skeleton
-    p = forward_kinematics(composed).positions
-    left = Constraint("LeftHand", "position", {"point": p[110, sk.index["LeftHand"]]
-                                               + [0.1, 0.15, 0.05]}, 90, 100, 120, 135)
-    right = Constraint("RightHand", "position", {"point": p[130, sk.index["RightHand"]]
-                                                 + [-0.1, 0.2, 0.1]}, 106, 121, 140, 155)
-    return [left, right]
+    from ik_fixtures import two_hands
+    return two_hands(composed)
 
 
 def test_the_key_postures_of_a_ramp_hold_the_goals_held_across_it(monkeypatch):

@@ -129,16 +129,9 @@ def test_a_window_eased_towards_a_key_back_to_back_with_another_previews_as_the_
     goals)."""
     import sys
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from ik_fixtures import walk_on_holden
-    from motion_composer.engine.correction.constraints import Constraint
-    from motion_composer.engine.kinematics import forward_kinematics
+    from ik_fixtures import two_hands, walk_on_holden
     _, _, _, composed = walk_on_holden()
-    sk = composed.skeleton
-    p = forward_kinematics(composed).positions
-    left = Constraint("LeftHand", "position", {"point": p[110, sk.index["LeftHand"]]
-                                               + [0.1, 0.15, 0.05]}, 115, 117, 120, 135)
-    right = Constraint("RightHand", "position", {"point": p[130, sk.index["RightHand"]]
-                                                 + [-0.1, 0.2, 0.1]}, 106, 121, 140, 155)
+    left, right = two_hands(composed, (115, 117, 120, 135))
     full = enforce(composed, [left, right]).motion
     for lo, hi in ((107, 110), (107, 114), (118, 122)):
         problem = window_problem([left, right], lo, hi)
