@@ -115,25 +115,11 @@ def window_problem(constraints: list, lo: int, hi: int) -> list:
             for c, rng in _window_ranges(constraints, lo, hi)]
 
 
-def _window_ranges(constraints: list, lo: int, hi: int) -> list:
-    """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
-    problem)``."""
-    inside = overlapping(constraints, lo, hi)
-    # pass two's repairs are eased over the ramps from the key frame and the frame next to it
-    # (enforcement._ease_repairs, over every ramp keyed on either: with ramps back to back,
-    # each takes half), so the frames the window's ramps read there are solved as the window
-    # is: with every constraint and ramp that reaches them
-    wide_lo, wide_hi = lo, hi
-    for c in inside:
-        if c.start - c.smooth_in >= 2 and c.smooth_in + 1 <= hi and c.start - 1 >= lo:
-            wide_lo, wide_hi = min(wide_lo, c.start - 1), max(wide_hi, c.start)
-        if c.smooth_out - c.end >= 2 and c.end + 1 <= hi and c.smooth_out - 1 >= lo:
-            wide_lo, wide_hi = min(wide_lo, c.end), max(wide_hi, c.end + 1)
-    lo, hi = wide_lo, wide_hi
-    inside = overlapping(constraints, lo, hi)
-    # the ramps whose eased frames meet the window (a ramp of fewer than two frames eases
-    # nothing, enforcement._ramp_units): their key frames by side, and the frames next to
-    # them inside the ramp, whose corrections the key postures without them start from
+def _ramp_keys(inside: list, lo: int, hi: int) -> tuple[set, set, set]:
+    """The ramps of ``inside`` whose eased frames meet ``[lo, hi]`` (a ramp of fewer than two
+    frames eases nothing, enforcement._ramp_units): their key frames by side (``start`` of
+    the input ramps, ``end`` of the output ones), and those with the frames next to them
+    inside the ramps, whose corrections the key postures start from."""
     rising, falling, keys = set(), set(), set()
     for c in inside:
         if c.start - c.smooth_in >= 2 and c.smooth_in + 1 <= hi and c.start - 1 >= lo:
@@ -142,6 +128,20 @@ def _window_ranges(constraints: list, lo: int, hi: int) -> list:
         if c.smooth_out - c.end >= 2 and c.end + 1 <= hi and c.smooth_out - 1 >= lo:
             falling.add(c.end)
             keys.update((c.end, c.end + 1))
+    return rising, falling, keys
+
+
+def _window_ranges(constraints: list, lo: int, hi: int) -> list:
+    """:func:`window_problem`'s constraints, each as ``(constraint, its range in the
+    problem)``."""
+    # pass two's repairs are eased over the ramps from the key frame and the frame next to it
+    # (enforcement._ease_repairs, over every ramp keyed on either: with ramps back to back,
+    # each takes half), so the window first takes in those frames of its ramps: they are then
+    # solved as the window is, with every constraint and ramp that reaches them
+    _, _, keys = _ramp_keys(overlapping(constraints, lo, hi), lo, hi)
+    lo, hi = min([lo, *keys]), max([hi, *keys])
+    inside = overlapping(constraints, lo, hi)
+    rising, falling, keys = _ramp_keys(inside, lo, hi)
     outside_keys = sorted(k for k in keys if not lo <= k <= hi)
     L, H = min([lo, *keys]), max([hi, *keys])
     chosen = list(inside)
