@@ -45,7 +45,7 @@ from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction.keyfit import solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
 from .correction import preview as _preview
-from .correction.quality import quality
+from .correction.quality import goal_jumps, quality
 from .errors import MotionComposerError
 from .motion import Motion
 from .project import (Project, Source, check_project, correction_keys, open_project,
@@ -122,7 +122,8 @@ class Solution:
             keys were fitted.
         report: JSON-ready figures (residuals, contact drift, timings) and ``"warnings"``:
             lines on what the settings asked for but could not do (feet for automatic
-            contacts, :meth:`Scene.contact_warnings`).
+            contacts, :meth:`Scene.contact_warnings`; a joint's goals it would have to jump
+            between, :func:`~engine.correction.quality.goal_jumps`).
     """
 
     scene: "Scene"
@@ -438,7 +439,7 @@ class Scene:
             chosen = [c for c in chosen if not c.auto] + self.automatic_constraints()
             timings["contact_detection_s"] = time.perf_counter() - t0
         chosen, unreached = self._with_reach(chosen)
-        warnings += unreached
+        warnings += unreached + goal_jumps(self.edited, chosen)
         correction = None
         if any(c.enabled for c in chosen):
             t0 = time.perf_counter()
