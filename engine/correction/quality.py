@@ -11,6 +11,9 @@ panel show: one function, :func:`quality`.
   (the virtual bone it follows) and the corrected target bone, and where.
 * ``per_frame``: the foot slide (the largest horizontal distance of a planted joint from where
   its contact started) and the largest metric residual, per frame.
+
+Before a solve, :func:`goal_jumps` reads the request itself: where the user's goals for one
+joint ask it to jump, it says so in one line (a solve's warnings).
 """
 from __future__ import annotations
 
