@@ -235,3 +235,19 @@ def test_retarget_warns_of_a_jump_in_one_line_and_solves(tmp_path, capsys):
                                                    "'reach A' holds it to frame 120")
     assert (tmp_path / "o.bvh").exists()
     assert json.loads(report.read_text())["warnings"] == [lines[0].split("warning: ", 1)[1]]
+
+
+def test_the_window_shows_a_jump_in_the_status_bar(qtbot, tmp_path, monkeypatch):
+    """The window's solve says it too, as the other warnings of a solve (the status bar)."""
+    from gui_support import WAIT_MS, quiet_window
+    performer, target = read_motion(WALK), read_motion(TPOSE)
+    project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
+                      correspondence=Correspondence(MAX_TO_HOLDEN))
+    scene = Scene(project, performer, target)
+    jump = _hand_goals(scene.composed, 120, 121, 0.19)
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
+    w.doc.load_scene(scene.replace(constraints=jump))
+    with qtbot.waitSignal(w.doc.solved, timeout=WAIT_MS):
+        w.doc.solve()
+    assert w.statusBar().currentMessage() == f"Warning: {goal_jumps(scene.composed, jump)[0]}"
+    assert w.errors == []
