@@ -414,3 +414,36 @@ def test_a_ground_level_root_on_a_node_above_the_hips_scales_by_the_hips(clip):
         ratios.append(bind(performer, target, corr).hip_height_ratio)
     assert ratios[0] != pytest.approx(1.0, abs=0.02)
     assert ratios[1] == pytest.approx(2 * ratios[0], rel=1e-9)
+
+
+@pytest.mark.parametrize("target_file", ["bandai1_walk_normal_001.bvh", "target_mixamo_ely.glb"])
+def test_a_writers_rounding_on_position_channels_is_no_movement(target_file):
+    """Blender writes a position channel on every bone not connected to its parent, its values
+    the bone's offset printed to six decimals of the file's unit (up to 1.0e-6 m apart on its
+    export of the CMU walk). The same walk with a position channel on every joint, its values
+    the offsets give or take 6e-7 m, retargets as the file without them does: a rounding is
+    no movement, and the virtual bones across those joints keep their directions (a bound
+    of 1e-6 m took Chest2 for a moving joint there, and the arms turned 0.8 degrees away)."""
+    import dataclasses
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character, read_motion
+    from motion_composer.engine.motion import Motion
+    walk = read_bvh(shared_path("cmu_max_131_01_walk.bvh"))
+    sk = walk.skeleton
+    J = sk.num_joints
+    channels = tuple(("Xposition", "Yposition", "Zposition") +
+                     tuple(c for c in ch if c.endswith("rotation")) for ch in sk.channels)
+    noisy_sk = dataclasses.replace(sk, channels=channels, position_modes=("absolute",) * J)
+    assert len(noisy_sk.translated) == J
+    rng = np.random.default_rng(7)
+    translations = sk.offsets[None] + rng.uniform(-6e-7, 6e-7, (walk.num_frames, J, 3))
+    translations[:, 0] = walk.translations[:, 0]
+    noisy = Motion(noisy_sk, walk.rotations, translations, walk.frame_time, walk.name)
+    assert np.ptp(translations[:, 1:], axis=0).max() > 1e-6
+    path = shared_path(target_file)
+    character = read_character(path)
+    target = character.rest_motion() if character is not None else read_motion(path)
+    corr = automap(target.skeleton, sk)
+    plain, written = retarget(walk, target, corr), retarget(noisy, target, corr)
+    assert _deg(plain.rotations, written.rotations).max() < 0.01
+    assert np.abs(plain.translations - written.translations).max() < 1e-5

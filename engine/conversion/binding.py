@@ -441,7 +441,8 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
 
     p_ref = _reference(performer, options.performer_reference)
     t_ref = _reference(target, options.target_reference)
-    p_moving = _moving_performer_joints(performer)
+    p_moving = _moving_performer_joints(
+        performer, max(float(np.ptp(p_ref.all_positions, axis=0).max()), 1e-6))
     bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving)
     chains = _chains(tsk, bones)
 
@@ -526,8 +527,20 @@ def _reference(motion: Motion, choice: str | int) -> _Reference:
                       pose.all_positions()[0])
 
 
-def _moving_performer_joints(performer: Motion) -> set[int]:
-    """Performer joints (not the root) whose translation is animated (by more than 1e-6 m).
+#: a performer joint's translation is animated where it moves by more than this share of the
+#: skeleton's size: less is a writer's rounding, not a movement. Blender writes a position
+#: channel on every bone not connected to its parent, its values the offset printed to six
+#: decimals of the file's unit: on its export of the CMU walk they move by up to 1.0e-6 m
+#: (7e-7 of the size), and a bound of 1e-6 m took the Chest2 of that file for a moving joint,
+#: so that the arms' virtual bones across it gave no direction and turned 0.8 degrees from
+#: the original file's (24 mm of a foot with contacts). A joint that truly moves (Bandai's
+#: hips under its ground root) moves by centimetres.
+MOVING_TRANSLATION = 1e-4
+
+
+def _moving_performer_joints(performer: Motion, size: float) -> set[int]:
+    """Performer joints (not the root) whose translation is animated: moves by more than
+    :data:`MOVING_TRANSLATION` of ``size`` (the skeleton's size [m]).
 
     A virtual bone across one of them stretches and turns with the translation (Bandai's hips
     under its ground root), so it gives no direction to follow.
@@ -535,7 +548,7 @@ def _moving_performer_joints(performer: Motion) -> set[int]:
     psk = performer.skeleton
     p_slots = {int(j): k for k, j in enumerate(psk.translated)}
     return {j for j, k in p_slots.items() if j > 0 and
-            np.ptp(performer.translations[:, k], axis=0).max() > 1e-6}
+            np.ptp(performer.translations[:, k], axis=0).max() > MOVING_TRANSLATION * size}
 
 
 def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
