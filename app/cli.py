@@ -219,6 +219,7 @@ def cmd_info(args) -> int:
     character = read_character(args.file)
     if character is not None:
         motion, extra = _gltf_info(args, character, sniff(args.file))
+        _warn(motion, args.file, "--")
     else:
         if args.take is not None:
             raise MotionComposerError(f"{args.file}: --take applies to FBX files (a BVH file "

@@ -91,9 +91,11 @@ class SourceFrame:
         """The doubt as one line naming the file and the overrides that settle it, as
         command-line flags (``flag_prefix``: ``"--performer-"``, ``"--target-"``, ``"--"``):
         ``"clip.bvh: a stature of ...; if that is wrong, give --performer-units UNIT"``;
-        ``""`` without a doubt."""
+        the doubt alone where no override settles it; ``""`` without a doubt."""
         if not self.doubt:
             return ""
+        if not self.overrides:              # nothing to give: the file is to be written again
+            return f"{path}: {' '.join(self.doubt.split())}"
         shown = {"units": "UNIT", "up_axis": "AXIS"}
         flags = " or ".join(f"{flag_prefix}{option.replace('_', '-')} {value or shown[option]}"
                             for option, value in self.overrides)

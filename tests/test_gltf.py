@@ -1074,3 +1074,49 @@ def test_required_extensions_the_reader_handles_or_ignores(tmp_path):
     bad = _ely_requiring(tmp_path, "ely_bad_list.glb", [3])
     with pytest.raises(GLTFError, match="list of extension names"):
         read_gltf(bad)
+
+
+# =========================================================================== which way is up
+@pytest.mark.parametrize("name", [
+    "target_mixamo_ely.glb", "target_mixamo_mannequin.glb", ROBOT, FOX, "fbx/mixamo.fbx",
+    "fbx/maya_kenney_character_7700_binary.fbx", "fbx/maya_character_7500_binary.fbx",
+    "fbx/maya_character_6100_ascii.fbx", "fbx/Samba_Dancing.fbx"])
+def test_every_shared_character_stands_up_without_a_doubt(name):
+    """glTF is +Y up by definition and FBX says its axes: every character of ../shared/data
+    stands up as read (the fox too, a quadruped read as a humanoid whose head is 59 degrees
+    forward of its legs: the legs, hips over their ends, tell which way it stands)."""
+    from motion_composer.engine.formats import read_character
+    assert read_character(shared_path(name)).skeleton.source.doubt == ""
+
+
+def z_up_ely(folder: Path) -> Path:
+    """``folder/ely_z_up.glb``: Ely written +Z up (its armature node turned a further 90
+    degrees about x), as Blender's exporter writes it with "+Y Up" unticked."""
+    js, binary = unpack_glb(shared_path("target_mixamo_ely.glb").read_bytes())
+    for i in js["scenes"][js.get("scene", 0)]["nodes"]:
+        node = js["nodes"][i]
+        assert "matrix" not in node
+        turned = Rotation.from_euler("x", 90, degrees=True) * Rotation.from_quat(
+            node.get("rotation", [0, 0, 0, 1]))
+        node["rotation"] = turned.as_quat().tolist()
+    path = folder / "ely_z_up.glb"
+    path.write_bytes(pack_glb(js, binary))
+    return path
+
+
+def test_a_gltf_written_z_up_is_said_to_lie_in_one_line(tmp_path, capsys):
+    """A glTF written with +Z up (against the format's definition, as Blender's exporter does
+    with "+Y Up" unticked): Ely's armature turned a further 90 degrees about x. It is read as
+    the file says (lying), and ``info``, ``retarget`` and the reader's source say so in one
+    line that names the file and the axis it stands along."""
+    from motion_composer.app.cli import main
+    from motion_composer.engine.formats import read_character
+    lying = z_up_ely(tmp_path)
+    doubt = read_character(lying).skeleton.source.doubt
+    assert doubt.startswith("the figure stands along +Z, not +Y, in its bind pose")
+    code, _, err = _info(capsys, lying)
+    assert code == 0 and err == f"motion-composer: warning: {lying}: {doubt}\n"
+    code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(lying),
+                 "-o", str(tmp_path / "out.bvh"), "--frames", "0:20"])
+    err = capsys.readouterr().err
+    assert code == 0 and err == f"motion-composer: warning: {lying}: {doubt}\n"

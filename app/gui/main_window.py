@@ -528,10 +528,12 @@ class MainWindow(QtWidgets.QMainWindow):
                                                      **options),
                                 f"Import {side} {Path(path).name}")
             self.viewport.frame_all()
-            doubt = motion.skeleton.source.doubt
-            if doubt:
-                self.statusBar().showMessage(f"{Path(path).name}: {doubt}; if that is wrong, "
-                                             f"import it again and set it in the options", 0)
+            source = motion.skeleton.source
+            if source.doubt:
+                # an override settles a BVH file's doubt; a glTF or FBX file is written again
+                hint = ("; if that is wrong, import it again and set it in the options"
+                        if source.overrides else "")
+                self.statusBar().showMessage(f"{Path(path).name}: {source.doubt}{hint}", 0)
         return self._guard(load)
 
     # ------------------------------------------------------------------ drag and drop

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ._numparse import file_pieces, parse_number_pieces, parse_number_rows
+from .figure import UP_AXIS_TOLERANCE, body_roles, body_vertical
 from ..errors import BVHError, ExportError
 from .. import limits
 from ..fileio import atomic_write, reading
@@ -660,11 +661,6 @@ def _local_arrays(record: BVHRecord, modes: Mapping[str, str]):
     return rotations, translations
 
 
-#: an up axis is trusted when the body's vertical lies within this angle of it [deg] (at 45
-#: degrees two axes are as near; a runner's median lean stays under 40)
-_UP_AXIS_TOLERANCE = 40.0
-
-
 @dataclass(frozen=True)
 class _Detection:
     """What :func:`_detect_frame` found (file units, file axes)."""
@@ -677,53 +673,16 @@ class _Detection:
     overrides: tuple[tuple[str, str], ...]
 
 
-def _body(skeleton_file: Skeleton, positions: np.ndarray):
-    """The humanoid roles of a file skeleton (:func:`engine.conversion.automap.identify`, by
-    names or, where names say nothing, by structure), or ``None`` for a figure that is not
-    a humanoid. ``positions`` ``(J, 3)``: a frame's joints, to tell the sides by."""
-    from ..conversion.automap import identify
-    from ..errors import MappingError
-    try:
-        return identify(skeleton_file, positions)
-    except MappingError:
-        return None
-
-
-def _body_vertical(roles, skeleton_file: Skeleton, pose) -> np.ndarray:
-    """The body's vertical per frame ``(S, 3)``: from the feet to the head (a leg without a
-    foot ends at its shin's End Site, or at the shin), with its component along the
-    shoulders removed (arms either side: the vertical is square to them)."""
-    index = skeleton_file.index
-    positions = pose.positions
-    site_of = {site.parent: e for e, site in enumerate(skeleton_file.end_sites)}
-    ends = []
-    for side in ("l", "r"):
-        if f"foot_{side}" in roles:
-            ends.append(positions[:, index[roles[f"foot_{side}"]]])
-            continue
-        last = index[roles[next(r for r in (f"shin_{side}", f"thigh_{side}") if r in roles)]]
-        ends.append(pose.end_positions[:, site_of[last]] if last in site_of
-                    else positions[:, last])
-    vertical = positions[:, index[roles["head"]]] - (ends[0] + ends[1]) / 2
-    arm = next((r for r in ("upper_arm", "forearm", "hand")
-                if f"{r}_l" in roles and f"{r}_r" in roles), None)
-    if arm is not None:
-        across = positions[:, index[roles[f"{arm}_l"]]] - positions[:, index[roles[f"{arm}_r"]]]
-        norm = np.linalg.norm(across, axis=1, keepdims=True)
-        across = np.divide(across, norm, out=np.zeros_like(across), where=norm > 0)
-        vertical = vertical - np.sum(vertical * across, axis=1, keepdims=True) * across
-    return vertical
-
-
 def _detect_frame(record: BVHRecord, rotations, translations,
                   skeleton_file: Skeleton) -> _Detection:
     """Detect the up axis and the units from a sample of frames (file units, file axes) of
     the local ``rotations`` ``(4, J, F)`` and ``translations`` ``(3, K, F)`` (component arrays,
     as :func:`_local_arrays` gives them).
 
-    The up axis is the coordinate axis nearest the body's vertical (:func:`_body_vertical`,
-    median over the sample) when the skeleton is a humanoid, whatever its joints are called;
-    for another figure, the axis from its feet to its head by name; else +Y with a doubt.
+    The up axis is the coordinate axis nearest the body's vertical
+    (:func:`.figure.body_vertical`, median over the sample) when the skeleton is a humanoid,
+    whatever its joints are called; for another figure, the axis from its feet to its head
+    by name; else +Y with a doubt.
     The stature is the median height of the figure along that axis (for a humanoid, of the
     body below its hips joint, so that IK targets hanging from a ground root do not count);
     the units follow from it (:func:`engine.units.detect_units`).
@@ -733,11 +692,11 @@ def _detect_frame(record: BVHRecord, rotations, translations,
     pose = WorldPose(*(a.T for a in fk_components(skeleton_file, rotations[..., sample],
                                                   translations[..., sample])))
     pts = pose.all_positions()                                        # (S, J+E, 3)
-    roles = _body(skeleton_file, pose.positions[0])
+    roles = body_roles(skeleton_file, pose.positions[0])
     lower = [n.lower() for n in record.names]
     doubts, overrides = [], []
     if roles is not None:
-        v = np.median(_body_vertical(roles, skeleton_file, pose), axis=0)
+        v = np.median(body_vertical(roles, skeleton_file, pose), axis=0)
         up = nearest_axis(v)
         how = (f"the body stands along {up} (feet to '{roles['head']}', square to the "
                "shoulders)")
@@ -759,7 +718,7 @@ def _detect_frame(record: BVHRecord, rotations, translations,
         overrides.append(("up_axis", ""))
     else:
         angle = math.degrees(math.acos(min(1.0, abs(v[k]) / np.linalg.norm(v))))
-        if angle > _UP_AXIS_TOLERANCE:
+        if angle > UP_AXIS_TOLERANCE:
             doubts.append(f"the figure stands {angle:.0f} degrees off {up}, its nearest axis")
             overrides.append(("up_axis", ""))
     if roles is not None:

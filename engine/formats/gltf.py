@@ -59,6 +59,7 @@ import os
 import re
 import struct
 import urllib.parse
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,6 +72,7 @@ from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot, to_matrix
 from ..skeleton import EndSite, Skeleton
 from ..units import SourceFrame
+from .figure import lying_doubt
 
 __all__ = ["Mesh", "Character", "read_gltf", "write_gltf", "format_gltf", "DEFAULT_FPS",
            "GLTF_SOURCE", "ROTATION_LAYOUT", "POSITION_LAYOUT"]
@@ -938,6 +940,10 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
     channels = _channels(joints, offsets, size, [default] + poses, hint)
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=channels, end_sites=end_sites, source=GLTF_SOURCE)
+    doubt = lying_doubt(skeleton, "bind pose")
+    if doubt:
+        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(GLTF_SOURCE,
+                                                                            doubt=doubt))
     stem = Path(doc.path).stem if doc.path else "character"
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(default, skeleton, joints.parents, 1.0 / fps)

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import os
 from collections import Counter
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,6 +58,7 @@ from ...errors import FBXError
 from ...fileio import reading
 from ...motion import Motion
 from ...skeleton import Skeleton
+from ..figure import lying_doubt
 from ...units import SourceFrame
 from ..gltf import (POSITION_LAYOUT, ROTATION_LAYOUT, Character, Mesh, _frozen, _local_translations,
                     _matrix_to_quat, _plural, _polar, _pose_from_world, _pose_motion)
@@ -1073,6 +1075,9 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Charact
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=_channels(joints.parents, offsets, size, [rest] + poses),
                         source=source)
+    doubt = lying_doubt(skeleton, "rest pose")
+    if doubt:
+        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(source, doubt=doubt))
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(rest, skeleton, joints.parents, 1.0 / fps).replace(
         name=f"{name} (rest pose)")

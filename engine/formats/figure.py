@@ -1,0 +1,95 @@
+"""Which way a figure stands, for the readers: the humanoid's roles and its vertical.
+
+A BVH file's up axis is detected from the body (:mod:`.bvh`); glTF and FBX state theirs, and a
+figure that still does not stand along +Y once read (a glTF written Z-up, against the format's
+definition; an FBX whose axis settings say nothing true) is a doubt the reader records on its
+:class:`~engine.units.SourceFrame` (:func:`lying_doubt`), which the command line and the window
+show as one warning line.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kinematics import fk_arrays
+from ..skeleton import Skeleton
+from ..units import nearest_axis
+
+__all__ = ["body_roles", "body_vertical", "lying_doubt", "UP_AXIS_TOLERANCE"]
+
+#: an up axis is trusted when the body's vertical lies within this angle of it [deg] (at 45
+#: degrees two axes are as near; a runner's median lean stays under 40)
+UP_AXIS_TOLERANCE = 40.0
+
+
+def body_roles(skeleton: Skeleton, positions: np.ndarray):
+    """The humanoid roles of a skeleton (:func:`engine.conversion.automap.identify`, by
+    names or, where names say nothing, by structure), or ``None`` for a figure that is not
+    a humanoid. ``positions`` ``(J, 3)``: a frame's joints, to tell the sides by."""
+    from ..conversion.automap import identify
+    from ..errors import MappingError
+    try:
+        return identify(skeleton, positions)
+    except MappingError:
+        return None
+
+
+def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
+    """``(S, 3)`` the middle of the two legs' ends per frame (a leg without a foot ends at its
+    shin's End Site, or at the shin)."""
+    index = skeleton.index
+    positions = pose.positions
+    site_of = {site.parent: e for e, site in enumerate(skeleton.end_sites)}
+    ends = []
+    for side in ("l", "r"):
+        if f"foot_{side}" in roles:
+            ends.append(positions[:, index[roles[f"foot_{side}"]]])
+            continue
+        last = index[roles[next(r for r in (f"shin_{side}", f"thigh_{side}") if r in roles)]]
+        ends.append(pose.end_positions[:, site_of[last]] if last in site_of
+                    else positions[:, last])
+    return (ends[0] + ends[1]) / 2
+
+
+def body_vertical(roles, skeleton: Skeleton, pose) -> np.ndarray:
+    """The body's vertical per frame ``(S, 3)``: from the feet to the head (a leg without a
+    foot ends at its shin's End Site, or at the shin), with its component along the
+    shoulders removed (arms either side: the vertical is square to them)."""
+    index = skeleton.index
+    positions = pose.positions
+    vertical = positions[:, index[roles["head"]]] - _feet(roles, skeleton, pose)
+    arm = next((r for r in ("upper_arm", "forearm", "hand")
+                if f"{r}_l" in roles and f"{r}_r" in roles), None)
+    if arm is not None:
+        across = positions[:, index[roles[f"{arm}_l"]]] - positions[:, index[roles[f"{arm}_r"]]]
+        norm = np.linalg.norm(across, axis=1, keepdims=True)
+        across = np.divide(across, norm, out=np.zeros_like(across), where=norm > 0)
+        vertical = vertical - np.sum(vertical * across, axis=1, keepdims=True) * across
+    return vertical
+
+
+def lying_doubt(skeleton: Skeleton, what: str) -> str:
+    """``""`` where the skeleton's zero pose (``what``: ``"bind pose"``, ``"rest pose"``)
+    stands along +Y, or is no humanoid to tell by; else one sentence saying along which axis
+    it stands: its legs, from their ends to the hips, more than :data:`UP_AXIS_TOLERANCE`
+    off +Y. (The legs, not the feet-to-head vertical that tells a BVH file's up axis: a
+    quadruped read as a humanoid, the glTF fox, stands on its hind legs' line but carries its
+    head 59 degrees forward of it.)"""
+    J = skeleton.num_joints
+    rest = np.zeros((1, J, 4))
+    rest[..., 3] = 1.0
+    pose = fk_arrays(skeleton, rest, skeleton.offsets[skeleton.translated][None])
+    roles = body_roles(skeleton, pose.positions[0])
+    if roles is None:
+        return ""
+    v = pose.positions[0, skeleton.index[roles["hips"]]] - _feet(roles, skeleton, pose)[0]
+    norm = float(np.linalg.norm(v))
+    if not norm > 0.0:
+        return ""
+    angle = math.degrees(math.acos(min(1.0, max(-1.0, v[1] / norm))))
+    if angle <= UP_AXIS_TOLERANCE:
+        return ""
+    return (f"the figure stands along {nearest_axis(v)}, not +Y, in its {what} ({angle:.0f} "
+            "degrees off): the file was probably written with another axis up; export it with "
+            "+Y up")
