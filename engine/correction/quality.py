@@ -178,17 +178,19 @@ def goal_jumps(direct: Motion, constraints) -> list[str]:
                 size = stature(direct)
             if gap <= JUMP_FLOOR * size:
                 continue
-            lo, hi = max(0, a.end - w), min(F - 1, b.start + w)
-            frames = slice(lo, hi + 1)
-            pos = fk_arrays(sk, direct.rotations[frames], direct.translations[frames],
+            near = slice(max(0, a.end - w), min(F - 1, b.start + w) + 1)
+            pos = fk_arrays(sk, direct.rotations[near], direct.translations[near],
                             end_sites=False).positions[:, sk.index[joint]]
             step = float(np.linalg.norm(np.diff(pos, axis=0), axis=1).max(initial=0.0))
             travel = POP_FACTOR * step * n
             if gap > travel:
                 frames = f"{n} frame{'s' if n > 1 else ''}"
-                ratio = gap / travel if travel > 0 else 0.0
-                how = (f"{ratio:.{1 if ratio < 10 else 0}f} times as far as the conversion moves it in {frames}"
-                       if travel > 0 else f"and the conversion holds it still for {frames}")
+                if travel > 0:
+                    ratio = gap / travel
+                    how = (f"{ratio:.{1 if ratio < 10 else 0}f} times as far as the "
+                           f"conversion moves it in {frames}")
+                else:
+                    how = f"and the conversion holds it still for {frames}"
                 out.append(f"{joint}: {a.name or a.kind!r} holds it to frame {a.end} and "
                            f"{b.name or b.kind!r} from frame {b.start}, at goals "
                            f"{gap * 100:.1f} cm apart, {how}: the motion jumps there (leave "

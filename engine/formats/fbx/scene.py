@@ -45,9 +45,9 @@ A file with no joints raises :class:`~engine.errors.FBXError` saying what the fi
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections import Counter
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,8 +58,8 @@ from ...errors import FBXError
 from ...fileio import reading
 from ...motion import Motion
 from ...skeleton import Skeleton
-from ..figure import lying_doubt
 from ...units import SourceFrame
+from ..figure import lying_doubt
 from ..gltf import (POSITION_LAYOUT, ROTATION_LAYOUT, Character, Mesh, _frozen, _local_translations,
                     _matrix_to_quat, _plural, _polar, _pose_from_world, _pose_motion)
 from .ascii import is_ascii_fbx, parse_ascii
