@@ -65,9 +65,15 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
 * **No pops.** In the same rounds, where the keyed motion turns a joint faster around a ramp
   than the no-pop rule allows (:func:`~.quality.pop_limits`; where the dense solve itself
   turns the joint faster, at its ratio there: :func:`_pop_allowance`), that joint's curve
-  speed there costs 4 times more, :data:`CALMING` rounds at most.
-  Both in one round: calming after the emphasis undid it (a 60 fps walk went from 0.59 mm
-  back to 1.02 mm), emphasis after the calming popped again.
+  speed there costs 4 times more, :data:`CALMING` rounds at most. Likewise where the keys
+  move the root's translation in a lurch the dense solve does not make (its correction's
+  step into a frame over :data:`ROOT_MARGIN` times the dense one's within
+  :data:`ROOT_REACH` frames, and over :data:`ROOT_FLOOR` statures a second:
+  :func:`_root_allowance`), the root's curve speed there costs 4 times more; the no-pop rule
+  judges turns only, and the root's translation between the tasks is what a leg's turns
+  make up for (the CC3 walk onto the CMU T-pose: a 37 mm step at 60 fps where the dense one
+  is 4 mm). Both in one round: calming after the emphasis undid it (a 60 fps walk went from
+  0.59 mm back to 1.02 mm), emphasis after the calming popped again.
 
 The unknowns are numbered in key order, so the normal equations are banded in time and are
 factorised in that order (no fill outside the band): each iteration is linear in the frames
@@ -142,8 +148,19 @@ ANGLE_LEVER = 0.1
 #: damped Gauss-Newton iterations per fit at most, and rounds of added keys at most
 ITERATIONS = 8
 ROUNDS = 12
-#: rounds of a costlier speed where the keys pop, at most
-CALMING = 10
+#: rounds of a costlier speed where the keys pop or lurch, at most (10 before the root's
+#: lurches were calmed too: the CC3 walk onto Ely then needed 16 and fell back to the
+#: dense-following keys with 10)
+CALMING = 16
+#: the keys may move the root's translation (its correction's change from frame to frame) at
+#: most this many times as fast as the dense solve does within ``ROOT_REACH`` frames, and
+#: always ``ROOT_FLOOR`` statures per second: the no-pop rule judges turns, and between the
+#: tasks the root's translation was free to lurch where the dense solve glides (the CC3 walk
+#: onto the CMU T-pose: the keyed x correction 30, 37, 0, -19 mm on frames 126-129 at 60 fps,
+#: the dense one 2 mm; benchmarks/keyed_root_steps.py)
+ROOT_MARGIN = 1.5
+ROOT_REACH = 3
+ROOT_FLOOR = 0.1
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
 EMPHASIS = 10
@@ -415,6 +432,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     x = _least_squares(layout.basis, dense)
     reg_pull = sparse.diags(scale)
     allowed = _pop_allowance(edited, _keyed(edited, layout, dense), cons, 1.0)
+    allowed_root = _root_allowance(edited, root)
     boost = {}                    # (joint index, frame) -> how much more its speed costs
     total = rounds = calming = emphasised = stalls = 0
     best, adding, largest = np.inf, True, []
@@ -463,7 +481,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         # where tasks still miss, their frames count more; where a joint turns faster than
         # the no-pop rule (as the dense solve meets it) allows, its curves' speed costs
         # more; both at once, so that neither undoes what the other gained
-        popping = _popping(edited, _keyed(edited, layout, layout.values(x)), cons, allowed)
+        keyed = _keyed(edited, layout, layout.values(x))
+        popping = _popping(edited, keyed, cons, allowed) | _lurching(edited, keyed,
+                                                                     allowed_root)
         emphasise = bool(misses) and emphasised < EMPHASIS and \
             tasks.emphasise(sizes, tolerance)
         calm = bool(popping) and calming < CALMING
@@ -577,6 +597,34 @@ def _pop_allowance(direct: Motion, dense: Motion, constraints, margin: float) ->
     ratios = _pop_ratios(direct, dense, constraints)
     near = maximum_filter1d(ratios, 2 * POP_REACH + 1, axis=0, mode="nearest")
     return np.maximum(1.0, margin * near)
+
+
+def _root_steps(edited: Motion, keyed: Motion) -> np.ndarray:
+    """``(F,)`` [m] how far the root's translation correction (``keyed`` less ``edited``) moves
+    into each frame from the frame before (0 at frame 0)."""
+    correction = keyed.translations[:, 0] - edited.translations[:, 0]
+    out = np.zeros(edited.num_frames)
+    out[1:] = np.linalg.norm(np.diff(correction, axis=0), axis=1)
+    return out
+
+
+def _root_allowance(edited: Motion, root: np.ndarray) -> np.ndarray:
+    """``(F,)`` [m] the step the keys' root correction may take into each frame: the dense
+    correction ``root (F, 3)``'s largest step within :data:`ROOT_REACH` frames times
+    :data:`ROOT_MARGIN`, and at least :data:`ROOT_FLOOR` statures a second."""
+    from scipy.ndimage import maximum_filter1d
+    from ..describe import stature
+    dense = np.zeros(edited.num_frames)
+    dense[1:] = np.linalg.norm(np.diff(root, axis=0), axis=1)
+    near = maximum_filter1d(dense, 2 * ROOT_REACH + 1, mode="nearest")
+    return np.maximum(ROOT_MARGIN * near, ROOT_FLOOR * stature(edited) / edited.fps)
+
+
+def _lurching(edited: Motion, keyed: Motion, allowed: np.ndarray) -> set:
+    """``(-1, frame)`` (the root's translation, as :func:`_speeds` names it) where ``keyed``
+    moves the root's correction further into the frame than ``allowed``
+    (:func:`_root_allowance`)."""
+    return {(-1, int(f)) for f in np.flatnonzero(_root_steps(edited, keyed) > allowed)}
 
 
 def _pop_ratios(direct: Motion, corrected: Motion, constraints) -> np.ndarray:
@@ -811,9 +859,10 @@ POP_MARGIN = 1.02
 
 def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None):
     """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), or None when they
-    miss a held task by more than :data:`TASK_LIMIT` or break the no-pop rule (its worst
-    ratio against ``direct``, the direct conversion, over 1) more than the dense solve does:
-    the caller then keeps keys fitted to the dense curves. ``cancel()``
+    miss a held task by more than :data:`TASK_LIMIT`, break the no-pop rule (its worst
+    ratio against ``direct``, the direct conversion, over 1) more than the dense solve does,
+    or move the root in a lurch it does not make (:func:`_root_allowance`): the caller then
+    keeps keys fitted to the dense curves. ``cancel()``
     returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
     if correction is None or edited.num_frames < 3:
         return None
@@ -825,7 +874,11 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     cons = [c for c in constraints if c.enabled]
     # the keys keep the no-pop rule where the dense solve keeps it, and break it no further
     # where it does not
-    if np.any(_pop_ratios(direct, keys.apply(edited), cons) >
+    keyed = keys.apply(edited)
+    if np.any(_pop_ratios(direct, keyed, cons) >
               _pop_allowance(direct, correction.motion, cons, POP_MARGIN)):
+        return None
+    # nor move the root in lurches the dense solve does not make
+    if _lurching(edited, keyed, _root_allowance(edited, correction.root)):
         return None
     return keys
