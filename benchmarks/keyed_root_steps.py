@@ -3,15 +3,16 @@
     python benchmarks/keyed_root_steps.py [--pairs CLIP:TARGET ...]
 
 The solved layer's keys are fitted to the tasks (engine/correction/keyfit.py), and
-``solved_keys`` keeps them when they hold every task within 1 mm and turn no joint faster
-than the dense solve does (the no-pop rule, on rotations). The root's translation is held to
-neither: between the tasks it may move where the dense solve does not. Per pair, solved as
+``solved_keys`` keeps them when they hold every task within 1 mm, turn no joint faster than
+the dense solve does (the no-pop rule, on rotations) and move the root's translation no
+faster than it does (``keyfit.ROOT_MARGIN``, ``ROOT_FLOOR``). Per pair, solved as
 ``motion-composer retarget CLIP --target CHAR --auto-contacts`` does, this prints the frame
 where the keyed root correction (the delivered root less the direct conversion's) changes most
 against the dense correction's largest change within 3 frames of it, in mm per frame.
-A ratio near 1 means the keys move the root as the dense solve does; round 30 found 8-9 on
-the CC3 walk (60 fps) onto Ely and the CMU T-pose (a 37 mm step where the dense one is 4 mm)
-and on the Bandai walk (30 fps) onto the T-pose (33 mm against 4).
+A ratio near 1 means the keys move the root as the dense solve does; before the root rule
+(round 30) it was 8-9 on the CC3 walk (60 fps) onto Ely and the CMU T-pose (a 37 mm step
+where the dense one is 4 mm) and on the Bandai walk (30 fps) onto the T-pose (33 mm against
+4); see benchmarks/README.md for after.
 
 Without ``--pairs``, six clips of ``../shared/data`` onto five characters.
 """
