@@ -6,7 +6,7 @@ import numpy as np
 from .kinematics import fk_arrays
 from .motion import Motion
 
-__all__ = ["stature", "describe_motion", "joint_tree_lines"]
+__all__ = ["stature", "figure_size", "describe_motion", "joint_tree_lines"]
 
 
 def stature(motion: Motion, *, samples: int = 48) -> float:
@@ -17,6 +17,26 @@ def stature(motion: Motion, *, samples: int = 48) -> float:
     pose = fk_arrays(motion.skeleton, motion.rotations[idx], motion.translations[idx])
     y = pose.all_positions()[..., 1]
     return float(np.median(y.max(axis=1) - y.min(axis=1)))
+
+
+#: a figure's size for the solvers is at least this share of its largest extent: a figure
+#: lying flat (or a snake) has almost no height
+FLAT_SHARE = 0.1
+
+
+def figure_size(motion: Motion, *, samples: int = 48) -> float:
+    """[m] the length the correction measures a figure by (its tolerances, steps and
+    thresholds are shares of it, or shrink with it, so that a character is solved alike at
+    any size): its :func:`stature`, but at least :data:`FLAT_SHARE` of its largest extent
+    along an axis (median over the same sampled frames); 1 for a figure of no size (every
+    joint at one point)."""
+    F = motion.num_frames
+    idx = np.unique(np.linspace(0, F - 1, min(F, samples)).round().astype(int))
+    pose = fk_arrays(motion.skeleton, motion.rotations[idx], motion.translations[idx])
+    points = pose.all_positions()
+    extent = np.ptp(points, axis=1)                                   # (S, 3)
+    size = max(float(np.median(extent[:, 1])), FLAT_SHARE * float(np.median(extent.max(axis=1))))
+    return size if size > 0 else 1.0
 
 
 def joint_tree_lines(motion: Motion) -> list[str]:

@@ -166,13 +166,13 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     ``options.max_gap`` closed and contacts under ``options.min_duration`` dropped; each
     contact keeps the runs where each part is held: slow, and within :data:`PART_HEIGHT` of
     ``options.height`` above its lowest height in the contact."""
-    from ..describe import stature
+    from ..describe import figure_size
     options = options or ContactOptions()
     sk = motion.skeleton
     feet = feet if feet is not None else find_feet(sk)
     if not feet or motion.num_frames < 2:        # a contact lasts two frames or more
         return []
-    size = max(stature(motion), 0.1)
+    size = figure_size(motion)
     fps = motion.fps
     points = []
     for ankle, toe in feet:

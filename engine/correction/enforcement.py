@@ -860,7 +860,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         composed: the directly converted motion: the attraction posture of every frame.
         constraints: :class:`Constraint` list (disabled ones are skipped).
         options: solver settings (default :class:`IKOptions`); an unset ``scale`` is
-            the composed motion's stature.
+            the composed motion's size (:func:`~engine.describe.figure_size`: its stature).
         warm_start: solve frame by frame from the solution at t - 1 (the paper's scheme)
             instead of in batches from the attraction posture.
         progress: called with a fraction in [0, 1].
@@ -883,12 +883,12 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             Ignored with ``warm_start``, where each frame starts from the one before: every
             frame is solved and kept. ``None`` (the default): every frame.
     """
-    from ..describe import stature
+    from ..describe import figure_size
 
     cons = _check(constraints, composed, pins)
     options = options if options is not None else IKOptions()
     if options.scale is None:
-        options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
+        options = dataclasses.replace(options, scale=figure_size(composed))
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
     wanted = None

@@ -173,7 +173,9 @@ class IKOptions:
             ``scale`` (:meth:`met_below`): a tolerance of 0.1 mm on a 100 m giant (the glTF
             fox is 61 m tall) is a millionth of it, which a stretched leg converges to so
             slowly that the lower priorities it gates (a planted foot's orientation) never
-            run. Default 1e-4 (0.1 mm); positive.
+            run. On a character smaller than :data:`FULL_SIZE` it shrinks with it
+            (:meth:`length_share`), and so does ``settle`` for the root's translation.
+            Default 1e-4 (0.1 mm); positive.
         max_iterations: the cap of iterations per frame. Default 60; a whole number >= 0.
         damping: damped least squares lambda of the task levels, as a fraction of
             ``scale``. Larger is steadier near singularities (a stretched leg) and slower to
@@ -207,7 +209,8 @@ class IKOptions:
         joint_limits: ``((joint index, angle [rad]), ...)`` sorted by joint: the largest angle
             a joint may turn away from its attraction posture. A ``{joint: angle}`` mapping is
             accepted and stored as pairs. Default none; angles >= 0.
-        scale: [m] the character's size (its stature), a per-run value: ``None`` (the default)
+        scale: [m] the character's size (:func:`~engine.describe.figure_size`: its stature),
+            a per-run value: ``None`` (the default)
             lets :func:`~engine.correction.enforcement.enforce` take the composed motion's
             stature; :func:`solve_frames` needs it set.
     """
@@ -240,13 +243,22 @@ class IKOptions:
             object.__setattr__(self, "scale", _checked_number("scale", self.scale, 0.0, None,
                                                               True))
 
+    def length_share(self) -> float:
+        """The share of the lengths given in metres (``tolerance``, ``settle`` of the root's
+        translation) that holds on this character: 1 from :data:`FULL_SIZE` up, ``scale /
+        FULL_SIZE`` below (with ``scale`` unset: 1), so that a small character is solved as
+        the same character scaled up to that size (a tenth of a millimetre on a figure of
+        2 cm, a 1 m tall file written in the wrong unit, is half a percent of it)."""
+        return 1.0 if self.scale is None else length_share(self.scale)
+
     def met_below(self) -> float:
         """[m] the error below which a position or plane task is met: ``tolerance``, or
         :data:`MIN_TOLERANCE` times ``scale`` on a character large enough for that to be
-        more (with ``scale`` unset: ``tolerance``)."""
+        more, or ``tolerance`` times :meth:`length_share` on one smaller than
+        :data:`FULL_SIZE` (with ``scale`` unset: ``tolerance``)."""
         if self.scale is None:
             return self.tolerance
-        return max(self.tolerance, MIN_TOLERANCE * self.scale)
+        return max(self.tolerance * self.length_share(), MIN_TOLERANCE * self.scale)
 
 
 #: (field, lowest, highest or None, lowest excluded) of the real-valued settings
@@ -299,6 +311,18 @@ def _checked_limits(limits) -> tuple:
 #: giant's tasks are met at this fraction of its stature, a twentieth of a millimetre per metre
 #: (below the default tolerance on any character up to 2 m, which it leaves alone)
 MIN_TOLERANCE = 5e-5
+
+#: [m] the least size at which the lengths of :class:`IKOptions` given in metres hold as
+#: they are: on a smaller character they shrink with it (:meth:`IKOptions.length_share`),
+#: so that its solve is the same as that of the character scaled up to this size. Every
+#: human figure of ``../shared/data`` is taller, and is solved as before
+FULL_SIZE = 1.0
+
+
+def length_share(size: float) -> float:
+    """The share of a length given in metres that holds on a character of ``size`` [m]
+    (its stature): 1 from :data:`FULL_SIZE` up, ``size / FULL_SIZE`` below."""
+    return min(1.0, size / FULL_SIZE)
 
 #: a polishing frame (only the first level acts) is done once its step is below this share
 #: of ``settle``: the first level restored to rounding, as polishing up to the cap would
@@ -463,6 +487,11 @@ class _Structure:
         self.colscale = (column_scale(skeleton, self.joints, options.scale)
                          if options is not None else np.ones(self.n))
         self.task_colscale = [self.colscale[cols] for cols in self.task_cols]
+        # a step's size as ``settle`` judges it: the root translation's in metres of a
+        # character of FULL_SIZE (IKOptions.length_share), the turns' in radians
+        self.settle_scale = self.colscale.copy()
+        if options is not None:
+            self.settle_scale[:3] /= options.length_share()
         # (T, T): task k pins task t's joint (see ``pins``), for all frames at once
         self.pin_matrix = np.zeros((len(tasks), len(tasks)), dtype=np.intp)
         for t, pins in enumerate(self.pins):
@@ -704,7 +733,13 @@ class _Rows:
             self.levels.append(slice(int(here[0]), int(here[-1]) + 1))
         angular = np.concatenate([[t.kind.angular] * t.rows for t in tasks])
         tol = options.met_below()
-        self.tol = np.where(angular, tol / options.scale, tol)
+        # on a character smaller than FULL_SIZE the orientation rows count their radians as
+        # the arc at FULL_SIZE times the length share (IKOptions.length_share), as the
+        # position rows' metres shrink with it: their balance, the step clamp and the
+        # damping are then those of the character scaled up to FULL_SIZE
+        share = options.length_share()
+        self.unit = None if share == 1.0 else np.where(angular, share, 1.0)
+        self.tol = np.where(angular, tol / options.scale * share, tol)
 
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
@@ -771,6 +806,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         err, jac, on, acting = _evaluate(skeleton, structure, r, t, active)
         err_on = np.where(acting[:, rows.task], err, 0.0)
         residual[active] = _task_norms(err_on, structure.row0)
+        if rows.unit is not None:
+            err, err_on, jac = err * rows.unit, err_on * rows.unit, jac * rows.unit[:, None]
         if it == options.max_iterations:
             break
         iterations[active] += 1
@@ -810,7 +847,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         # those are released and it goes on (so that the result is the posture nearest the
         # attraction that meets the tasks, whatever the start). Held tasks are checked so
         # then, and every few iterations (a hold may keep a lower level from being met)
-        size = np.abs(dq * structure.colscale).max(axis=1)
+        size = np.abs(dq * structure.settle_scale).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
         frames = (check & held.any(axis=1)).nonzero()[0]

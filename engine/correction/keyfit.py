@@ -113,12 +113,13 @@ import copy
 
 import numpy as np
 
+from ..describe import figure_size, stature
 from ..errors import MotionComposerError
 from ..motion import Motion
 from ..quaternions import qmul
 from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
                            DisplacementMap, chain_lengths, hermite_basis)
-from .ik import Task, _Structure, rotvec_to_quat, task_error_and_jacobian
+from .ik import Task, _Structure, length_share, rotvec_to_quat, task_error_and_jacobian
 
 __all__ = ["fit_to_tasks", "solved_keys", "KEY_BUDGET", "TASK_TOLERANCE", "TASK_LIMIT"]
 
@@ -145,6 +146,10 @@ SPEED_HELD = 0.0001
 LEVEL_WEIGHT = 0.1
 #: [m per rad] an angular task's error counts as a length at this lever
 ANGLE_LEVER = 0.1
+#: [m] a joint's lever (the length of the chain it turns) counts as at least this much
+LEVER_FLOOR = 1e-3
+#: [m^2] the least damping of a Gauss-Newton step's normal equations (squared lengths)
+RIDGE = 1e-12
 #: damped Gauss-Newton iterations per fit at most, and rounds of added keys at most
 ITERATIONS = 8
 ROUNDS = 12
@@ -343,7 +348,7 @@ class _Tasks:
     """The held tasks, the constraints of one task kind, joint, priority and weight in one
     batch: per batch its frames, goals, row weight and IK structure."""
 
-    def __init__(self, constraints, skeleton, locked):
+    def __init__(self, constraints, skeleton, locked, share: float = 1.0):
         batches: dict = {}
         for c in constraints:
             kind = c.kind_object.task_kind
@@ -363,7 +368,7 @@ class _Tasks:
                         np.ones(len(frames)), c.priority)
             weight = c.weight ** 0.5
             if kind.angular:
-                weight *= ANGLE_LEVER * LEVEL_WEIGHT ** (c.priority - 1)
+                weight *= ANGLE_LEVER * share * LEVEL_WEIGHT ** (c.priority - 1)
             self.items.append((frames, _Structure(skeleton, [task], locked), weight,
                                kind.angular))
             self.emphasis.append(np.ones(len(frames)))
@@ -392,10 +397,18 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
     the fit's figures (largest held-task error [m], evaluations, rounds, whether it stalled
     and the largest miss after each round of added keys); ``cancel()``
-    returning True stops it (:class:`~engine.errors.MotionComposerError`)."""
+    returning True stops it (:class:`~engine.errors.MotionComposerError`).
+
+    On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
+    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
+    (:func:`~engine.correction.ik.length_share`): its keys are those of the character
+    scaled up to that size."""
     import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
+    share = length_share(figure_size(edited))
+    tolerance = tolerance * share
+    limit = TASK_LIMIT * share
     cons = [c for c in constraints if c.enabled]
     per_joint, every = _windows(cons, sk, F)
     moved = np.any(rotvecs != 0, axis=2)                                    # (F, J)
@@ -418,8 +431,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     if not joints:
         return DisplacementMap()
     lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
+    lever[:-1] = np.maximum(lever[:-1], LEVER_FLOOR * share)
     locked = frozenset(range(sk.num_joints)) - {jt.index for jt in joints}
-    tasks = _Tasks(cons, sk, locked)
+    tasks = _Tasks(cons, sk, locked, share)
     layout = _Layout(joints, F)
     # the rows (joint, keyed frame, channel) depend on the keyed frames only, not the keys
     dense = _stacked(layout, rotvecs, root)
@@ -449,15 +463,15 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         if cancel is not None and cancel():
             raise MotionComposerError("the correction was cancelled")
         x, worst, misses, sizes, used = _gauss_newton(tasks, edited, layout, x, reg, target,
-                                               tolerance)
+                                                      tolerance, share)
         total += used
-        if adding and worst <= TASK_LIMIT and worst < kept_worst:
+        if adding and worst <= limit and worst < kept_worst:
             kept, kept_worst = (copy.deepcopy(joints), x.copy()), worst
         if adding:
             # keys added where tasks miss lower the largest miss round after round; where
             # they have not for STALLS rounds in a row (over the limit), more keys will not
             # hold the tasks: stop (the dense-following keys are kept)
-            stalls = stalls + 1 if TASK_LIMIT < worst >= best else 0
+            stalls = stalls + 1 if limit < worst >= best else 0
             best = min(best, worst)
             largest.append(float(worst))
             if stalls >= STALLS:
@@ -494,7 +508,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         for key in popping if calm else ():
             boost[key] = boost.get(key, 1.0) * 4.0
     result = _as_map(sk, layout, x)
-    if worst > TASK_LIMIT and kept is not None and kept_worst < worst:
+    if worst > limit and kept is not None and kept_worst < worst:
         result, worst = _as_map(sk, _Layout(kept[0], F), kept[1]), kept_worst
     if stats is not None:
         stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
@@ -613,7 +627,6 @@ def _root_allowance(edited: Motion, root: np.ndarray) -> np.ndarray:
     correction ``root (F, 3)``'s largest step within :data:`ROOT_REACH` frames times
     :data:`ROOT_MARGIN`, and at least :data:`ROOT_FLOOR` statures a second."""
     from scipy.ndimage import maximum_filter1d
-    from ..describe import stature
     dense = np.zeros(edited.num_frames)
     dense[1:] = np.linalg.norm(np.diff(root, axis=0), axis=1)
     near = maximum_filter1d(dense, 2 * ROOT_REACH + 1, mode="nearest")
@@ -636,11 +649,13 @@ def _pop_ratios(direct: Motion, corrected: Motion, constraints) -> np.ndarray:
 
 
 def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, target,
-                  tolerance: float):
+                  tolerance: float, share: float = 1.0):
     """Key values and slopes ``x`` improved by damped Gauss-Newton (Levenberg-Marquardt)
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
-    misses, the metric errors (as :func:`_linearised`) and the evaluations used."""
+    misses, the metric errors (as :func:`_linearised`) and the evaluations used. ``share``:
+    :func:`~engine.correction.ik.length_share` (the normal equations are in squared
+    lengths)."""
     import scipy.sparse as sparse
     def state(x):
         values = layout.values(x)
@@ -668,7 +683,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
         g = layout.basis_t @ (rows_t @ err) + reg_t @ rest
         while True:
             used += 1
-            step = _solve_spd(normal + sparse.diags(damping * diag + 1e-12), g)
+            step = _solve_spd(normal + sparse.diags(damping * diag + RIDGE * share ** 2), g)
             trial, trial_cost = state(x + step)
             if trial_cost < cost or damping > 1e6:
                 break
@@ -685,7 +700,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
 
 
 def _lever(jt: _Joint, lever: np.ndarray) -> float:
-    return float(lever[-1]) if jt.index < 0 else max(float(lever[jt.index]), 1e-3)
+    return float(lever[-1] if jt.index < 0 else lever[jt.index])
 
 
 def _stacked(layout: _Layout, rotvecs: np.ndarray, root: np.ndarray) -> np.ndarray:
@@ -869,7 +884,7 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     stats: dict = {}
     keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root, stats=stats,
                         cancel=cancel)
-    if stats.get("worst_task_m", 0.0) > TASK_LIMIT:
+    if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(figure_size(edited)):
         return None
     cons = [c for c in constraints if c.enabled]
     # the keys keep the no-pop rule where the dense solve keeps it, and break it no further

@@ -204,14 +204,14 @@ class WindowSolver:
     a replaced conversion (a whole clip's arrays) alive."""
 
     def __init__(self, composed, options=None):
-        from ..describe import stature
+        from ..describe import figure_size
         from .enforcement import _still_joints
         from .ik import IKOptions
         self._composed = weakref.ref(composed)
         self.given_options = options
         options = options if options is not None else IKOptions()
         if options.scale is None:
-            options = dataclasses.replace(options, scale=max(stature(composed), 0.1))
+            options = dataclasses.replace(options, scale=figure_size(composed))
         self.options = options
         self.still = _still_joints(composed)
 

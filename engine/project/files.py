@@ -255,8 +255,13 @@ ROTATION_TOLERANCE = math.radians(0.02)
 
 def correction_keys(correction: Correction | None) -> DisplacementMap:
     """An IK correction as the keys a project stores (fitted within 0.1 mm per joint above a
-    point of the IK result, at most 0.02 degree per channel)."""
+    point of the IK result, at most 0.02 degree per channel; on a character smaller than
+    :data:`~engine.correction.ik.FULL_SIZE` the 0.1 mm shrinks with it, as the solve's
+    lengths do, :func:`~engine.correction.ik.length_share`)."""
     if correction is None:
         return DisplacementMap()
-    return correction.displacement_map(position_tolerance=POSITION_TOLERANCE,
+    from ..correction.ik import length_share
+    from ..describe import figure_size
+    share = length_share(figure_size(correction.motion))
+    return correction.displacement_map(position_tolerance=POSITION_TOLERANCE * share,
                                        rotation_tolerance=ROTATION_TOLERANCE)
