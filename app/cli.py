@@ -473,8 +473,11 @@ def cmd_retarget(args) -> int:
         atomic_write(args.report, json.dumps(report, indent=2, allow_nan=False) + "\n")
     note = ""
     if result.correction is not None:
+        keys = result.report["keys"]
         note = (f", {len(result.constraints)} constraints (largest residual "
-                f"{_residual_text(largest_residuals(result.report['constraints']), 2)})")
+                f"{_residual_text(largest_residuals(result.report['constraints']), 2)}), "
+                f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
+                f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)")
     print(f"wrote {args.output}: {written.num_frames} frames at "
           f"{written.fps:.6g} fps onto {written.skeleton.num_joints} joints "
           f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")

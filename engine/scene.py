@@ -47,6 +47,7 @@ from .correction.reach import SOURCE as REACH, reach_constraints, unreached
 from .correction import preview as _preview
 from .correction.quality import goal_jumps, quality
 from .errors import MotionComposerError
+from .kinematics import fk_arrays
 from .motion import Motion
 from .project import (Project, Source, check_project, correction_keys, open_project,
                       read_sources)
@@ -461,6 +462,7 @@ class Scene:
         report["quality"] = quality(self.performer, composed, scene.motion, chosen,
                                     correction.residual if correction is not None else None,
                                     self.binding)
+        report["keys"] = _keys_report(scene, correction, keys is not None)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 
@@ -613,6 +615,30 @@ def _sole(character, target: Motion, feet, reference) -> float | None:
         if on_feet.any():
             lowest.append(float(vertices[0, on_feet, 1].min()))
     return min(lowest) if lowest else None
+
+
+def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
+    """The solved layer's keys: fitted to the tasks (``"tasks"``) or to the dense curves
+    (``"dense curves"``), how many, and how far the delivered motion puts any joint from where
+    the dense solve puts it (``largest_distance_from_dense_m``, with the joint and frame):
+    the keys fitted to the tasks hold them within 1 mm but may part from the dense solve,
+    the posture nearest the capture, between and around them."""
+    keys = scene.displacement
+    out = {"fitted_to": "tasks" if fitted else "dense curves",
+           "count": sum(len(c) for c in keys.curves.values()),
+           "largest_distance_from_dense_m": 0.0, "joint": None, "frame": None}
+    if correction is None:
+        return out
+    sk = correction.motion.skeleton
+
+    def positions(m):
+        return fk_arrays(sk, m.rotations, m.translations, end_sites=False).positions
+
+    apart = np.linalg.norm(positions(scene.motion) - positions(correction.motion), axis=-1)
+    f, j = np.unravel_index(int(apart.argmax()), apart.shape)
+    out.update({"largest_distance_from_dense_m": float(apart[f, j]), "joint": sk.names[j],
+                "frame": int(f)})
+    return out
 
 
 def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:

@@ -52,6 +52,11 @@ def test_auto_contacts_floor_and_report(tmp_path, mapping, capsys):
     angular = max(c["max_residual"] for c in data["constraints"]
                   if c["residual_unit"] == "rad" and c["max_residual"] is not None)
     assert f"(largest residual {metric * 1000:.2f} mm, {np.degrees(angular):.2f} deg)" in text
+    # the keys stored and how far the delivered motion is from the dense solve, as reported
+    keys = data["keys"]
+    assert keys["count"] > 0 and keys["fitted_to"] in ("tasks", "dense curves")
+    assert (f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
+            f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)") in text
     assert data["frames"] == 994
     drift = data["contact_drift"]
     assert drift["count"] >= 10

@@ -259,6 +259,11 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     for name, curve in fallback.items():
         assert np.array_equal(kept[name].frames, curve.frames), name
     assert max(_goal_errors(solution.motion, solution.constraints)) <= keyfit.TASK_LIMIT
+    # the report says so, and how closely the delivered motion follows the dense solve
+    report = solution.report["keys"]
+    assert report["fitted_to"] == "dense curves"
+    assert report["count"] == sum(len(c) for c in fallback.values())
+    assert report["largest_distance_from_dense_m"] < 1e-3
 
 
 def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch):
@@ -322,6 +327,14 @@ def test_each_channel_has_at_most_a_tenth_as_many_keys_as_window_frames(name):
     print(f"{name}: keys per window frame, median {np.median(shares):.3f}, worst "
           f"{max(shares):.3f}; worst goal error {max(errors) * 1e3:.3f} mm; largest joint "
           f"difference from the dense solve {gap * 1e3:.1f} mm")
+    # the solve's report gives that difference (issue 15), with where it is
+    report = solution.report["keys"]
+    assert report["fitted_to"] == "tasks"
+    assert report["count"] == sum(len(c) for c in solution.scene.displacement.curves.values())
+    assert report["largest_distance_from_dense_m"] == pytest.approx(gap, rel=1e-9)
+    apart = np.linalg.norm(_positions(solution.motion) - _positions(solution.correction.motion),
+                           axis=-1)
+    assert apart[report["frame"], sk.index[report["joint"]]] == pytest.approx(gap, rel=1e-9)
     assert max(errors) < 1e-3
     assert max(shares) <= 0.1
 
