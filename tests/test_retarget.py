@@ -447,3 +447,30 @@ def test_a_writers_rounding_on_position_channels_is_no_movement(target_file):
     plain, written = retarget(walk, target, corr), retarget(noisy, target, corr)
     assert _deg(plain.rotations, written.rotations).max() < 0.01
     assert np.abs(plain.translations - written.translations).max() < 1e-5
+
+
+def test_a_target_clips_moving_hips_give_its_ground_root_no_bone_to_align():
+    """The CC3 walk (its ground root ``RL_BoneRoot`` carrying the walk, the hips a fixed 1.05 m
+    above it) onto the Bandai walk's skeleton used as a target: Bandai's hips move under its
+    ground root, and on the clip's first frame (the target's reference) they stand 4.07 m along
+    the floor from it. That ground-root-to-hips vector is where the walk has taken the hips,
+    not a bone: aligned onto the performer's vertical root-to-hips bone it stood the hips
+    4.2 m above the floor, and the character came out 4.6 m tall (Bandai is 1.37 m). As the
+    performer's moving joints do, the target's give the bones across them no direction: the
+    character stands as tall as Bandai, its hips at Bandai's height, upright on every frame."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.describe import stature
+    from motion_composer.engine.formats import read_motion, read_performer
+    performer = read_performer(shared_path("cc3_cmu_02_01_walk.bvh"))
+    target = read_motion(shared_path("bandai1_walk_normal_001.bvh"))
+    corr = automap(target.skeleton, performer.skeleton)
+    assert corr.pairs["joint_Root"] == "RL_BoneRoot" and corr.pairs["Hips"] == "CC_Base_Hip"
+    composed = retarget(performer, target, corr)
+    assert stature(composed) == pytest.approx(stature(target), rel=0.05)
+    sk = composed.skeleton
+    p = forward_kinematics(composed).positions
+    t = forward_kinematics(target).positions
+    hips, head = sk.index["Hips"], sk.index["Head"]
+    ground = p[:, sk.index["joint_Root"], 1]
+    assert np.allclose(p[:, hips, 1] - ground, t[0, hips, 1] - t[0, 0, 1], rtol=0.05)
+    assert np.all(p[:, head, 1] > p[:, hips, 1] + 0.3)

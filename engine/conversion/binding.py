@@ -441,9 +441,11 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
 
     p_ref = _reference(performer, options.performer_reference)
     t_ref = _reference(target, options.target_reference)
-    p_moving = _moving_performer_joints(
+    p_moving = _moving_joints(
         performer, max(float(np.ptp(p_ref.all_positions, axis=0).max()), 1e-6))
-    bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving)
+    t_moving = _moving_joints(
+        target, max(float(np.ptp(t_ref.all_positions, axis=0).max()), 1e-6))
+    bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving)
     chains = _chains(tsk, bones)
 
     aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
@@ -538,21 +540,25 @@ def _reference(motion: Motion, choice: str | int) -> _Reference:
 MOVING_TRANSLATION = 1e-4
 
 
-def _moving_performer_joints(performer: Motion, size: float) -> set[int]:
-    """Performer joints (not the root) whose translation is animated: moves by more than
-    :data:`MOVING_TRANSLATION` of ``size`` (the skeleton's size [m]).
+def _moving_joints(motion: Motion, size: float) -> set[int]:
+    """Joints (not the root) whose translation is animated in ``motion`` (the performer, or a
+    clip used as the target): moves by more than :data:`MOVING_TRANSLATION` of ``size`` (the
+    skeleton's size [m]).
 
     A virtual bone across one of them stretches and turns with the translation (Bandai's hips
-    under its ground root), so it gives no direction to follow.
+    under its ground root), so it gives no direction to follow, on either side: in a target
+    clip's reference frame the bone from Bandai's ground root to its hips is where the walk
+    has taken the hips (4 m along the floor on its first frame), not a bone.
     """
-    psk = performer.skeleton
-    p_slots = {int(j): k for k, j in enumerate(psk.translated)}
-    return {j for j, k in p_slots.items() if j > 0 and
-            np.ptp(performer.translations[:, k], axis=0).max() > MOVING_TRANSLATION * size}
+    sk = motion.skeleton
+    slots = {int(j): k for k, j in enumerate(sk.translated)}
+    return {j for j, k in slots.items() if j > 0 and
+            np.ptp(motion.translations[:, k], axis=0).max() > MOVING_TRANSLATION * size}
 
 
 def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
-                   p_ref: _Reference, t_ref: _Reference, p_moving: set[int]) -> dict:
+                   p_ref: _Reference, t_ref: _Reference, p_moving: set[int],
+                   t_moving: set[int] = frozenset()) -> dict:
     """Per mapped target joint, its :class:`_Bones`: the virtual bones towards its mapped
     children that give a direction, in the reference poses (``target_local`` in the target's
     reference posture; :func:`_bones_in_posture` moves it to the bound one)."""
@@ -569,8 +575,9 @@ def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.
 
     bones: dict[int, _Bones] = {}
     for j, children in kids.items():
-        usable = [u for u in (_usable_bone(psk, mapped, j, c, p_ref, t_ref, p_moving, scale_len,
-                                           t_height) for c in children) if u is not None]
+        usable = [u for u in (_usable_bone(tsk, psk, mapped, j, c, p_ref, t_ref, p_moving,
+                                           t_moving, scale_len, t_height)
+                              for c in children) if u is not None]
         usable.sort(key=lambda item: -subtree[item[0]])
         # the primary bone is the one towards the largest subtree (the spine from the hips);
         # when that one has no direction (CMU's LowerBack sits on its hips), aligning a leg in
@@ -588,15 +595,18 @@ def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.
     return bones
 
 
-def _usable_bone(psk: Skeleton, mapped: np.ndarray, j: int, c: int, p_ref: _Reference,
-                 t_ref: _Reference, p_moving: set[int], scale_len: float, t_height: float):
+def _usable_bone(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, j: int, c: int,
+                 p_ref: _Reference, t_ref: _Reference, p_moving: set[int], t_moving: set[int],
+                 scale_len: float, t_height: float):
     """The virtual bone from mapped target joint ``j`` to its mapped child ``c``, as ``(c,
     performer bone (3,) [m] in the world, target bone (3,) [m] in j's reference frame)``, or
-    ``None`` when it gives no direction to follow.
+    ``None`` when it gives no direction to follow (among others: it crosses a joint whose
+    translation is animated, in the performer or in a target clip).
 
     ``scale_len`` and ``t_height`` [m]: the performer's and the target's heights.
     """
-    if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving):
+    if _crosses(psk, int(mapped[j]), int(mapped[c]), p_moving) or \
+            _crosses(tsk, j, c, t_moving):
         return None
     v = p_ref.positions[mapped[c]] - p_ref.positions[mapped[j]]
     world_t = t_ref.positions[c] - t_ref.positions[j]
