@@ -39,9 +39,9 @@ TARGETS = ["cmu_max_131_01_walk.bvh", "target_cmu_mb_rest_tpose.bvh", "target_mi
 NEAR = 3
 
 
-def root_steps(clip: Path, target_path: Path) -> dict:
-    """The keyed and dense root corrections' steps [m per frame] of one pair, and where the
-    keyed one's is largest against the dense one's near it."""
+def solve_pair(clip: Path, target_path: Path):
+    """One pair solved as ``motion-composer retarget CLIP --target CHAR --auto-contacts``
+    does: the :class:`~engine.scene.Solution`."""
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.formats import read_character, read_motion, read_performer
     from motion_composer.engine.project import Project, Source
@@ -52,7 +52,13 @@ def root_steps(clip: Path, target_path: Path) -> dict:
     project = Project(performer=Source(str(clip)), target=Source(str(target_path)),
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True)
-    solution = Scene(project, performer, target).solve(regenerate=True)
+    return Scene(project, performer, target).solve(regenerate=True)
+
+
+def root_steps(clip: Path, target_path: Path) -> dict:
+    """The keyed and dense root corrections' steps [m per frame] of one pair, and where the
+    keyed one's is largest against the dense one's near it."""
+    solution = solve_pair(clip, target_path)
     composed = solution.scene.composed
     dense = solution.correction.root
     keyed = solution.motion.translations[:, 0] - composed.translations[:, 0]
@@ -66,24 +72,33 @@ def root_steps(clip: Path, target_path: Path) -> dict:
             "dense_mm": 1000 * float(near[i]), "fps": composed.fps}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def report_pairs(description: str, measure, header: str, row) -> None:
+    """The reports' command line: ``--pairs CLIP:TARGET ...`` (default: :data:`CLIPS` onto
+    :data:`TARGETS`), then ``header`` and per pair ``row(measure(clip, target))`` after the
+    pair's names, or the error that stopped it."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--pairs", nargs="+", default=[], metavar="CLIP:TARGET",
                         help="file names under ../shared/data (default: six clips onto five "
                              "characters)")
     args = parser.parse_args()
     pairs = ([tuple(p.split(":", 1)) for p in args.pairs] if args.pairs else
              [(c, t) for c, t in itertools.product(CLIPS, TARGETS) if c != t])
-    print(f"{'clip':32} {'target':42} {'frame':>5} {'keyed':>8} {'dense':>8} {'ratio':>6}"
-          "   (root correction's step, mm per frame)")
+    print(f"{'clip':32} {'target':42} {header}")
     for clip, target in pairs:
         try:
-            r = root_steps(SHARED_DATA / clip, SHARED_DATA / target)
+            r = measure(SHARED_DATA / clip, SHARED_DATA / target)
         except Exception as exc:                       # a report: say it and go on
             print(f"{clip:32} {target:42} ERROR {type(exc).__name__}: {exc}")
             continue
-        print(f"{clip:32} {target:42} {r['frame']:5d} {r['keyed_mm']:8.1f} "
-              f"{r['dense_mm']:8.1f} {r['ratio']:6.2f}", flush=True)
+        print(f"{clip:32} {target:42} {row(r)}", flush=True)
+
+
+def main() -> None:
+    report_pairs(__doc__.splitlines()[0], root_steps,
+                 f"{'frame':>5} {'keyed':>8} {'dense':>8} {'ratio':>6}"
+                 "   (root correction's step, mm per frame)",
+                 lambda r: f"{r['frame']:5d} {r['keyed_mm']:8.1f} {r['dense_mm']:8.1f} "
+                           f"{r['ratio']:6.2f}")
 
 
 if __name__ == "__main__":
