@@ -619,15 +619,15 @@ def _sole(character, target: Motion, feet, reference) -> float | None:
 
 def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
     """The solved layer's keys: fitted to the tasks (``"tasks"``) or to the dense curves
-    (``"dense curves"``), how many, and how far the delivered motion puts any joint from where
+    (``"dense curves"``; ``None`` without a correction), how many, and how far the delivered motion puts any joint from where
     the dense solve puts it (``largest_distance_from_dense_m``, with the joint and frame):
     the keys fitted to the tasks hold them within 1 mm but may part from the dense solve,
     the posture nearest the capture, between and around them."""
     keys = scene.displacement
-    out = {"fitted_to": "tasks" if fitted else "dense curves",
+    out = {"fitted_to": None if correction is None else "tasks" if fitted else "dense curves",
            "count": sum(len(c) for c in keys.curves.values()),
            "largest_distance_from_dense_m": 0.0, "joint": None, "frame": None}
-    if correction is None:
+    if correction is None:                   # nothing solved: no keys (``fitted_to`` None)
         return out
     sk = correction.motion.skeleton
 

@@ -251,3 +251,32 @@ def test_the_window_shows_a_jump_in_the_status_bar(qtbot, tmp_path, monkeypatch)
         w.doc.solve()
     assert w.statusBar().currentMessage() == f"Warning: {goal_jumps(scene.composed, jump)[0]}"
     assert w.errors == []
+
+
+def test_the_window_says_how_far_the_solved_keys_are_from_the_dense_solve(qtbot, tmp_path,
+                                                                          monkeypatch):
+    """After a real solve the status bar says the stored keys and the report's largest
+    distance of a joint from the dense solve (the walk's contacts, no warning after it)."""
+    from gui_support import WAIT_MS, quiet_window
+    from motion_composer.app.gui.document import keys_note
+    performer, target = read_motion(WALK), read_motion(TPOSE)
+    performer = performer.replace(rotations=performer.rotations[:240],
+                                  translations=performer.translations[:240])
+    project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
+                      correspondence=Correspondence(MAX_TO_HOLDEN), auto_contacts=True)
+    scene = Scene(project, performer, target)
+    w = quiet_window(qtbot, tmp_path, monkeypatch)
+    w.doc.load_scene(scene)
+    notes = []
+    w.doc.noted.connect(notes.append)
+    with qtbot.waitSignal(w.doc.solved, timeout=WAIT_MS):
+        w.doc.solve(regenerate=True)
+    keys = scene.solve(regenerate=True).report["keys"]
+    assert keys["count"] > 0 and keys["joint"] in scene.composed.skeleton.names
+    assert keys_note(keys) in notes
+    assert w.statusBar().currentMessage() == keys_note(keys)
+    assert "keys fitted to the" in w.statusBar().currentMessage()
+    assert w.errors == []
+    # nothing to solve (the contacts not generated): no keys, and nothing said of them
+    bare = scene.solve().report["keys"]
+    assert bare["fitted_to"] is None and bare["count"] == 0

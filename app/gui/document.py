@@ -46,6 +46,15 @@ _FIELD_SIGNALS = {
 }
 
 
+def keys_note(keys: dict) -> str:
+    """The status line of a solve's stored keys (``report["keys"]``): how many, fitted to what,
+    and how far they put any joint from the dense solve (where: joint and frame)."""
+    where = (f" ({keys['joint']}, frame {keys['frame']})" if keys.get("joint") is not None
+             else "")
+    return (f"Solved: {keys['count']} keys fitted to the {keys['fitted_to']}, at most "
+            f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve{where}")
+
+
 class Document(QtCore.QObject):
     """A retargeting session with undo: the current scene and what the window shows of it."""
 
@@ -243,13 +252,13 @@ class Document(QtCore.QObject):
             t0 = time.perf_counter()
             solution = scene.solve(progress=progress, cancel=cancel, **kwargs)
             return (solution.scene, time.perf_counter() - t0, solution.report["warnings"],
-                    solution.report["quality"])
+                    solution.report["quality"], solution.report.get("keys"))
 
         self.jobs.run("Solving", work, lambda result: self._solved(scene, result),
                       on_end=lambda outcome: self._solve_ended(scene, outcome))
 
     def _solved(self, scene: Scene, outcome: tuple) -> None:
-        result, self.solve_seconds, warnings, quality = outcome
+        result, self.solve_seconds, warnings, quality, keys = outcome
         self._pending.pop(scene, None)
         from motion_composer.app.gui.commands import replace_scene
         replace_scene(self, scene, result)
@@ -258,6 +267,8 @@ class Document(QtCore.QObject):
             self._preview = None
             self._emit_changes(old, self._scene)
             self.motionChanged.emit()
+        if keys is not None and keys["fitted_to"] is not None:
+            self.noted.emit(keys_note(keys))
         for line in warnings:
             self.noted.emit(f"Warning: {line}")
         self.last_quality = quality
