@@ -35,7 +35,8 @@ def figure_size(motion: Motion, *, samples: int = 48) -> float:
     pose = fk_arrays(motion.skeleton, motion.rotations[idx], motion.translations[idx])
     points = pose.all_positions()
     extent = np.ptp(points, axis=1)                                   # (S, 3)
-    size = max(float(np.median(extent[:, 1])), FLAT_SHARE * float(np.median(extent.max(axis=1))))
+    size = max(float(np.median(extent[:, 1])),
+               FLAT_SHARE * float(np.median(extent.max(axis=1))))
     return size if size > 0 else 1.0
 
 

@@ -619,8 +619,9 @@ def _sole(character, target: Motion, feet, reference) -> float | None:
 
 def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
     """The solved layer's keys: fitted to the tasks (``"tasks"``) or to the dense curves
-    (``"dense curves"``; ``None`` without a correction), how many, and how far the delivered motion puts any joint from where
-    the dense solve puts it (``largest_distance_from_dense_m``, with the joint and frame):
+    (``"dense curves"``; ``None`` without a correction), how many, and how far the delivered
+    motion puts any joint from where the dense solve puts it
+    (``largest_distance_from_dense_m``, with the joint and frame):
     the keys fitted to the tasks hold them within 1 mm but may part from the dense solve,
     the posture nearest the capture, between and around them."""
     keys = scene.displacement

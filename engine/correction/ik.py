@@ -324,6 +324,7 @@ def length_share(size: float) -> float:
     (its stature): 1 from :data:`FULL_SIZE` up, ``size / FULL_SIZE`` below."""
     return min(1.0, size / FULL_SIZE)
 
+
 #: a polishing frame (only the first level acts) is done once its step is below this share
 #: of ``settle``: the first level restored to rounding, as polishing up to the cap would
 POLISH_SETTLE = 1e-6
