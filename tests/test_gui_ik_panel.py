@@ -11,7 +11,7 @@ from motion_composer.app.gui.qt import QtCore  # noqa: E402
 from motion_composer.app.gui.ik_panel import IKPanel  # noqa: E402
 from motion_composer.engine.correction.constraints import Constraint  # noqa: E402
 from motion_composer.engine.correction.ik import IKOptions  # noqa: E402
-from gui_support import demo_document  # noqa: E402
+from gui_support import SOLVE_WAIT_MS, demo_document  # noqa: E402
 
 ENTER = QtCore.Qt.Key.Key_Return
 
@@ -76,11 +76,11 @@ def test_changing_an_option_re_solves_the_constraints_with_it(qtbot, panel, doc)
     doc.edit("Add reach", solve=True, constraints=(
         Constraint("LeftHand", "position", {"point": hand + [0.05, 0.1, 0.0]},
                    280, 290, 310, 320, name="reach"),))
-    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
     solved = doc.scene.displacement
     _type(qtbot, panel.edits["max_iterations"], "1")           # a cramped solver
     assert doc.pending or doc.scene.displacement is not solved
-    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
     assert doc.scene.displacement is not solved
     expected = doc.scene.solve().scene.displacement
     for key, curve in expected.curves.items():

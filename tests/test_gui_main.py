@@ -9,7 +9,7 @@ import pytest
 
 from motion_composer.app.gui.qt import QtCore
 from conftest import REPO, clip_path
-from gui_support import WAIT_MS, quiet_window
+from gui_support import SOLVE_WAIT_MS, WAIT_MS, quiet_window
 
 DEMO = REPO / "resources" / "demo" / "demo.mcp"
 
@@ -133,7 +133,7 @@ def test_long_work_runs_in_a_thread_with_progress_and_cancel(window, qtbot):
     timer = QtCore.QTimer()
     timer.timeout.connect(lambda: ticks.append(1))
     timer.start(5)
-    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=30000)
+    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=SOLVE_WAIT_MS)
     timer.stop()
     assert len(ticks) > 3                                   # the event loop kept running
     assert window.undo_action.text() == "&Undo Solve constraints"
@@ -142,7 +142,7 @@ def test_long_work_runs_in_a_thread_with_progress_and_cancel(window, qtbot):
     motion = doc.motion
     window.solve()
     window.cancel_job()
-    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=30000)
+    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=SOLVE_WAIT_MS)
     assert doc.motion is motion and not doc.pending
     assert window.statusBar().currentMessage() == "Cancelled"
 

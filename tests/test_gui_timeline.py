@@ -33,7 +33,7 @@ from motion_composer.engine.correction.constraints import Constraint  # noqa: E4
 from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
 from motion_composer.engine.kinematics import forward_kinematics  # noqa: E402
 
-from gui_support import WAIT_MS, demo_document  # noqa: E402
+from gui_support import SOLVE_WAIT_MS, WAIT_MS, demo_document  # noqa: E402
 
 Qt = QtCore.Qt
 LEFT, RIGHT = Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton
@@ -546,7 +546,7 @@ def test_inspector_edits_are_undoable(qtbot, inspector, doc):
     assert doc.scene.constraints[i].goal["point"][1] == pytest.approx(0.25)
     assert doc.undo_stack.count() == count + 1
     assert doc.undo_stack.text(count) == f"Set point of {HAND}"
-    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)   # the solve lands in that step
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)   # the solve lands in that step
     j = doc.motion.skeleton.index["LeftHand"]
     hand = doc.pose("target").positions[330, j]
     assert np.linalg.norm(hand - doc.scene.constraints[i].goal["point"]) < 0.01   # solved

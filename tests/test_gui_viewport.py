@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gui_support import WAIT_MS, count_colour, demo_document, require_gl, view_pixels
+from gui_support import SOLVE_WAIT_MS, WAIT_MS, count_colour, demo_document, require_gl, view_pixels
 
 
 @pytest.fixture()
@@ -203,7 +203,7 @@ def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     qtbot.mouseRelease(v, QtCore.Qt.MouseButton.LeftButton,
                        pos=QtCore.QPoint(int(x), int(y) - 30))
     qtbot.waitUntil(lambda: doc.undo_stack.count() == count + 1, timeout=WAIT_MS)
-    qtbot.waitUntil(lambda: not doc.pending, timeout=30000)     # the solve landed
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)     # the solve landed
     assert doc.undo_stack.undoText() == "Move goal of reach"
     goal = np.array(doc.scene.constraints[0].goal["point"])
     assert goal[1] > start[1] + 0.02                     # dragged up on screen: higher

@@ -239,7 +239,7 @@ def test_retarget_warns_of_a_jump_in_one_line_and_solves(tmp_path, capsys):
 
 def test_the_window_shows_a_jump_in_the_status_bar(qtbot, tmp_path, monkeypatch):
     """The window's solve says it too, as the other warnings of a solve (the status bar)."""
-    from gui_support import WAIT_MS, quiet_window
+    from gui_support import SOLVE_WAIT_MS, quiet_window
     performer, target = read_motion(WALK), read_motion(TPOSE)
     project = Project(performer=Source(str(WALK)), target=Source(str(TPOSE)),
                       correspondence=Correspondence(MAX_TO_HOLDEN))
@@ -247,7 +247,7 @@ def test_the_window_shows_a_jump_in_the_status_bar(qtbot, tmp_path, monkeypatch)
     jump = _hand_goals(scene.composed, 120, 121, 0.19)
     w = quiet_window(qtbot, tmp_path, monkeypatch)
     w.doc.load_scene(scene.replace(constraints=jump))
-    with qtbot.waitSignal(w.doc.solved, timeout=WAIT_MS):
+    with qtbot.waitSignal(w.doc.solved, timeout=SOLVE_WAIT_MS):
         w.doc.solve()
     assert w.statusBar().currentMessage() == f"Warning: {goal_jumps(scene.composed, jump)[0]}"
     assert w.errors == []
@@ -257,7 +257,7 @@ def test_the_window_says_how_far_the_solved_keys_are_from_the_dense_solve(qtbot,
                                                                           monkeypatch):
     """After a real solve the status bar says the stored keys and the report's largest
     distance of a joint from the dense solve (the walk's contacts, no warning after it)."""
-    from gui_support import WAIT_MS, quiet_window
+    from gui_support import SOLVE_WAIT_MS, quiet_window
     from motion_composer.app.gui.document import keys_note
     performer, target = read_motion(WALK), read_motion(TPOSE)
     performer = performer.replace(rotations=performer.rotations[:240],
@@ -269,7 +269,7 @@ def test_the_window_says_how_far_the_solved_keys_are_from_the_dense_solve(qtbot,
     w.doc.load_scene(scene)
     notes = []
     w.doc.noted.connect(notes.append)
-    with qtbot.waitSignal(w.doc.solved, timeout=WAIT_MS):
+    with qtbot.waitSignal(w.doc.solved, timeout=SOLVE_WAIT_MS):
         w.doc.solve(regenerate=True)
     keys = scene.solve(regenerate=True).report["keys"]
     assert keys["count"] > 0 and keys["joint"] in scene.composed.skeleton.names
