@@ -42,12 +42,11 @@ from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
-from .correction.keyfit import solved_keys
+from .correction.keyfit import parting, solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
 from .correction import preview as _preview
 from .correction.quality import goal_jumps, quality
 from .errors import MotionComposerError
-from .kinematics import fk_arrays
 from .motion import Motion
 from .project import (Project, Source, check_project, correction_keys, open_project,
                       read_sources)
@@ -620,8 +619,9 @@ def _sole(character, target: Motion, feet, reference) -> float | None:
 def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
     """The solved layer's keys: fitted to the tasks (``"tasks"``) or to the dense curves
     (``"dense curves"``; ``None`` without a correction), how many, and how far the delivered
-    motion puts any joint from where the dense solve puts it
-    (``largest_distance_from_dense_m``, with the joint and frame):
+    motion puts any joint from the path the dense solve takes it along
+    (``largest_distance_from_dense_m``, with the joint and frame; from the nearest of that
+    path's positions on the frame and either side: :func:`~.correction.keyfit.parting`):
     the keys fitted to the tasks hold them within 1 mm but may part from the dense solve,
     the posture nearest the capture, between and around them."""
     keys = scene.displacement
@@ -630,15 +630,9 @@ def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
            "largest_distance_from_dense_m": 0.0, "joint": None, "frame": None}
     if correction is None:                   # nothing solved: no keys (``fitted_to`` None)
         return out
-    sk = correction.motion.skeleton
-
-    def positions(m):
-        return fk_arrays(sk, m.rotations, m.translations, end_sites=False).positions
-
-    apart = np.linalg.norm(positions(scene.motion) - positions(correction.motion), axis=-1)
-    f, j = np.unravel_index(int(apart.argmax()), apart.shape)
-    out.update({"largest_distance_from_dense_m": float(apart[f, j]), "joint": sk.names[j],
-                "frame": int(f)})
+    apart, f, j = parting(scene.motion, correction.motion)
+    out.update({"largest_distance_from_dense_m": apart,
+                "joint": correction.motion.skeleton.names[j], "frame": f})
     return out
 
 

@@ -8,7 +8,7 @@ from motion_composer.engine.correction.enforcement import enforce
 from motion_composer.engine.correction.constraints import Constraint
 from motion_composer.engine.correction.displacement import (ROOT, Curve, DisplacementMap,
                                                             hermite_basis, reduce_keys)
-from motion_composer.engine.correction.keyfit import KEY_BUDGET, fit_to_tasks
+from motion_composer.engine.correction.keyfit import fit_to_tasks, key_budget
 from motion_composer.engine.errors import MotionComposerError
 from motion_composer.engine import forward_kinematics
 from motion_composer.engine.rotations import angle_between
@@ -87,7 +87,7 @@ def test_keys_fitted_to_the_task_hold_a_reach_with_a_tenth_of_the_window_as_keys
     stats = {}
     dmap = fit_to_tasks(composed, [c], result.rotvecs, result.root, stats=stats)
     window = c.smooth_out - c.smooth_in + 1
-    assert dmap.curves and all(len(curve) <= KEY_BUDGET * window
+    assert dmap.curves and all(len(curve) <= key_budget(composed.fps) * window
                                for curve in dmap.curves.values())
     applied = dmap.apply(composed)
     got = forward_kinematics(applied).positions[c.start:c.end + 1, sk.index["LeftHand"]]
