@@ -364,10 +364,12 @@ class Scene:
                                        ground=ground)
         if p.floor is not None:
             sk = self.target.skeleton
+            # the contacts' floor planes stand on the same floor (``ground``): once is enough
+            floored = {c.joint for c in out if c.meta.get("floor")}
             for ankle, toe in find_feet(sk):
                 below = [sk.names[k] for k in below_foot(sk, ankle, toe)]
                 for joint in (ankle, toe, *below):
-                    if joint and joint in ground.heights:
+                    if joint and joint in ground.heights and joint not in floored:
                         out.append(floor_constraint(joint, composed.num_frames,
                                                     p.floor + ground.heights[joint]))
         return out

@@ -155,3 +155,56 @@ def test_back_to_back_ramps_of_two_goals_ease_without_a_pop():
     q = quality(performer, composed, result.motion, cons, result.residual)
     assert max(c["max_residual"] for c in q["constraints"]) < 1e-3
     assert max(p["ratio"] for p in q["pops"]) <= 1.0, q["pops"][:2]
+
+
+def _walk_onto_bandai_with_a_floor(lo: int, hi: int):
+    """The CMU walk's frames ``lo .. hi - 1`` onto the Bandai skeleton (../shared/data), as
+    ``motion-composer retarget --auto-contacts --floor 0`` sets it up: the scene."""
+    from conftest import shared_path
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_motion, read_performer
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
+    clip, character = shared_path("cmu_max_131_01_walk.bvh"), shared_path(
+        "bandai1_walk_normal_001.bvh")
+    performer, target = read_performer(clip), read_motion(character)
+    performer = performer.replace(rotations=performer.rotations[lo:hi],
+                                  translations=performer.translations[lo:hi])
+    project = Project(performer=Source(str(clip)), target=Source(str(character)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True, floor=0.0)
+    return Scene(project, performer, target)
+
+
+def test_the_project_floor_adds_no_second_plane_where_the_contacts_hold_the_floor():
+    """With automatic contacts and ``--floor``, the contacts' floor planes stand on that
+    floor: the project's floor adds none on the joints they already keep above it."""
+    scene = _walk_onto_bandai_with_a_floor(500, 760)
+    planes = [(c.joint, c.goal["point"][1]) for c in scene.automatic_constraints()
+              if c.kind == "plane"]
+    assert len(planes) == 4 and len(set(planes)) == 4            # heels and toes, once each
+    assert {j for j, _ in planes} == {"Foot_L", "Foot_R", "Toes_L", "Toes_R"}
+
+
+def test_a_plane_given_twice_is_solved_once_without_a_pop():
+    """The same floor plane twice on a joint (the contacts' and the project's, as the scene
+    made them before it made them once): the solve is the one with each plane once, bit for
+    bit, and each copy reports the plane's residual. Solved as two tasks, the active set
+    held the right toe on the floor through its releases on one frame of a swing (the
+    second copy kept it there while the first was let go): 5.7 cm below both neighbours on
+    frame 635 of the whole clip, Foot_R turning 1.8 times its no-pop limit; in this window
+    the hips turned 1.87 times theirs (frame 140), where each plane once keeps 0.99."""
+    from motion_composer.engine.correction.constraints import floor_constraint
+    scene = _walk_onto_bandai_with_a_floor(500, 760)
+    composed = scene.composed
+    once = scene.automatic_constraints()
+    twice = once + [floor_constraint(c.joint, composed.num_frames, c.goal["point"][1])
+                    for c in once if c.kind == "plane"]
+    single, double = enforce(composed, once), enforce(composed, twice)
+    np.testing.assert_array_equal(double.motion.rotations, single.motion.rotations)
+    np.testing.assert_array_equal(double.motion.translations, single.motion.translations)
+    planes = [i for i, c in enumerate(once) if c.kind == "plane"]
+    for k, i in enumerate(planes):
+        np.testing.assert_array_equal(double.residual[len(once) + k], single.residual[i])
+    q = quality(scene.performer, composed, double.motion, twice, double.residual)
+    assert max(p["ratio"] for p in q["pops"]) <= 1.0, q["pops"][:3]
