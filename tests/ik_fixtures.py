@@ -69,22 +69,28 @@ def run_on_bandai():
     return performer, target, corr, retarget(performer, target, corr)
 
 
-def walk_window_on_tpose(lo: int, hi: int):
-    """The bundled CMU walk's frames ``lo .. hi - 1`` onto the bundled T-pose, as
-    ``motion-composer retarget --auto-contacts --floor 0`` solves it (the capture walks
-    0.9 m under that floor on some of its frames): the :class:`Solution`."""
+def window_scene(clip, character, lo: int, hi: int):
+    """The clip's frames ``lo .. hi - 1`` onto the character (paths), as ``motion-composer
+    retarget --auto-contacts --floor 0`` sets them up: the :class:`Scene`, not solved."""
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.formats import read_motion, read_performer
     from motion_composer.engine.project import Project, Source
     from motion_composer.engine.scene import Scene
-    walk, tpose = clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh")
-    performer, target = read_performer(walk), read_motion(tpose)
+    performer, target = read_performer(clip), read_motion(character)
     performer = performer.replace(rotations=performer.rotations[lo:hi],
                                   translations=performer.translations[lo:hi])
-    project = Project(performer=Source(str(walk)), target=Source(str(tpose)),
+    project = Project(performer=Source(str(clip)), target=Source(str(character)),
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True, floor=0.0)
-    return Scene(project, performer, target).solve(regenerate=True)
+    return Scene(project, performer, target)
+
+
+def walk_window_on_tpose(lo: int, hi: int):
+    """The bundled CMU walk's frames ``lo .. hi - 1`` onto the bundled T-pose, as
+    ``motion-composer retarget --auto-contacts --floor 0`` solves it (the capture walks
+    0.9 m under that floor on some of its frames): the :class:`Solution`."""
+    return window_scene(clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh"),
+                        lo, hi).solve(regenerate=True)
 
 
 def two_hands(composed, left_range=(90, 100, 120, 135)):

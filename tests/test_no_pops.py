@@ -161,19 +161,9 @@ def _walk_onto_bandai_with_a_floor(lo: int, hi: int):
     """The CMU walk's frames ``lo .. hi - 1`` onto the Bandai skeleton (../shared/data), as
     ``motion-composer retarget --auto-contacts --floor 0`` sets it up: the scene."""
     from conftest import shared_path
-    from motion_composer.engine.conversion.automap import automap
-    from motion_composer.engine.formats import read_motion, read_performer
-    from motion_composer.engine.project import Project, Source
-    from motion_composer.engine.scene import Scene
-    clip, character = shared_path("cmu_max_131_01_walk.bvh"), shared_path(
-        "bandai1_walk_normal_001.bvh")
-    performer, target = read_performer(clip), read_motion(character)
-    performer = performer.replace(rotations=performer.rotations[lo:hi],
-                                  translations=performer.translations[lo:hi])
-    project = Project(performer=Source(str(clip)), target=Source(str(character)),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True, floor=0.0)
-    return Scene(project, performer, target)
+    from ik_fixtures import window_scene
+    return window_scene(shared_path("cmu_max_131_01_walk.bvh"),
+                        shared_path("bandai1_walk_normal_001.bvh"), lo, hi)
 
 
 def test_the_project_floor_adds_no_second_plane_where_the_contacts_hold_the_floor():
