@@ -122,8 +122,8 @@ from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
                            DisplacementMap, chain_lengths, hermite_basis)
 from .ik import Task, _Structure, length_share, rotvec_to_quat, task_error_and_jacobian
 
-__all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND", "TASK_TOLERANCE",
-           "TASK_LIMIT"]
+__all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND",
+           "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY"]
 
 # scipy (sparse) is imported where a fit needs it: opening a project stays off scipy, which
 # costs about half a second to import
