@@ -157,7 +157,7 @@ PULL_FREE = 0.05
 #: the pull on held frames of the first fit a solve tries (:func:`solved_keys`): where the
 #: keys can follow it, they stay nearer the dense solve (a 120 fps walk 3 % of the stature
 #: instead of 5, the 30 fps walk 2 % instead of 7); where they cannot (the bundled walk onto
-#: the T-pose with the floor at 0, frames of 200 at a time: 2-12 mm off in 6 of 8 windows),
+#: the T-pose with the floor at 0, frames of 200 at a time: 2-16 mm off in 6 of 8 windows),
 #: the solve fits again with :data:`PULL`
 FAITHFUL_PULL = 0.05
 #: [s] the curves' speed (per channel, metres per second at the joint's lever) counts this
