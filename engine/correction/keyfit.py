@@ -110,6 +110,7 @@ keys fitted to the tasks (5 fell back to dense-following keys), parting by 0.7 t
 from __future__ import annotations
 
 import copy
+import functools
 
 import numpy as np
 
@@ -912,12 +913,17 @@ def parting(motion: Motion, dense: Motion) -> tuple[float, int, int]:
     CMU walk onto the Bandai skeleton with ``--floor 0`` had each floor plane twice, its dense
     solve threw a toe 20 cm for one frame and back (``enforcement._assign_slots``), and the
     keys, 16 cm from it on that frame, were 2.6 % of the stature from its path."""
-    sk = motion.skeleton
+    return _parting(_positions(motion), _positions(dense))
 
-    def positions(m):
-        return fk_arrays(sk, m.rotations, m.translations, end_sites=False).positions
 
-    here, path = positions(motion), positions(dense)
+def _positions(motion: Motion) -> np.ndarray:
+    """``(F, J, 3)`` the joints' world positions."""
+    return fk_arrays(motion.skeleton, motion.rotations, motion.translations,
+                     end_sites=False).positions
+
+
+def _parting(here: np.ndarray, path: np.ndarray) -> tuple[float, int, int]:
+    """:func:`parting` of the joint positions ``here`` from ``path`` (both ``(F, J, 3)``)."""
     apart = np.linalg.norm(here - path, axis=-1)
     if len(path) > 1:
         apart[1:] = np.minimum(apart[1:], np.linalg.norm(here[1:] - path[:-1], axis=-1))
@@ -939,28 +945,49 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
     if correction is None or edited.num_frames < 3:
         return None
+    judge = _Judge(direct, edited, constraints, correction)
     for pull in (FAITHFUL_PULL, PULL):
         stats: dict = {}
         keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root,
                             pull=pull, stats=stats, cancel=cancel)
-        if _kept(direct, edited, constraints, correction, keys, stats):
+        if judge.keeps(keys, stats):
             return keys
     return None
 
 
-def _kept(direct: Motion, edited: Motion, constraints, correction, keys, stats) -> bool:
-    """Whether :func:`solved_keys` keeps ``keys`` (fitted with ``stats``)."""
-    if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(figure_size(edited)):
-        return False
-    cons = [c for c in constraints if c.enabled]
-    keyed = keys.apply(edited)
-    # the keys stay near the dense solve
-    if parting(keyed, correction.motion)[0] > FIDELITY * figure_size(edited):
-        return False
-    # the keys keep the no-pop rule where the dense solve keeps it, and break it no further
-    # where it does not
-    if np.any(_pop_ratios(direct, keyed, cons) >
-              _pop_allowance(direct, correction.motion, cons, POP_MARGIN)):
-        return False
-    # nor move the root in lurches the dense solve does not make
-    return not _lurching(edited, keyed, _root_allowance(edited, correction.root))
+class _Judge:
+    """What :func:`solved_keys` keeps keys by, against the dense solve: what depends on it
+    alone (its joint positions, where it pops, how fast its root moves) is found once, when
+    a fit first needs it, for both fits."""
+
+    def __init__(self, direct: Motion, edited: Motion, constraints, correction):
+        self.direct, self.edited, self.correction = direct, edited, correction
+        self.cons = [c for c in constraints if c.enabled]
+        self.size = figure_size(edited)
+
+    @functools.cached_property
+    def path(self) -> np.ndarray:
+        return _positions(self.correction.motion)
+
+    @functools.cached_property
+    def pops_allowed(self) -> np.ndarray:
+        return _pop_allowance(self.direct, self.correction.motion, self.cons, POP_MARGIN)
+
+    @functools.cached_property
+    def root_allowed(self) -> np.ndarray:
+        return _root_allowance(self.edited, self.correction.root)
+
+    def keeps(self, keys: DisplacementMap, stats: dict) -> bool:
+        """Whether the keys (fitted with ``stats``) are kept."""
+        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(self.size):
+            return False
+        keyed = keys.apply(self.edited)
+        # the keys stay near the dense solve
+        if _parting(_positions(keyed), self.path)[0] > FIDELITY * self.size:
+            return False
+        # the keys keep the no-pop rule where the dense solve keeps it, and break it no
+        # further where it does not
+        if np.any(_pop_ratios(self.direct, keyed, self.cons) > self.pops_allowed):
+            return False
+        # nor move the root in lurches the dense solve does not make
+        return not _lurching(self.edited, keyed, self.root_allowed)
