@@ -478,6 +478,11 @@ def cmd_retarget(args) -> int:
                 f"{_residual_text(largest_residuals(result.report['constraints']), 2)}), "
                 f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
                 f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)")
+        floor = result.report["floor"]
+        if floor["lift_m"]:
+            note += (f", standing on the floor at {floor['height_m']:.3f} m (the conversion "
+                     f"{'raised' if floor['lift_m'] > 0 else 'lowered'} "
+                     f"{abs(floor['lift_m']) * 1000:.0f} mm onto it)")
     print(f"wrote {args.output}: {written.num_frames} frames at "
           f"{written.fps:.6g} fps onto {written.skeleton.num_joints} joints "
           f"({len(correspondence)} mapped){note} in {elapsed:.2f} s")
@@ -715,8 +720,9 @@ def build_parser() -> ArgumentParser:
     fix.add_argument("--auto-contacts", action="store_true",
                      help="detect the performer's foot contacts and pin the target's feet")
     fix.add_argument("--floor", type=float, metavar="HEIGHT",
-                     help="keep the target's feet and toes on or above a floor at HEIGHT "
-                          "metres (also the floor automatic contacts stand on)")
+                     help="stand the character on a floor at HEIGHT metres: the conversion "
+                          "is raised or lowered onto it, and the feet and toes are kept on "
+                          "or above it (also the floor automatic contacts stand on)")
     fix.add_argument("--report", metavar="REPORT.json",
                      help="write residuals per constraint, contact drift and timings")
     proj = rt.add_argument_group("project")

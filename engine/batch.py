@@ -46,6 +46,7 @@ class Recipe:
             RootOptions fields.
         auto_contacts: pin the feet where the performer plants them.
         floor: keep the feet on or above this height [m], or None.
+        stand_on_floor: also move each conversion onto ``floor`` (the project's setting).
         suffix: appended to each clip's stem for its output name.
         target_reader: options for reading the target (units, up_axis, ...).
         performer_reader: options for reading every clip (none: detected per clip).
@@ -58,6 +59,7 @@ class Recipe:
     root: dict = field(default_factory=dict)
     auto_contacts: bool = True
     floor: float | None = None
+    stand_on_floor: bool = True
     suffix: str = ""
     target_reader: dict = field(default_factory=dict)
     ik: dict = field(default_factory=dict)
@@ -81,7 +83,8 @@ def recipe_from_project(project, *, suffix: str = "") -> Recipe:
     root = dataclasses.asdict(project.root)
     return Recipe(target_path=str(src.path), pairs=dict(project.correspondence.pairs),
                   bind=bind, root=root, auto_contacts=bool(project.auto_contacts),
-                  floor=project.floor, suffix=suffix, target_reader=src.reader_options(),
+                  floor=project.floor, stand_on_floor=bool(project.stand_on_floor),
+                  suffix=suffix, target_reader=src.reader_options(),
                   ik=dataclasses.asdict(project.ik_options))
 
 
@@ -174,7 +177,8 @@ def process_clip(recipe: Recipe, clip: str, out_dir: str) -> dict:
                           target=Source(recipe.target_path, **recipe.target_reader),
                           correspondence=corr, bind_options=BindOptions(**recipe.bind),
                           root=RootOptions(**recipe.root), auto_contacts=recipe.auto_contacts,
-                          floor=recipe.floor, ik_options=IKOptions(**recipe.ik))
+                          floor=recipe.floor, stand_on_floor=recipe.stand_on_floor,
+                          ik_options=IKOptions(**recipe.ik))
         result = Scene(project, performer, target).solve(regenerate=True)
         summary["warnings"] += result.report["warnings"]
         Path(out_dir).mkdir(parents=True, exist_ok=True)

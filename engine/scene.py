@@ -266,10 +266,11 @@ class Scene:
         binding = self._raw("binding")
         if isinstance(binding, _Failed):
             return binding
-        key = (bkey, p.root)
+        lift = self.lift()
+        key = (bkey, p.root, lift)
         if stage == "intermediate":
             return self.derived.get("intermediate", key, _guarded(
-                lambda: convert(binding, self.performer, p.root)))
+                lambda: convert(binding, self.performer, p.root, lift=lift)))
         pose = self._raw("intermediate")
         if isinstance(pose, _Failed):
             return pose
@@ -377,15 +378,49 @@ class Scene:
     def ground(self):
         """Where the target's feet stand (:class:`~engine.correction.contacts.Ground`): the
         target's feet in its reference pose on the floor under them (the lowest mesh vertex
-        of the feet where the character has a mesh), moved to ``floor`` where it is set."""
-        by_performer = {p: t for t, p in self.correspondence.pairs.items()}
-        mapped = [(by_performer[a], by_performer.get(t)) for a, t in
-                  find_feet(self.performer.skeleton) if a in by_performer]
-        feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
-        reference = self.project.bind_options.target_reference
-        sole = _sole(self.character, self.target, feet, reference)
-        return target_ground(self.target, feet, reference=reference, floor=self.project.floor,
-                             sole=sole)
+        of the feet where the character has a mesh), moved to ``floor`` where it is set (the
+        direct conversion is moved with it: :meth:`lift`)."""
+        standing = self._standing()
+        if self.project.floor is None:
+            return standing
+        return dataclasses.replace(standing, floor=float(self.project.floor))
+
+    def lift(self) -> float:
+        """[m] How far the direct conversion is raised (lowered, where negative) so that the
+        character stands on the project's ``floor``: the floor less the one the character
+        stands on in its reference pose (:meth:`ground` without a floor). 0 without a floor,
+        where the project does not ``stand_on_floor`` (the floor is only the feet's plane, as
+        format 3 and older read it), without both sources and a map, and in the
+        ``absolute`` root mode, which places the root where the performer's is.
+
+        A floor the conversion does not stand on would otherwise be a correction: the
+        contacts would pull each planted foot to it and let it go at every step, and a floor
+        above the feet would lift the body by force on every frame (the CMU walk onto the
+        CMU T-pose skeleton, whose hips are at 0, with ``--floor 0``: 0.92 m, and joints
+        turning at 4.8 times the no-pop limit)."""
+        p = self.project
+        if p.floor is None or not p.stand_on_floor or p.root.mode == "absolute" \
+                or not self.has_sources or not len(self.correspondence):
+            return 0.0
+        return float(p.floor) - self._standing().floor
+
+    def _standing(self):
+        """The :class:`~engine.correction.contacts.Ground` the character stands on in its
+        reference pose, whatever the project's floor (cached: a skinned character's sole is
+        found by skinning its mesh)."""
+        p = self.project
+        reference = p.bind_options.target_reference
+        key = (self.performer, self.target, _pairs_key(p.correspondence), reference,
+               p.target.path)
+
+        def compute():
+            by_performer = {a: t for t, a in self.correspondence.pairs.items()}
+            mapped = [(by_performer[a], by_performer.get(t)) for a, t in
+                      find_feet(self.performer.skeleton) if a in by_performer]
+            feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
+            sole = _sole(self.character, self.target, feet, reference)
+            return target_ground(self.target, feet, reference=reference, sole=sole)
+        return self.derived.get("standing", key, compute)
 
     def contact_warnings(self) -> list[str]:
         """Why automatic contacts (``auto_contacts``) cannot pin some or all feet, one line
@@ -464,6 +499,9 @@ class Scene:
                                     correction.residual if correction is not None else None,
                                     self.binding)
         report["keys"] = _keys_report(scene, correction, keys is not None)
+        # the floor the character stands on: the project's, with the conversion moved onto
+        # it (``lift_m``), else the one under its feet in its reference pose
+        report["floor"] = {"height_m": self.ground().floor, "lift_m": self.lift()}
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 

@@ -58,6 +58,14 @@ def test_auto_contacts_floor_and_report(tmp_path, mapping, capsys):
     assert (f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
             f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)") in text
     assert data["frames"] == 994
+    # the character stands on that floor: the conversion moved by it less the T-pose's own
+    # (its lowest foot point with the hips at 0), and the summary says so
+    rest_floor = forward_kinematics(read_bvh(TPOSE)).end_positions[0, :, 1].min()
+    assert data["floor"]["height_m"] == pytest.approx(floor)
+    assert data["floor"]["lift_m"] == pytest.approx(floor - rest_floor, abs=1e-9)
+    direction = "raised" if floor > rest_floor else "lowered"
+    assert (f"standing on the floor at {floor:.3f} m (the conversion {direction} "
+            f"{abs(floor - rest_floor) * 1000:.0f} mm onto it)") in text
     drift = data["contact_drift"]
     assert drift["count"] >= 10
     assert drift["corrected_mean_m"] < 0.1 * drift["direct_mean_m"]

@@ -78,6 +78,7 @@ def full_project() -> Project:
         contact_options=ContactOptions(height=0.04, speed=0.3, min_duration=0.1,
                                        max_gap=0.05, ramp=0.1),
         floor=-0.02,
+        stand_on_floor=False,
         ik_options=IKOptions(tolerance=2e-4, max_iterations=40, damping=0.01, max_step=0.04,
                              attraction=0.4, settle=2e-5, nullspace_damping=2e-6,
                              step_cap=0.25, polish_share=0.3, priority_gate=8.0,

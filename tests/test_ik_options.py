@@ -194,8 +194,11 @@ def test_a_version_1_project_migrates_and_evaluates_to_the_same_motion(v1_sessio
     # saved, it is a current-version file with every setting written
     save_project(project, tmp_path / "v2.mcp")
     data = json.loads((tmp_path / "v2.mcp").read_text())
-    assert data["version"] == VERSION == 3
-    assert list(data)[list(data).index("floor") + 1] == "ik"
+    assert data["version"] == VERSION == 4
+    assert list(data)[list(data).index("floor") + 2] == "ik"
+    # its floor stays the feet's plane only (format 4 moves a new project's conversion
+    # onto its floor: :func:`_v3_to_v4`)
+    assert data["floor"] == 0.0 and data["stand_on_floor"] is False
     assert data["ik"] == {"tolerance": 1e-4, "max_iterations": 60, "damping": 0.005,
                           "max_step": 0.05, "attraction": 0.5, "settle": 1e-5,
                           "nullspace_damping": 1e-6, "step_cap": 0.3, "polish_share": 0.25,
@@ -291,8 +294,8 @@ def test_retarget_flags_reach_the_solver_and_the_project(v1_session, capsys, tmp
                         "--save-project", tmp_path / "cli.mcp")
     assert code == 0, err
     project, performer, target = v1_session
-    fresh = Scene(project.replace(constraints=(), auto_contacts=True, floor=0.0), performer,
-                  target)
+    fresh = Scene(project.replace(constraints=(), auto_contacts=True, floor=0.0,
+                                  stand_on_floor=True), performer, target)
     result = fresh.solve(regenerate=True, ik_options=FLAGGED)
     write_bvh(result.motion, tmp_path / "engine.bvh")
     assert (tmp_path / "cli.bvh").read_bytes() == (tmp_path / "engine.bvh").read_bytes()
@@ -326,6 +329,8 @@ def test_batch_flags_override_the_projects_options(v1_session, capsys, tmp_path)
     assert code == 0, err
     recipe = recipe_from_project(project.replace(
         ik_options=IKOptions(damping=0.01, max_iterations=2)))
+    # the migrated floor stays the feet's plane only, clip after clip
+    assert recipe.floor == 0.0 and recipe.stand_on_floor is False
     summary = process_clip(recipe, str(WALK60), str(tmp_path / "engine"))
     assert summary["status"] == "written"
     assert ((tmp_path / "cli" / WALK60.name).read_bytes() ==

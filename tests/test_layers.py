@@ -448,7 +448,7 @@ def test_export_writes_what_retarget_delivered(tmp_path):
 
 # --------------------------------------------------------------------------- format 3
 def test_a_version_2_project_migrates_to_layers_and_evaluates_to_the_same_motion(tmp_path):
-    assert json.loads(V2_FIXTURE.read_text())["version"] == 2 and VERSION == 3
+    assert json.loads(V2_FIXTURE.read_text())["version"] == 2 and VERSION == 4
     old = json.loads(V2_FIXTURE.read_text())["displacement"]
     project, performer, target = open_project(V2_FIXTURE)
     # the version-2 map is the solved layer, and an empty animator layer is there to edit
@@ -461,7 +461,8 @@ def test_a_version_2_project_migrates_to_layers_and_evaluates_to_the_same_motion
     # saved, a version-3 file with the solved layer first; saved again, the same bytes
     save_project(project, tmp_path / "v3.mcp")
     data = json.loads((tmp_path / "v3.mcp").read_text())
-    assert data["version"] == 3 and "displacement" not in data
+    assert data["version"] == 4 and "displacement" not in data
+    assert data["floor"] == 0.0 and data["stand_on_floor"] is False       # as version 2 read it
     assert [(x["name"], x["kind"]) for x in data["layers"]] == [("solved", "solved"),
                                                                ("edit", "animator")]
     assert project_to_json(load_project(tmp_path / "v3.mcp"), tmp_path / "v3.mcp") == \

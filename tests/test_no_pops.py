@@ -198,3 +198,60 @@ def test_a_plane_given_twice_is_solved_once_without_a_pop():
         np.testing.assert_array_equal(double.residual[len(once) + k], single.residual[i])
     q = quality(scene.performer, composed, double.motion, twice, double.residual)
     assert max(p["ratio"] for p in q["pops"]) <= 1.0, q["pops"][:3]
+
+
+def _walk_onto_the_tpose(floor, lo: int = 400, hi: int = 660, mode: str = "scaled"):
+    """The bundled CMU walk's frames ``lo .. hi - 1`` onto the bundled T-pose skeleton, whose
+    hips are at 0 and feet 0.92 m lower, as ``retarget --auto-contacts [--floor F]
+    [--root-mode M]`` sets it up: the scene."""
+    from conftest import clip_path
+    from ik_fixtures import window_scene
+    from motion_composer.engine.conversion.converter import RootOptions
+    scene = window_scene(clip_path("cmu_131_01_walk.bvh"), clip_path("cmu_rest_tpose.bvh"),
+                         lo, hi)
+    return scene.replace(floor=floor, root=RootOptions(mode=mode))
+
+
+def test_the_project_floor_moves_the_conversion_onto_it():
+    """``--floor F`` stands the character on F: the direct conversion is the one without a
+    floor, every rotation bit for bit, with the root raised by F less the floor the
+    character stands on in its rest pose (found here independently: the lowest joint or
+    End Site of the T-pose, its toes' tips). In the absolute root mode, which places the
+    root where the performer's is, nothing moves."""
+    from motion_composer.engine.kinematics import fk_arrays
+    free, floored = _walk_onto_the_tpose(None), _walk_onto_the_tpose(0.25)
+    rest = floored.target
+    pose = fk_arrays(rest.skeleton, rest.rotations, rest.translations, end_sites=True)
+    lowest = min(pose.positions[0, :, 1].min(), pose.end_positions[0, :, 1].min())
+    assert lowest < -0.9                                       # hips at 0, feet far below
+    assert free.lift() == 0.0
+    assert floored.lift() == pytest.approx(0.25 - lowest, abs=1e-9)
+    a, b = free.composed, floored.composed
+    np.testing.assert_array_equal(b.rotations, a.rotations)
+    np.testing.assert_allclose(b.translations - a.translations,
+                               np.broadcast_to([0.0, 0.25 - lowest, 0.0], a.translations.shape),
+                               atol=1e-12)
+    absolute = _walk_onto_the_tpose(0.25, mode="absolute")
+    assert absolute.lift() == 0.0
+    np.testing.assert_array_equal(absolute.composed.translations,
+                                  _walk_onto_the_tpose(None, mode="absolute").composed.translations)
+
+
+def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
+    """``--floor 0`` onto the T-pose skeleton (its feet 0.92 m under 0). Until round 33 the
+    floor planes and contacts lifted the body onto that floor by force on every frame:
+    joints turned at 2.4-4.8 times the no-pop limit on all four clips tried (this walk's
+    hips 4.8 on frame 348; in this window, frames 250-449, 8.7 on its frame 98). Now the
+    conversion stands on the floor: the solve is the one without a floor, moved up, and no
+    joint pops."""
+    free, floored = _walk_onto_the_tpose(None, 250, 450), _walk_onto_the_tpose(0.0, 250, 450)
+    a, b = free.solve(regenerate=True), floored.solve(regenerate=True)
+    lift = floored.lift()
+    assert lift > 0.9
+    for solution in (a, b):
+        assert max(c["max_residual"] for c in solution.report["quality"]["constraints"]) < 1e-3
+        assert max(p["ratio"] for p in solution.report["quality"]["pops"]) <= 1.0
+    pa = forward_kinematics(a.correction.motion).positions
+    pb = forward_kinematics(b.correction.motion).positions
+    np.testing.assert_allclose(pb - [0.0, lift, 0.0], pa, atol=1e-4)
+    assert b.report["floor"] == {"height_m": 0.0, "lift_m": pytest.approx(lift)}

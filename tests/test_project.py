@@ -315,6 +315,40 @@ def test_a_version_0_project_migrates_forward(tmp_path):
     assert same_motion(evaluate_project(load_project(tmp_path / "now.mcp")).motion, motion)
 
 
+@pytest.mark.parametrize("floor", [0.0, None], ids=["a floor", "no floor"])
+def test_a_version_3_floor_stays_the_feet_plane_only(tmp_path, floor):
+    """Format 3 read ``"floor"`` as the feet's floor plane only; format 4 also stands the
+    conversion on it (``stand_on_floor``). A version-3 file with a floor keeps its reading:
+    its conversion is the one without a floor (the walk onto the T-pose, whose hips are at
+    0, is not raised 0.92 m onto the floor at 0), so it evaluates as it did. A new project
+    with that floor stands on it; a file whose ``stand_on_floor`` is not true or false is
+    refused by name."""
+    assert 3 in MIGRATIONS
+    project = session_in(tmp_path, Project(performer=Source(str(WALK)),
+                                           target=Source(str(TPOSE)),
+                                           correspondence=Correspondence(MAX_TO_HOLDEN),
+                                           floor=floor))
+    data = json.loads(project_to_json(project))
+    assert data["stand_on_floor"] is True
+    old = {k: v for k, v in data.items() if k != "stand_on_floor"}
+    old["version"] = 3
+    path = tmp_path / "v3.mcp"
+    path.write_text(json.dumps(old))
+    loaded = load_project(path)
+    assert loaded.floor == floor and loaded.stand_on_floor is (floor is None)
+    free = evaluate_project(project.replace(floor=None)).motion
+    assert same_motion(evaluate_project(loaded).motion, free)
+    if floor is not None:
+        lifted = evaluate_project(project).motion
+        rise = lifted.translations[:, 0, 1] - free.translations[:, 0, 1]
+        assert rise.min() == pytest.approx(rise.max()) and rise.min() > 0.9
+    data["stand_on_floor"] = "yes"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ProjectError) as exc:
+        load_project(path)
+    assert exc.value.field == "stand_on_floor"
+
+
 def test_a_broken_version_0_file_names_the_field(tmp_path):
     data = json.loads(V0_FIXTURE.read_text())
     data["mapping"][3] = ["LeftLeg"]

@@ -41,7 +41,8 @@ _FIELD_SIGNALS = {
     "correspondence": "mappingChanged",
     "bind_options": "optionsChanged", "root": "optionsChanged",
     "auto_contacts": "optionsChanged", "contact_options": "optionsChanged",
-    "floor": "optionsChanged", "ik_options": "optionsChanged",
+    "floor": "optionsChanged", "stand_on_floor": "optionsChanged",
+    "ik_options": "optionsChanged",
     "constraints": "constraintsChanged",
 }
 

@@ -71,8 +71,11 @@ _CHUNK = 8192
 
 
 def convert(binding: Binding, performer: Motion, root: RootOptions | None = None,
-            progress=None) -> IntermediatePose:
-    """Motion Converter: orient the intermediate bones along the virtual bones, every frame."""
+            progress=None, *, lift: float = 0.0) -> IntermediatePose:
+    """Motion Converter: orient the intermediate bones along the virtual bones, every frame.
+
+    ``lift`` [m] raises the driven joints' positions (lowers, where negative): the scene
+    stands the character on the project's floor with it (:meth:`engine.scene.Scene.lift`)."""
     root = root or RootOptions()
     _check_performer(binding, performer)
     F, J = performer.num_frames, binding.target.num_joints
@@ -80,7 +83,7 @@ def convert(binding: Binding, performer: Motion, root: RootOptions | None = None
     positions = {j: np.empty((F, 3)) for j in binding.driven}
     known = None
     for lo, hi in chunks(F):
-        w, pos, known = convert_frames(binding, performer, lo, hi, root)
+        w, pos, known = convert_frames(binding, performer, lo, hi, root, lift)
         world[lo:hi] = w.T
         for j, p in pos.items():
             positions[j][lo:hi] = p.T
@@ -99,10 +102,11 @@ def _check_performer(binding: Binding, performer: Motion) -> None:
         raise MappingError("this binding was made for another performer skeleton")
 
 
-def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: RootOptions):
+def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: RootOptions,
+                   lift: float = 0.0):
     """:func:`convert` on frames ``lo`` to ``hi`` (exclusive), on component arrays: the
     intermediate world rotations ``(4, J, n)`` (filled where ``known``), the driven joints'
-    positions ``{j: (3, n)}`` [m] and the ``(J,)`` known mask."""
+    positions ``{j: (3, n)}`` [m], raised by ``lift`` [m], and the ``(J,)`` known mask."""
     tsk = binding.target
     pq, pp, _ = fk_components(performer.skeleton, joint_major(performer.rotations[lo:hi]),
                               joint_major(performer.translations[lo:hi]), end_sites=False)
@@ -165,6 +169,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         ph = mapped[j]
         if root.mode == "absolute":
             positions[j] = pp[:, ph].copy()
+            positions[j][1] += lift
             continue
         disp = pp[:, ph] - binding.performer_rest_positions[ph][:, None]
         h, v = root.scale if root.scale is not None else (binding.hip_height_ratio,) * 2
@@ -172,6 +177,7 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         if root.mode == "in-place":
             scaled[[0, 2]] = 0.0
         positions[j] = binding.aligned_positions[j][:, None] + scaled
+        positions[j][1] += lift
     return world, positions, known
 
 

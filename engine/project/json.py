@@ -75,6 +75,7 @@ def _project_dict(p: Project, folder) -> dict:
                      "options": {f.name: float(getattr(p.contact_options, f.name))
                                  for f in dataclasses.fields(ContactOptions)}},
         "floor": float(p.floor) if p.floor is not None else None,
+        "stand_on_floor": bool(p.stand_on_floor),
         "ik": ik_dict(p.ik_options),
         "viewer": {"current_frame": int(v.current_frame),
                    "play_range": [int(x) for x in v.play_range] if v.play_range else None,
@@ -319,7 +320,7 @@ def _reject_not_a_number(value, where: str) -> None:
 
 
 _TOP = ("format", "version", "performer", "target", "correspondence", "binding", "root",
-        "contacts", "floor", "ik", "viewer", "constraints", "layers", "embedded")
+        "contacts", "floor", "stand_on_floor", "ik", "viewer", "constraints", "layers", "embedded")
 
 
 def _build(data: dict, folder) -> Project:
@@ -337,6 +338,7 @@ def _build(data: dict, folder) -> Project:
         root=_root(data.get("root", {})),
         auto_contacts=auto_contacts, contact_options=contact_options,
         floor=_optional(_num, data.get("floor"), "floor"),
+        stand_on_floor=_bool(data.get("stand_on_floor", True), "stand_on_floor"),
         ik_options=_ik(data.get("ik", {})),
         constraints=tuple(_constraint(c, f"constraints[{i}]")
                           for i, c in enumerate(_list(data.get("constraints", []),

@@ -98,6 +98,15 @@ def _v2_to_v3(old: dict) -> dict:
     return data
 
 
+@migrator(3)
+def _v3_to_v4(old: dict) -> dict:
+    """Version 3's ``"floor"`` was only the feet's floor plane: the direct conversion stood
+    where the character stands in its reference pose, whatever the floor. Version 4 moves
+    the conversion onto the floor (``"stand_on_floor"``); a version-3 project keeps its
+    reading, so that it evaluates and solves as it did."""
+    return dict(old, stand_on_floor=old.get("floor") is None, version=4)
+
+
 #: the IK settings built into the solver up to format version 1
 _SOLVER_BEFORE_V2 = {"tolerance": 1e-4, "max_iterations": 60, "damping": 0.005,
                      "max_step": 0.05, "attraction": 0.5, "settle": 1e-5,

@@ -25,7 +25,7 @@ __all__ = ["Project", "Source", "ViewerState", "ProjectError", "MissingSourceErr
 
 FORMAT = "motion-composer-project"
 #: the format version this module writes (and the newest it reads)
-VERSION = 3
+VERSION = 4
 SUFFIX = ".mcp"
 ROLES = ("performer", "target")
 #: the solved layer's name in files and in the curve editor
@@ -236,6 +236,11 @@ class Project:
     motion with them applied and never changes them. The final motion is the solved layer
     applied on top of that.
 
+    ``floor`` [m] is the floor the target's feet are kept on or above (``None``: the one the
+    character stands on in its reference pose); with ``stand_on_floor`` the direct
+    conversion is moved onto it too (:meth:`engine.scene.Scene.lift`), else it is only the
+    feet's floor plane (how format 3 and older read it).
+
     ``ik_options`` are the settings its correction is solved with; their ``scale`` stays
     ``None`` (each run takes the character's stature), so it is not part of a project.
     """
@@ -248,6 +253,7 @@ class Project:
     auto_contacts: bool = False
     contact_options: ContactOptions = field(default_factory=ContactOptions)
     floor: float | None = None
+    stand_on_floor: bool = True
     ik_options: IKOptions = field(default_factory=IKOptions)
     constraints: tuple = ()
     displacement: DisplacementMap = field(default_factory=DisplacementMap)
