@@ -404,6 +404,12 @@ class Scene:
             return 0.0
         return float(p.floor) - self._standing().floor
 
+    def standing_floor(self) -> float | None:
+        """[m] The floor the character stands on in its reference pose, whatever the
+        project's ``floor`` (the lowest point of its feet: :meth:`ground` without a floor);
+        None without both sources."""
+        return self._standing().floor if self.has_sources else None
+
     def _standing(self):
         """The :class:`~engine.correction.contacts.Ground` the character stands on in its
         reference pose, whatever the project's floor (cached: a skinned character's sole is

@@ -233,10 +233,13 @@ class MainWindow(QtWidgets.QMainWindow):
             panel.constraintSelected.connect(self.viewport.set_active_constraint)
             return panel, self._timeline_page(panel)
         else:
+            from motion_composer.app.gui.floor_panel import FloorPanel
             from motion_composer.app.gui.ik_panel import IKPanel
             panel = IKPanel(self.doc)
+            self._floor_panel = FloorPanel(self.doc)
             page = QtWidgets.QWidget()
             box = QtWidgets.QVBoxLayout(page)
+            box.addWidget(self._floor_panel)
             box.addWidget(panel)
             box.addStretch(1)
             return panel, page
@@ -246,6 +249,8 @@ class MainWindow(QtWidgets.QMainWindow):
                             doc="The curve editor (built when first shown or asked for).")
     binding_panel = property(lambda self: self._panel("binding_panel"),
                              doc="The binding panel (built when first shown or asked for).")
+    floor_panel = property(lambda self: self._panel("ik_panel") and self._floor_panel,
+                           doc="The floor's settings, in the IK dock above the solver's.")
     ik_panel = property(lambda self: self._panel("ik_panel"),
                         doc="The IK panel (built when first shown or asked for).")
     inspector = property(lambda self: self._panel("inspector"),
