@@ -388,7 +388,7 @@ class Scene:
     def lift(self) -> float:
         """[m] How far the direct conversion is raised (lowered, where negative) so that the
         character stands on the project's ``floor``: the floor less the one the character
-        stands on in its reference pose (:meth:`ground` without a floor). 0 without a floor,
+        stands on in its reference pose (:meth:`standing_floor`). 0 without a floor or feet,
         where the project does not ``stand_on_floor`` (the floor is only the feet's plane, as
         format 3 and older read it), without both sources and a map, and in the
         ``absolute`` root mode, which places the root where the performer's is.
@@ -402,13 +402,18 @@ class Scene:
         if p.floor is None or not p.stand_on_floor or p.root.mode == "absolute" \
                 or not self.has_sources or not len(self.correspondence):
             return 0.0
-        return float(p.floor) - self._standing().floor
+        standing = self.standing_floor()
+        return 0.0 if standing is None else float(p.floor) - standing
 
     def standing_floor(self) -> float | None:
         """[m] The floor the character stands on in its reference pose, whatever the
         project's ``floor`` (the lowest point of its feet: :meth:`ground` without a floor);
-        None without both sources."""
-        return self._standing().floor if self.has_sources else None
+        None without both sources or where no feet are found on either side (a quadruped:
+        where it stands is not known, and the floor moves nothing)."""
+        if not self.has_sources:
+            return None
+        standing = self._standing()
+        return standing.floor if standing.heights else None
 
     def _standing(self):
         """The :class:`~engine.correction.contacts.Ground` the character stands on in its

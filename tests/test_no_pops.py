@@ -237,6 +237,27 @@ def test_the_project_floor_moves_the_conversion_onto_it():
                                   _walk_onto_the_tpose(None, mode="absolute").composed.translations)
 
 
+def test_a_floor_moves_nothing_on_a_target_without_feet():
+    """The robot's feet are IK controls on its root, not ends of its legs: no feet are found
+    on it, so where it stands is not known (``standing_floor`` None) and a floor neither
+    moves its conversion nor adds planes."""
+    from conftest import shared_path
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character, read_performer
+    from motion_composer.engine.project import Project, Source
+    from motion_composer.engine.scene import Scene
+    clip, robot = shared_path("bandai1_walk_normal_001.bvh"), \
+        shared_path("target_robot_expressive.glb")
+    performer, target = read_performer(clip), read_character(robot).rest_motion()
+    project = Project(performer=Source(str(clip)), target=Source(str(robot)),
+                      correspondence=automap(target.skeleton, performer.skeleton), floor=0.5)
+    scene = Scene(project, performer, target)
+    assert scene.ready and scene.standing_floor() is None and scene.lift() == 0.0
+    np.testing.assert_array_equal(scene.composed.translations,
+                                  scene.replace(floor=None).composed.translations)
+    assert scene.automatic_constraints() == []
+
+
 def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
     """``--floor 0`` onto the T-pose skeleton (its feet 0.92 m under 0). Until round 33 the
     floor planes and contacts lifted the body onto that floor by force on every frame:

@@ -80,7 +80,10 @@ class FloorPanel(QtWidgets.QGroupBox):
         scene = self.doc.scene
         if scene.composed is None:
             return ""
-        line = f"The character stands at {scene.standing_floor():.3f} m."
+        standing = scene.standing_floor()
+        if standing is None:
+            return "No feet found on the target: the floor moves nothing."
+        line = f"The character stands at {standing:.3f} m."
         lift = scene.lift()
         if lift:
             line += (f" The conversion is {'raised' if lift > 0 else 'lowered'} "
@@ -98,7 +101,8 @@ class FloorPanel(QtWidgets.QGroupBox):
         scene = self.doc.scene
         if on:
             # start where the character stands: nothing moves until a height is typed
-            height = scene.standing_floor()
+            standing = scene.standing_floor()
+            height = 0.0 if standing is None else standing
             self._apply(f"Floor at {height:.3f} m", floor=height)
         else:
             self._apply("No floor", floor=None)
