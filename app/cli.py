@@ -721,8 +721,9 @@ def build_parser() -> ArgumentParser:
                      help="detect the performer's foot contacts and pin the target's feet")
     fix.add_argument("--floor", type=float, metavar="HEIGHT",
                      help="stand the character on a floor at HEIGHT metres: the conversion "
-                          "is raised or lowered onto it, and the feet and toes are kept on "
-                          "or above it (also the floor automatic contacts stand on)")
+                          "is raised or lowered onto it (not with --root absolute), and the "
+                          "feet and toes are kept on or above it (also the floor automatic "
+                          "contacts stand on)")
     fix.add_argument("--report", metavar="REPORT.json",
                      help="write residuals per constraint, contact drift and timings")
     proj = rt.add_argument_group("project")

@@ -7,7 +7,7 @@ derived on demand and cached by its inputs in a :class:`Derived` store shared by
 made from one another, so an edit recomputes only what it touches::
 
     binding      <- performer, target, correspondence, bind options      (Anatomic Binding)
-    intermediate <- binding, root options                                (Motion Converter)
+    intermediate <- binding, root options, floor (its lift)               (Motion Converter)
     composed     <- intermediate                                         (Motion Composer)
     edited       <- composed, animator layers                            (what IK starts from)
     motion       <- edited, solved layer                                 (the final motion)
@@ -340,12 +340,15 @@ class Scene:
     @property
     def character(self):
         """The target's character with its mesh and skin (a glTF target), or None (a BVH
-        target, or one embedded in the project whose file is gone)."""
+        target, or one embedded in the project whose file is gone). Cached by the file's
+        path, size and time, so that a file written again is read again."""
         path = self.project.target.path
         if path is None or not os.path.isfile(path):
             return None
         from .formats import read_character
-        return self.derived.get("character", path, lambda: read_character(path))
+        stat = os.stat(path)
+        return self.derived.get("character", (path, stat.st_size, stat.st_mtime_ns),
+                                lambda: read_character(path))
 
     # ------------------------------------------------------------------ correction
     def automatic_constraints(self) -> list[Constraint]:
@@ -378,8 +381,8 @@ class Scene:
     def ground(self):
         """Where the target's feet stand (:class:`~engine.correction.contacts.Ground`): the
         target's feet in its reference pose on the floor under them (the lowest mesh vertex
-        of the feet where the character has a mesh), moved to ``floor`` where it is set (the
-        direct conversion is moved with it: :meth:`lift`)."""
+        of the feet where the character has a mesh), moved to ``floor`` where it is set
+        (the direct conversion moves with it by :meth:`lift`, where that is not 0)."""
         standing = self._standing()
         if self.project.floor is None:
             return standing
@@ -421,15 +424,21 @@ class Scene:
         found by skinning its mesh)."""
         p = self.project
         reference = p.bind_options.target_reference
-        key = (self.performer, self.target, _pairs_key(p.correspondence), reference,
-               p.target.path)
+        path = p.target.path
+        stat = os.stat(path) if path is not None and os.path.isfile(path) else None
+        key = (self.performer, self.target, _pairs_key(p.correspondence), reference, path,
+               stat and (stat.st_size, stat.st_mtime_ns))
 
         def compute():
+            try:
+                character = self.character
+            except MotionComposerError:      # unreadable now: the feet's joints, not its mesh
+                character = None
             by_performer = {a: t for t, a in self.correspondence.pairs.items()}
             mapped = [(by_performer[a], by_performer.get(t)) for a, t in
                       find_feet(self.performer.skeleton) if a in by_performer]
             feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
-            sole = _sole(self.character, self.target, feet, reference)
+            sole = _sole(character, self.target, feet, reference)
             return target_ground(self.target, feet, reference=reference, sole=sole)
         return self.derived.get("standing", key, compute)
 

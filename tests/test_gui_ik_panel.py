@@ -3,7 +3,7 @@ re-solving the constraints, refused values shown and not applied; and the floor 
 switched on where the character stands, a typed height standing the character on it (the
 conversion moved by the floor less its own), the stand switch, one undoable command each
 that re-solves with the floor's planes. Driven with real mouse clicks and key presses on the
-demo (the CMU walk onto the FAIR child)."""
+bundled CMU walk onto the bundled T-pose skeleton (its hips at 0, its feet 0.92 m lower)."""
 from __future__ import annotations
 
 
@@ -162,7 +162,9 @@ def test_a_typed_height_stands_the_character_on_it(qtbot, floor, doc):
     _click(qtbot, floor.stand)
     assert not doc.scene.project.stand_on_floor and doc.scene.lift() == 0.0
     np.testing.assert_array_equal(doc.scene.composed.translations, free.translations)
-    assert "raised" not in floor.where.text()
+    assert floor.where.text() == (
+        f"The character stands at {standing:.3f} m. The conversion stays: the floor is "
+        f"{(0.5 - standing) * 1000:.0f} mm above its feet, and its planes push them up.")
     doc.undo_stack.undo()
     assert doc.scene.project.stand_on_floor and floor.stand.isChecked()
     qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
@@ -177,4 +179,23 @@ def test_a_height_that_is_not_a_number_is_refused(qtbot, floor, doc):
         assert floor.message.isVisibleTo(floor) and "Floor height" in floor.message.text()
     _type(qtbot, floor.height, "0.25")
     assert doc.scene.project.floor == 0.25 and not floor.message.isVisibleTo(floor)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    _type(qtbot, floor.height, "low")                 # refused, then the step undone
+    assert floor.message.isVisibleTo(floor)
+    doc.undo_stack.undo()
+    assert doc.scene.project.floor == before and not floor.message.isVisibleTo(floor)
+    assert floor.height.text() == repr(before)
+
+
+def test_the_absolute_root_mode_keeps_the_character_where_the_performer_is(qtbot, floor, doc):
+    from motion_composer.engine.conversion.converter import RootOptions
+    doc.edit("Absolute root", root=RootOptions(mode="absolute"))
+    _click(qtbot, floor.enabled)
+    _type(qtbot, floor.height, "0.5")
+    assert doc.scene.project.floor == 0.5 and doc.scene.lift() == 0.0
+    assert not floor.stand.isEnabled()                # it would change nothing
+    standing = doc.scene.standing_floor()
+    assert floor.where.text().endswith(
+        f"The absolute root mode places the root where the performer's is: the floor is "
+        f"{(0.5 - standing) * 1000:.0f} mm above its feet, and its planes push them up.")
     qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)

@@ -347,6 +347,8 @@ def test_a_version_3_floor_stays_the_feet_plane_only(tmp_path, floor):
     with pytest.raises(ProjectError) as exc:
         load_project(path)
     assert exc.value.field == "stand_on_floor"
+    with pytest.raises(MotionComposerError, match="stand_on_floor: expected true or false"):
+        project.replace(stand_on_floor=1)
 
 
 def test_a_broken_version_0_file_names_the_field(tmp_path):

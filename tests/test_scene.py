@@ -274,3 +274,34 @@ def test_replacing_the_target_by_another_convention_remaps(name):
     assert moved.binding is not None and moved.motion.num_frames == performer.num_frames
     assert moved.motion.skeleton is other.skeleton or \
         moved.motion.skeleton.names == other.skeleton.names
+
+
+def test_a_character_written_again_is_read_again_for_where_it_stands(tmp_path):
+    """The lift stands the conversion on the floor from where the character's mesh puts its
+    feet. A glTF character written again to the same path (its mesh 10 cm lower, as after a
+    re-export) and imported again into a scene sharing the old one's cache is read again: it
+    stands 10 cm lower and the floor raises it 10 cm more."""
+    import dataclasses
+    import os
+    import shutil
+    from motion_composer.engine.formats import read_character
+    path = tmp_path / "ely.glb"
+    shutil.copy(shared_path("target_mixamo_ely.glb"), path)
+    character = read_character(path)
+    target = character.rest_motion()
+    performer = read_performer(WALK)
+    scene = Scene(Project(performer=Source(str(WALK)), target=Source(str(path)),
+                          correspondence=automap(target.skeleton, performer.skeleton),
+                          floor=0.0), performer, target)
+    before = scene.standing_floor()
+    assert abs(before) < 0.01 and scene.lift() == pytest.approx(-before)
+    lowered = dataclasses.replace(character, meshes=[
+        dataclasses.replace(m, positions=m.positions - [0.0, 0.1, 0.0])
+        for m in character.meshes])
+    write_motion(target, tmp_path / "new.glb", lowered)
+    os.replace(tmp_path / "new.glb", path)
+    again = read_character(path).rest_motion()
+    reimported = scene.with_source("target", again, Source(str(path)))
+    assert reimported.derived is scene.derived                    # the cache is shared
+    assert reimported.standing_floor() == pytest.approx(before - 0.1, abs=1e-4)
+    assert reimported.lift() == pytest.approx(0.1 - before, abs=1e-4)

@@ -66,14 +66,16 @@ class FloorPanel(QtWidgets.QGroupBox):
             self.enabled.setChecked(floor is not None)
         with QtCore.QSignalBlocker(self.stand):
             self.stand.setChecked(bool(scene.project.stand_on_floor))
+        absolute = scene.project.root.mode == "absolute"
         self.enabled.setEnabled(ready)
         self.height.setEnabled(ready and floor is not None)
-        self.stand.setEnabled(ready and floor is not None)
+        self.stand.setEnabled(ready and floor is not None and not absolute)
         text = _text(floor) if floor is not None else ""
         if self.height.text() != text:
             with QtCore.QSignalBlocker(self.height):
                 self.height.setText(text)
         self.height.setStyleSheet("")
+        self.message.setVisible(False)             # a refused text is gone with the refresh
         self.where.setText(self._where())
 
     def _where(self) -> str:
@@ -85,9 +87,16 @@ class FloorPanel(QtWidgets.QGroupBox):
             return "No feet found on the target: the floor moves nothing."
         line = f"The character stands at {standing:.3f} m."
         lift = scene.lift()
+        floor = scene.project.floor
         if lift:
             line += (f" The conversion is {'raised' if lift > 0 else 'lowered'} "
                      f"{abs(lift) * 1000:.0f} mm onto the floor.")
+        elif floor is not None and floor != standing:
+            why = ("The absolute root mode places the root where the performer's is"
+                   if scene.project.root.mode == "absolute" else "The conversion stays")
+            line += (f" {why}: the floor is {abs(floor - standing) * 1000:.0f} mm "
+                     f"{'above' if floor > standing else 'below'} its feet"
+                     f"{', and its planes push them up' if floor > standing else ''}.")
         return line
 
     # ------------------------------------------------------------------ view -> model

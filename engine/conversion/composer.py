@@ -29,17 +29,17 @@ def compose(binding: Binding, pose: IntermediatePose, frame_time: float,
 
 
 def transfer(binding: Binding, performer: Motion, root: RootOptions | None = None, *,
-             name: str = "", progress=None) -> Motion:
-    """``compose(binding, convert(binding, performer, root), ...)`` value for value, a run of
-    frames at a time: the intermediate pose of only one run is ever in memory, and its
-    rotations stay component arrays from the performer's forward kinematics to the target's
-    local values (no round trip through ``(F, J, 4)``)."""
+             name: str = "", progress=None, lift: float = 0.0) -> Motion:
+    """``compose(binding, convert(binding, performer, root, lift=lift), ...)`` value for
+    value, a run of frames at a time: the intermediate pose of only one run is ever in
+    memory, and its rotations stay component arrays from the performer's forward kinematics
+    to the target's local values (no round trip through ``(F, J, 4)``)."""
     root = root or RootOptions()
     _check_performer(binding, performer)
     F = performer.num_frames
     rotations, translations = _outputs(binding, F)
     for lo, hi in chunks(F):
-        world, positions, known = convert_frames(binding, performer, lo, hi, root)
+        world, positions, known = convert_frames(binding, performer, lo, hi, root, lift)
         _compose_into(binding, world, positions, known, rotations[lo:hi], translations[lo:hi])
         if progress is not None:
             progress(hi / F)

@@ -15,7 +15,7 @@ gives the same bytes::
 
     {
       "format": "motion-composer-project",
-      "version": 3,
+      "version": 4,
       "performer": {"path": "clips/walk.bvh", "units": null, "scale": null, "up_axis": null,
                     "position_mode": null},
       "target": {...},
@@ -27,7 +27,7 @@ gives the same bytes::
                                        "ik_blend": 0.0}}},
       "root": {"mode": "scaled", "scale": null},
       "contacts": {"auto": true, "options": {"height": 0.03, ...}},
-      "floor": null,
+      "floor": null, "stand_on_floor": true,
       "ik": {"tolerance": 0.0001, "max_iterations": 60, "damping": 0.005, ...},
       "viewer": {"current_frame": 0, "play_range": null, "camera": {...},
                  "shown": ["performer", "target"], "options": {}},
