@@ -121,7 +121,7 @@ from ..motion import Motion
 from ..quaternions import qmul
 from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
                            DisplacementMap, chain_lengths, hermite_basis)
-from .ik import Task, _Structure, length_scale, rotvec_to_quat, task_error_and_jacobian
+from .ik import Task, _Structure, length_share, rotvec_to_quat, task_error_and_jacobian
 
 __all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND",
            "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY"]
@@ -425,13 +425,13 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     returning True stops it (:class:`~engine.errors.MotionComposerError`).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
-    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it, and on
-    a giant they grow as the IK's tolerance does (:func:`~engine.correction.ik.length_scale`):
-    its keys are those of the character scaled to a human size."""
+    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
+    (:func:`~engine.correction.ik.length_share`): its keys are those of the character
+    scaled up to that size."""
     import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
-    share = length_scale(figure_size(edited))
+    share = length_share(figure_size(edited))
     tolerance = tolerance * share
     limit = TASK_LIMIT * share
     cons = [c for c in constraints if c.enabled]
@@ -680,7 +680,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
     misses, the metric errors (as :func:`_linearised`) and the evaluations used. ``share``:
-    :func:`~engine.correction.ik.length_scale` (the normal equations are in squared
+    :func:`~engine.correction.ik.length_share` (the normal equations are in squared
     lengths)."""
     import scipy.sparse as sparse
     def state(x):
@@ -979,7 +979,7 @@ class _Judge:
 
     def keeps(self, keys: DisplacementMap, stats: dict) -> bool:
         """Whether the keys (fitted with ``stats``) are kept."""
-        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_scale(self.size):
+        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(self.size):
             return False
         keyed = keys.apply(self.edited)
         # the keys stay near the dense solve
