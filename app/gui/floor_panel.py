@@ -11,10 +11,8 @@ with the reason and not applied.
 """
 from __future__ import annotations
 
-import math
-
 from motion_composer.app.gui.qt import QtCore, QtWidgets
-from motion_composer.engine import limits
+from motion_composer.engine.errors import MotionComposerError
 
 __all__ = ["FloorPanel"]
 
@@ -126,12 +124,12 @@ class FloorPanel(QtWidgets.QGroupBox):
         raw = self.height.text().strip()
         try:
             value = float(raw)
-        except ValueError:
-            value = None
-        if value is None or not math.isfinite(value) or limits.problem(value) is not None:
+            self.doc.scene.project.replace(floor=value)      # the project's own check
+        except (ValueError, MotionComposerError) as exc:
+            problem = (str(exc).removeprefix("floor: ") if isinstance(exc, MotionComposerError)
+                       else f"expected a number, not {raw!r}")
             self.height.setStyleSheet("color: #c0392b")
-            self.message.setText(f"Floor height: expected a finite height in metres of "
-                                 f"magnitude at most {limits.MAX_MAGNITUDE:g}, not {raw!r}")
+            self.message.setText(f"Floor height: {problem}")
             self.message.setVisible(True)
             return
         self.height.setStyleSheet("")
