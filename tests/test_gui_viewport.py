@@ -137,6 +137,14 @@ def test_constraint_goals_are_drawn(view):
                                       310, 320),
                            floor_constraint("LeftToeBase", doc.scene.num_frames, -0.9)])
     assert v.goals.visible() and v.planes.visible()
+    # the floor plane (its goal point at the origin) is a pad at -0.9 under the toe
+    from motion_composer.app.gui.viewport import to_view
+    toe = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftToeBase"]]
+    pad = v.planes.opts["meshdata"].vertexes()
+    np.testing.assert_allclose(pad.mean(axis=0),
+                               to_view([toe[0], -0.9, toe[2]]) + v.figures["target"].offset,
+                               atol=1e-5)
+    np.testing.assert_allclose(pad[:, 2], pad[0, 2], atol=1e-6)          # level
     doc.undo_stack.undo()
     assert not v.goals.visible()
 
@@ -212,3 +220,30 @@ def test_a_position_goal_can_be_dragged_in_3d(view, qtbot):
     assert np.linalg.norm(reached - goal, axis=1).max() < 2e-3
     doc.undo_stack.undo()
     np.testing.assert_allclose(doc.scene.constraints[0].goal["point"], start)
+
+
+def test_the_grid_lies_on_the_projects_floor(view, qtbot):
+    """A character stood on a raised floor walks on the grid, not above it: the grid is
+    drawn at the project's floor (at 0 without one), and moves back on undo."""
+    from motion_composer.app.gui.qt import QtGui
+    doc, v = view
+
+    def grid_height():
+        return v.grid.transform().map(QtGui.QVector3D(0, 0, 0)).z()
+
+    def lowest():
+        fig = v.figures["target"]
+        return float((fig.points - fig.offset)[:, 2].min())
+
+    assert doc.scene.project.floor is None and grid_height() == 0.0
+    standing, before = doc.scene.standing_floor(), lowest()
+    assert doc.edit("Floor at 0.5 m", floor=0.5)
+    assert grid_height() == pytest.approx(0.5) and v.grid_height == 0.5
+    # the character is as high over the grid as it was over its own floor
+    assert lowest() - grid_height() == pytest.approx(before - standing, abs=1e-9)
+    assert doc.edit("Floor keeps only the feet above it", stand_on_floor=False)
+    assert grid_height() == pytest.approx(0.5)       # the floor is still where the feet go
+    doc.undo_stack.undo()
+    doc.undo_stack.undo()
+    assert doc.scene.project.floor is None and grid_height() == 0.0
+    assert lowest() == pytest.approx(before, abs=1e-12)

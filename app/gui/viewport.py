@@ -57,6 +57,8 @@ SKIN = (0.80, 0.79, 0.76, 1.0)
 #: red, fainter further away)
 GHOST_OFFSETS = (-20, -10, 10, 20)
 GHOST_PAST, GHOST_FUTURE = (0.45, 0.7, 1.0), (1.0, 0.55, 0.45)
+#: [share of the stature] half the side of the square a plane goal is drawn as
+PLANE_PAD = 0.08
 #: foot trails: the path, planted frames on it, and contacts active now on the floor
 TRAIL = (0.95, 0.85, 0.35, 0.9)
 PLANTED = (1.0, 0.25, 0.25, 1.0)
@@ -524,6 +526,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self.grid.setSize(20, 20)
         self.grid.setColor((120, 120, 120, 90))
         self.addItem(self.grid)
+        #: [m] the height the grid is drawn at (the project's floor, else 0)
+        self.grid_height = 0.0
         self.figures: dict[str, _Figure] = {}
         self.virtual = gl.GLLinePlotItem(pos=np.zeros((2, 3)), color=VIRTUAL, width=3,
                                          mode="lines")
@@ -587,6 +591,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         document.motionChanged.connect(self._motion_changed)
         document.selectionChanged.connect(lambda *_: self.refresh())
         document.constraintsChanged.connect(self.refresh)
+        document.optionsChanged.connect(self.refresh)
         self._motion_changed()
 
     # ------------------------------------------------------------------ display options
@@ -709,6 +714,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             fig.update(data[0], data[1], layout[which], width, joint_size, sel,
                        self._label(which))
             fig.offset = layout[which]
+        self._refresh_grid()
         self._refresh_skin(layout)
         if self.skin is not None and self.skin.visible():
             # the mesh stands for the target's bones (its joints stay, to pick); the label
@@ -725,6 +731,16 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         if self.option("follow_root") and not self.pose_editing:
             self._follow(layout)
         self.update()
+
+    def _refresh_grid(self) -> None:
+        """The grid lies on the project's floor where one is set (the character stands on
+        it: :meth:`engine.scene.Scene.lift`), else at height 0, the files' own origin."""
+        floor = self.doc.scene.project.floor
+        height = 0.0 if floor is None else float(floor)
+        if height != self.grid_height:
+            self.grid.resetTransform()
+            self.grid.translate(0.0, 0.0, height)       # view z is the engine's y (up)
+            self.grid_height = height
 
     def _refresh_skin(self, layout) -> None:
         """The target character's mesh, deformed by the motion at the current frame: the
@@ -999,18 +1015,25 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     #: a kind's drawing (:data:`~engine.correction.constraints.base.DRAWINGS`) -> its drawer
     _DRAW = {"point": _draw_point, "path": _draw_path, "plane": _draw_plane, "axes": _draw_axes}
 
-    @staticmethod
-    def _plane_quad(c, off, size):
-        n = c.goal["normal"]
+    def _plane_quad(self, c, off, size):
+        """A plane is unbounded: it is drawn as a square pad on it under where its joint is
+        now (a floor plane's goal point is anywhere on it, the world's origin for the
+        project's floor), so each foot joint's floor shows under that joint."""
+        n = np.asarray(c.goal["normal"], dtype=float)
+        n = n / np.linalg.norm(n)
         helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 0, 1.0])
         u = np.cross(n, helper)
         u /= np.linalg.norm(u)
         w = np.cross(n, u)
-        p = c.goal["point"]
-        r = 0.25 * size
+        p = np.asarray(c.goal["point"], dtype=float)
+        data = self.skeleton_points("target")
+        sk = self.doc.scene.target.skeleton
+        if data is not None and c.joint in sk.index:
+            x = data[0][sk.index[c.joint]]
+            p = x - np.dot(x - p, n) * n                   # the joint's foot on the plane
+        r = PLANE_PAD * size
         corners = [p + r * (a * u + b * w) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         return to_view(np.array(corners)) + off
-
 
     # ------------------------------------------------------------------ binding pose editing
     @property
