@@ -408,6 +408,20 @@ class Scene:
         standing = self.standing_floor()
         return 0.0 if standing is None else float(p.floor) - standing
 
+    def floor_changes(self, **fields) -> dict:
+        """The project fields that set the floor (``floor``, ``stand_on_floor``) as one edit:
+        ``fields``, and the constraints set by hand with their goals moved up or down by as
+        much as the new floor moves the character (the change of :meth:`lift`). A goal placed
+        on the character as it was shown (a hand on a prop beside it) stays where it was
+        against it, and against the floor it stood on: the floor moves the whole set-up, not
+        the body alone. The automatic constraints are made again with the floor."""
+        rise = self.replace(**fields).lift() - self.lift()
+        if rise == 0.0 or all(c.auto for c in self.project.constraints):
+            return dict(fields)
+        offset = np.array([0.0, rise, 0.0])
+        return {**fields, "constraints": tuple(c if c.auto else c.moved(offset)
+                                               for c in self.project.constraints)}
+
     def standing_floor(self) -> float | None:
         """[m] The floor the character stands on in its reference pose, whatever the
         project's ``floor`` (the lowest point of its feet: :meth:`ground` without a floor);

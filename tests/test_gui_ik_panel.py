@@ -170,6 +170,32 @@ def test_a_typed_height_stands_the_character_on_it(qtbot, floor, doc):
     qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
 
 
+def test_a_goal_set_by_hand_moves_with_the_character_onto_the_floor(qtbot, floor, doc):
+    """A hand goal set by hand rises with the character when a typed floor raises it, in
+    the same undoable step; undo puts both back."""
+    from motion_composer.app.gui.commands import push_constraints
+    def hand():
+        [c] = [c for c in doc.scene.project.constraints if not c.auto]
+        return np.array(c.goal["point"])
+
+    push_constraints(doc, [Constraint("LeftHand", "position", {"point": [0.3, -0.1, 0.2]},
+                                      280, 290, 310, 320)])
+    before = hand()
+    _click(qtbot, floor.enabled)
+    np.testing.assert_array_equal(hand(), before)              # switched on: nothing moves
+    standing = doc.scene.standing_floor()
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    count = doc.undo_stack.count()
+    _type(qtbot, floor.height, "0.5")
+    assert doc.undo_stack.count() == count + 1
+    np.testing.assert_allclose(hand(), before + [0.0, 0.5 - standing, 0.0], atol=1e-12)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    doc.undo_stack.undo()
+    assert doc.scene.project.floor == standing
+    np.testing.assert_array_equal(hand(), before)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+
+
 def test_a_height_that_is_not_a_number_is_refused(qtbot, floor, doc):
     _click(qtbot, floor.enabled)
     before, count = doc.scene.project.floor, doc.undo_stack.count()

@@ -237,6 +237,61 @@ def test_the_project_floor_moves_the_conversion_onto_it():
                                   _walk_onto_the_tpose(None, mode="absolute").composed.translations)
 
 
+def test_goals_set_by_hand_move_with_the_character_onto_the_floor():
+    """A floor set after goals were placed moves them with the character
+    (``Scene.floor_changes``): each goal's points rise by the change of the lift (a hand's
+    point, a trajectory's keys, a plane's point; not a plane's normal nor an orientation),
+    so a hand placed on the character as shown is still there against it, and solved the
+    hand is as high over the new floor as it was over the old. Automatic constraints are
+    made again, not moved; nothing moves where the lift does not change."""
+    from motion_composer.engine.correction.constraints import Constraint
+    from motion_composer.engine.kinematics import fk_arrays
+    free = _walk_onto_the_tpose(None)
+    sk = free.target.skeleton
+    hand = fk_arrays(sk, free.composed.rotations, free.composed.translations).positions[
+        :, sk.index["LeftHand"]]
+    turn = [0.0, np.sin(0.2), 0.0, np.cos(0.2)]
+    goals = (Constraint("LeftHand", "position", {"point": hand[60] + [0.05, 0.1, 0.0]},
+                        40, 50, 70, 80, name="hand"),
+             Constraint("RightHand", "trajectory", {"keys": [[50, 0.1, 0.2, 0.3],
+                                                             [70, 0.2, 0.3, 0.4]]},
+                        40, 50, 70, 80),
+             Constraint("Head", "orientation", {"quaternion": turn}, 40, 50, 70, 80),
+             Constraint("LeftFoot", "plane", {"point": [0.0, -0.8, 0.0],
+                                              "normal": [0.0, 1.0, 0.2]}, 0, 0, 99, 99))
+    scene = free.replace(constraints=goals, auto_contacts=True)
+    changes = scene.floor_changes(floor=0.0)
+    after = scene.replace(**changes)
+    rise = after.lift()
+    assert rise > 0.9 and set(changes) == {"floor", "constraints"}
+    hand_goal, path, head, plane = changes["constraints"]
+    np.testing.assert_allclose(hand_goal.goal["point"], goals[0].goal["point"] + [0, rise, 0],
+                               atol=1e-12)
+    keys = np.asarray(path.goal["keys"])
+    np.testing.assert_array_equal(keys[:, 0], [50, 70])
+    np.testing.assert_allclose(keys[:, 1:], np.asarray(goals[1].goal["keys"])[:, 1:]
+                               + [0, rise, 0], atol=1e-12)
+    np.testing.assert_array_equal(head.goal["quaternion"], goals[2].goal["quaternion"])
+    np.testing.assert_allclose(plane.goal["point"], [0.0, -0.8 + rise, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(plane.goal["normal"], goals[3].goal["normal"])
+    assert [c.range for c in changes["constraints"]] == [c.range for c in goals]
+    # solved, the hand reaches its moved goal: as high over the floor at 0 as over the old
+    solved = after.solve(constraints=[hand_goal])
+    sk = solved.motion.skeleton
+    got = fk_arrays(sk, solved.motion.rotations, solved.motion.translations).positions[
+        60, sk.index["LeftHand"]]
+    np.testing.assert_allclose(got, hand_goal.goal["point"], atol=1e-3)
+    # the stand switch off moves them back down; the same floor again moves nothing
+    back = after.floor_changes(stand_on_floor=False)
+    np.testing.assert_allclose(back["constraints"][0].goal["point"], goals[0].goal["point"],
+                               atol=1e-12)
+    assert after.floor_changes(floor=0.0) == {"floor": 0.0}
+    # automatic constraints are made again with the floor, not moved
+    auto = scene.replace(constraints=goals + tuple(scene.automatic_constraints()))
+    moved = auto.floor_changes(floor=0.0)["constraints"]
+    assert [c for c in moved if c.auto] == [c for c in auto.project.constraints if c.auto]
+
+
 def test_a_floor_moves_nothing_on_a_target_without_feet():
     """The robot's feet are IK controls on its root, not ends of its legs: no feet are found
     on it, so where it stands is not known (``standing_floor`` None) and a floor neither

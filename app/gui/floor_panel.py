@@ -4,8 +4,9 @@
 automatic contacts stand on); switched on it starts where the character stands, so nothing
 moves until a height is typed. *Stand the character on it* moves the whole conversion onto
 that floor (:meth:`engine.scene.Scene.lift`), as ``retarget --floor`` does; off, the floor is
-only the feet's plane. Each change is one undoable command that makes the automatic
-constraints again and re-solves in the background. The line below says where the character
+only the feet's plane. Goals set by hand move with the character
+(:meth:`engine.scene.Scene.floor_changes`). Each change is one undoable command that makes
+the automatic constraints again and re-solves in the background. The line below says where the character
 stands and how far the floor moves it. A height that is not a usable number is shown in red
 with the reason and not applied.
 """
@@ -102,7 +103,9 @@ class FloorPanel(QtWidgets.QGroupBox):
         self.message.setVisible(False)
         if self.doc.scene.composed is None:
             return
-        self.doc.edit(text, merge=merge, solve=True, regenerate=True, **changes)
+        # the goals set by hand move with the character (one command with the floor)
+        self.doc.edit(text, merge=merge, solve=True, regenerate=True,
+                      **self.doc.scene.floor_changes(**changes))
 
     def _toggled(self, on: bool) -> None:
         scene = self.doc.scene

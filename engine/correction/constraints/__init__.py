@@ -117,6 +117,12 @@ class Constraint:
     def with_priority(self, priority: int) -> "Constraint":
         return replace(self, priority=priority)
 
+    def moved(self, offset) -> "Constraint":
+        """The constraint with its goal moved by ``offset`` ``(3,)`` [m] in the world
+        (:meth:`ConstraintKind.moved_goal`)."""
+        return replace(self, goal=self.kind_object.moved_goal(
+            self.goal, np.asarray(offset, dtype=float)))
+
     def goal_point(self, frames: np.ndarray) -> np.ndarray:
         """``(n, 3)`` goal positions at ``frames`` for position and trajectory kinds."""
         return self.kind_object.goal_point(self, np.asarray(frames))

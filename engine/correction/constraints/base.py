@@ -191,6 +191,12 @@ class ConstraintKind(ABC):
         """``c``'s goal where joint ``index`` is in a pose (``(F, J, 3)`` world positions [m],
         ``(F, J, 4)`` world rotations) at ``frame``."""
 
+    def moved_goal(self, goal: dict, offset: np.ndarray) -> dict:
+        """``goal`` moved by ``offset`` ``(3,)`` [m] in the world with the character (its
+        points move; directions and orientations do not): nothing for a kind without a
+        point."""
+        return goal
+
     def retimed_goal(self, c, shift: int | None) -> dict:
         """``c``'s goal once its range changes (``shift``: the whole range moved by so many
         frames)."""

@@ -71,6 +71,13 @@ class TrajectoryKind(PositionKind):
         keys = c.goal["keys"]
         return np.stack([np.interp(frames, keys[:, 0], keys[:, k]) for k in (1, 2, 3)], 1)
 
+    def moved_goal(self, goal, offset):
+        if "points" in goal:
+            return {"points": goal["points"] + offset}
+        keys = np.array(goal["keys"], dtype=float)
+        keys[:, 1:] += offset
+        return {"keys": keys}
+
     def carried_point(self, c, frame):
         return self.goal_point(c, np.array([min(max(frame, c.start), c.end)]))[0]
 
