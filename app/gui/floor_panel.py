@@ -6,9 +6,9 @@ moves until a height is typed. *Stand the character on it* moves the whole conve
 that floor (:meth:`engine.scene.Scene.lift`), as ``retarget --floor`` does; off, the floor is
 only the feet's plane. Goals set by hand move with the character
 (:meth:`engine.scene.Scene.floor_changes`). Each change is one undoable command that makes
-the automatic constraints again and re-solves in the background. The line below says where the character
-stands and how far the floor moves it. A height that is not a usable number is shown in red
-with the reason and not applied.
+the automatic constraints again and re-solves in the background. The line below says where
+the character stands and how far the floor moves it. A height that is not a usable number
+is shown in red with the reason and not applied.
 """
 from __future__ import annotations
 
