@@ -137,12 +137,15 @@ def test_constraint_goals_are_drawn(view):
                                       310, 320),
                            floor_constraint("LeftToeBase", doc.scene.num_frames, -0.9)])
     assert v.goals.visible() and v.planes.visible()
-    # the floor plane (its goal point at the origin) is a pad at -0.9 under the toe
-    from motion_composer.app.gui.viewport import to_view
+    # the floor plane (its goal point at the origin) is a pad at -0.9 under the toe, drawn
+    # a hair above it
+    from motion_composer.app.gui.viewport import PLANE_LIFT, to_view
     toe = doc.pose("target").positions[300, doc.scene.target.skeleton.index["LeftToeBase"]]
     pad = v.planes.opts["meshdata"].vertexes()
+    hair = PLANE_LIFT * v._size()
+    assert 0 < hair < 0.005
     np.testing.assert_allclose(pad.mean(axis=0),
-                               to_view([toe[0], -0.9, toe[2]]) + v.figures["target"].offset,
+                               to_view([toe[0], -0.9 + hair, toe[2]]) + v.figures["target"].offset,
                                atol=1e-5)
     np.testing.assert_allclose(pad[:, 2], pad[0, 2], atol=1e-6)          # level
     doc.undo_stack.undo()
@@ -247,3 +250,8 @@ def test_the_grid_lies_on_the_projects_floor(view, qtbot):
     doc.undo_stack.undo()
     assert doc.scene.project.floor is None and grid_height() == 0.0
     assert lowest() == pytest.approx(before, abs=1e-12)
+    # an edit that solves in the background moves the grid at once, before the solve lands
+    assert doc.edit("Floor at 0.25 m", floor=0.25, solve=True)
+    assert doc.pending and grid_height() == pytest.approx(0.25)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    assert grid_height() == pytest.approx(0.25)

@@ -59,6 +59,9 @@ GHOST_OFFSETS = (-20, -10, 10, 20)
 GHOST_PAST, GHOST_FUTURE = (0.45, 0.7, 1.0), (1.0, 0.55, 0.45)
 #: [share of the stature] half the side of the square a plane goal is drawn as
 PLANE_PAD = 0.08
+#: [share of the stature] how far a plane goal is drawn off its plane, along its normal (a
+#: floor plane at the project's floor would otherwise flicker with the grid's lines)
+PLANE_LIFT = 0.001
 #: foot trails: the path, planted frames on it, and contacts active now on the floor
 TRAIL = (0.95, 0.85, 0.35, 0.9)
 PLANTED = (1.0, 0.25, 0.25, 1.0)
@@ -591,7 +594,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         document.motionChanged.connect(self._motion_changed)
         document.selectionChanged.connect(lambda *_: self.refresh())
         document.constraintsChanged.connect(self.refresh)
-        document.optionsChanged.connect(self.refresh)
+        document.optionsChanged.connect(self._options_changed)
         self._motion_changed()
 
     # ------------------------------------------------------------------ display options
@@ -730,6 +733,11 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         self._refresh_gizmo(layout)
         if self.option("follow_root") and not self.pose_editing:
             self._follow(layout)
+        self.update()
+
+    def _options_changed(self) -> None:
+        # the floor moves the grid; what else an option moves comes with motionChanged
+        self._refresh_grid()
         self.update()
 
     def _refresh_grid(self) -> None:
@@ -1027,10 +1035,10 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         w = np.cross(n, u)
         p = np.asarray(c.goal["point"], dtype=float)
         data = self.skeleton_points("target")
-        sk = self.doc.scene.target.skeleton
-        if data is not None and c.joint in sk.index:
-            x = data[0][sk.index[c.joint]]
+        if data is not None and c.joint in self.doc.scene.target.skeleton.index:
+            x = data[0][self.doc.scene.target.skeleton.index[c.joint]]
             p = x - np.dot(x - p, n) * n                   # the joint's foot on the plane
+        p = p + PLANE_LIFT * size * n                      # off the grid's lines under it
         r = PLANE_PAD * size
         corners = [p + r * (a * u + b * w) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         return to_view(np.array(corners)) + off

@@ -33,7 +33,8 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   null space stays near the dense solve; :data:`PULL_FREE` on the others, the ramps) and a
   cost on the curves' speed (:data:`SPEED` on the ramps, :data:`SPEED_HELD` on held frames,
   against pops). Metric tasks weigh
-  1 whatever their priority (each is held within 1 mm); an angle counts at
+  1 whatever their priority (each is held within 1 mm; on a giant a floor weighs, and its
+  error counts, by the factor its limits grew by, :func:`fit_to_tasks`); an angle counts at
   :data:`ANGLE_LEVER` metres per radian, :data:`LEVEL_WEIGHT` less per level below the first.
   Steps are Levenberg-Marquardt (a step that does not lower the cost is damped and tried
   again).
