@@ -696,8 +696,7 @@ def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
     motion puts any joint from the path the dense solve takes it along
     (``largest_distance_from_dense_m``, with the joint and frame; from the nearest of that
     path's positions on the frame and either side: :func:`~.correction.keyfit.parting`):
-    the keys fitted to the tasks hold them within 1 mm (scaled on a giant:
-    :func:`~.correction.ik.length_scale`; floors within 1 mm) but may part from the dense solve,
+    the keys fitted to the tasks hold them within 1 mm but may part from the dense solve,
     the posture nearest the capture, between and around them."""
     keys = scene.displacement
     out = {"fitted_to": None if correction is None else "tasks" if fitted else "dense curves",

@@ -325,15 +325,6 @@ def length_share(size: float) -> float:
     return min(1.0, size / FULL_SIZE)
 
 
-def length_scale(size: float) -> float:
-    """The factor of a tolerance given in metres on a character of ``size`` [m]: its
-    :func:`length_share` below :data:`FULL_SIZE`, and on a giant the factor by which the
-    IK's own tolerance grows there (:data:`MIN_TOLERANCE` of its size over the default
-    tolerance, :meth:`IKOptions.met_below`), so that what is judged against the solve is
-    judged as on the character scaled to a human size; 1 between (up to 2 m)."""
-    return max(length_share(size), MIN_TOLERANCE * size / IKOptions.tolerance)
-
-
 #: a polishing frame (only the first level acts) is done once its step is below this share
 #: of ``settle``: the first level restored to rounding, as polishing up to the cap would
 POLISH_SETTLE = 1e-6

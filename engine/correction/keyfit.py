@@ -33,8 +33,7 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   null space stays near the dense solve; :data:`PULL_FREE` on the others, the ramps) and a
   cost on the curves' speed (:data:`SPEED` on the ramps, :data:`SPEED_HELD` on held frames,
   against pops). Metric tasks weigh
-  1 whatever their priority (each is held within 1 mm; on a giant a floor weighs, and its
-  error counts, by the factor its limits grew by, :func:`fit_to_tasks`); an angle counts at
+  1 whatever their priority (each is held within 1 mm); an angle counts at
   :data:`ANGLE_LEVER` metres per radian, :data:`LEVEL_WEIGHT` less per level below the first.
   Steps are Levenberg-Marquardt (a step that does not lower the cost is damped and tried
   again).
@@ -122,7 +121,7 @@ from ..motion import Motion
 from ..quaternions import qmul
 from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
                            DisplacementMap, chain_lengths, hermite_basis)
-from .ik import Task, _Structure, length_scale, rotvec_to_quat, task_error_and_jacobian
+from .ik import Task, _Structure, length_share, rotvec_to_quat, task_error_and_jacobian
 
 __all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND",
            "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY"]
@@ -379,8 +378,7 @@ class _Tasks:
         for c in constraints:
             kind = c.kind_object.task_kind
             frames = np.arange(c.start, c.end + 1)
-            pushes = c.kind_object.one_sided(c.goal)
-            key = (kind.name, c.joint, c.priority, c.weight, pushes)
+            key = (kind.name, c.joint, c.priority, c.weight)
             entry = batches.setdefault(key, (kind, c, [], []))
             entry[2].append(frames)
             entry[3].append(c.kind_object.task_goals(c, frames))
@@ -389,19 +387,15 @@ class _Tasks:
         self.floor = None
         #: per item, how much more each of its frames counts (see :meth:`emphasise`)
         self.emphasis = []
-        for (*_, pushes), (kind, c, frames, goals) in batches.items():
+        for kind, c, frames, goals in batches.values():
             frames = np.concatenate(frames)
             task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
                         np.ones(len(frames)), c.priority)
             weight = c.weight ** 0.5
             if kind.angular:
                 weight *= ANGLE_LEVER * share * LEVEL_WEIGHT ** (c.priority - 1)
-            elif pushes:
-                # a floor holds within its millimetre on a giant too (issue 14's floor rule
-                # is absolute): its error counts at the scale the giant's limits grew by
-                weight *= max(share, 1.0)
             self.items.append((frames, _Structure(skeleton, [task], locked), weight,
-                               kind.angular, max(share, 1.0) if pushes else 1.0))
+                               kind.angular))
             self.emphasis.append(np.ones(len(frames)))
 
     def emphasise(self, sizes: dict, tolerance: float) -> bool:
@@ -431,15 +425,13 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     returning True stops it (:class:`~engine.errors.MotionComposerError`).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
-    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it, and on
-    a giant they grow as the IK's tolerance does (:func:`~engine.correction.ik.length_scale`):
-    its keys are those of the character scaled to a human size. A one-sided plane (the
-    floor) is the exception on a giant: its error counts at the scale the others grew by,
-    so it holds within the millimetre of issue 14's floor rule."""
+    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
+    (:func:`~engine.correction.ik.length_share`): its keys are those of the character
+    scaled up to that size."""
     import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
-    share = length_scale(figure_size(edited))
+    share = length_share(figure_size(edited))
     tolerance = tolerance * share
     limit = TASK_LIMIT * share
     cons = [c for c in constraints if c.enabled]
@@ -688,7 +680,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
     misses, the metric errors (as :func:`_linearised`) and the evaluations used. ``share``:
-    :func:`~engine.correction.ik.length_scale` (the normal equations are in squared
+    :func:`~engine.correction.ik.length_share` (the normal equations are in squared
     lengths)."""
     import scipy.sparse as sparse
     def state(x):
@@ -825,7 +817,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
     misses = []
     floors = {}
     sizes = {}
-    for item, (frames, structure, weight, angular, scale) in enumerate(tasks.items):
+    for item, (frames, structure, weight, angular) in enumerate(tasks.items):
         err, jac = task_error_and_jacobian(sk, structure, motion.rotations[frames],
                                            motion.translations[frames])
         B, K = err.shape
@@ -835,7 +827,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
         if not angular:
             # how much further from its goal than the dense solve (which may miss an
             # unreachable goal) the task is
-            size = scale * np.linalg.norm(err, axis=1)
+            size = np.linalg.norm(err, axis=1)
             if tasks.floor is not None:
                 size = size - tasks.floor[item]
             else:
@@ -987,7 +979,7 @@ class _Judge:
 
     def keeps(self, keys: DisplacementMap, stats: dict) -> bool:
         """Whether the keys (fitted with ``stats``) are kept."""
-        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_scale(self.size):
+        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(self.size):
             return False
         keyed = keys.apply(self.edited)
         # the keys stay near the dense solve
