@@ -22,6 +22,15 @@ def _text(value: float) -> str:
     return repr(float(value))
 
 
+def _check(form, text: str, tip: str, slot) -> QtWidgets.QCheckBox:
+    """A check box on its own row of ``form``, calling ``slot`` when toggled."""
+    box = QtWidgets.QCheckBox(text)
+    box.setToolTip(tip)
+    box.toggled.connect(slot)
+    form.addRow(box)
+    return box
+
+
 class FloorPanel(QtWidgets.QGroupBox):
     """The document's floor, wired both ways."""
 
@@ -29,20 +38,16 @@ class FloorPanel(QtWidgets.QGroupBox):
         super().__init__("Floor", parent)
         self.doc = document
         form = QtWidgets.QFormLayout(self)
-        self.enabled = QtWidgets.QCheckBox("Keep the feet on or above a floor")
-        self.enabled.setToolTip("Floor planes under every foot joint, and the floor the "
-                                "automatic contacts stand on")
-        self.enabled.toggled.connect(self._toggled)
-        form.addRow(self.enabled)
+        self.enabled = _check(form, "Keep the feet on or above a floor",
+                              "Floor planes under every foot joint, and the floor the "
+                              "automatic contacts stand on", self._toggled)
         self.height = QtWidgets.QLineEdit()
         self.height.setToolTip("The floor's height in metres (+Y up)")
         self.height.editingFinished.connect(self._height_edited)
         form.addRow("Height [m]:", self.height)
-        self.stand = QtWidgets.QCheckBox("Stand the character on it")
-        self.stand.setToolTip("Raise or lower the whole conversion onto the floor; off, the "
-                              "floor only keeps the feet above it")
-        self.stand.toggled.connect(self._stand_toggled)
-        form.addRow(self.stand)
+        self.stand = _check(form, "Stand the character on it",
+                            "Raise or lower the whole conversion onto the floor; off, the "
+                            "floor only keeps the feet above it", self._stand_toggled)
         self.where = QtWidgets.QLabel()
         self.where.setWordWrap(True)
         form.addRow(self.where)

@@ -273,7 +273,6 @@ class Project:
         if not isinstance(self.stand_on_floor, bool):
             raise MotionComposerError(f"stand_on_floor: expected true or false, not "
                                       f"{self.stand_on_floor!r}")
-        object.__setattr__(self, "stand_on_floor", bool(self.stand_on_floor))
         if self.ik_options.scale is not None:
             raise ValueError("a project's IK options leave scale None: each run takes the "
                              "character's stature")

@@ -192,10 +192,9 @@ class ConstraintKind(ABC):
         ``(F, J, 4)`` world rotations) at ``frame``."""
 
     def moved_goal(self, goal: dict, offset: np.ndarray) -> dict:
-        """``goal`` moved by ``offset`` ``(3,)`` [m] in the world with the character (its
-        points move; directions and orientations do not): nothing for a kind without a
-        point."""
-        return goal
+        """``goal`` moved by ``offset`` ``(3,)`` [m] in the world with the character: its
+        ``"point"`` moves (a position's, a plane's); directions and orientations do not."""
+        return {**goal, "point": goal["point"] + offset} if "point" in goal else goal
 
     def retimed_goal(self, c, shift: int | None) -> dict:
         """``c``'s goal once its range changes (``shift``: the whole range moved by so many

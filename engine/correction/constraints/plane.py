@@ -62,9 +62,6 @@ class PlaneKind(ConstraintKind):
     def describe(self, goal):
         return f"{self.name} {goal['side']}"
 
-    def moved_goal(self, goal, offset):
-        return {**goal, "point": goal["point"] + offset}
-
     def carried_point(self, c, frame):
         return np.array(c.goal["point"], dtype=float)
 

@@ -25,9 +25,6 @@ class PositionKind(ConstraintKind):
     def validate(self, goal, start, end, label):
         return {"point": vector(goal.get("point"), 3, "goal.point", label)}
 
-    def moved_goal(self, goal, offset):
-        return {**goal, "point": goal["point"] + offset}
-
     def goal_point(self, c, frames):
         return np.broadcast_to(c.goal["point"], (len(frames), 3)).copy()
 
