@@ -70,8 +70,8 @@ from ..kinematics import fk_joints
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize
 
-__all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "largest_residuals",
-           "CHUNK_FRAMES"]
+__all__ = ["Correction", "Residuals", "enforce", "compliance", "describe_residuals",
+           "largest_residuals", "CHUNK_FRAMES"]
 
 #: Frames solved together at most: a long clip is solved in chunks of this many frames so
 #: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
@@ -250,6 +250,8 @@ class _Problem:
     #: ``(F,)`` the frames whose result is wanted (:func:`enforce`'s ``frames``); ``None``:
     #: every frame
     wanted: np.ndarray | None = None
+    #: ``(F, J)`` each joint's compliance per frame (:func:`compliance`); ``None``: alike
+    compliance: np.ndarray | None = None
 
     @property
     def skeleton(self):
@@ -262,6 +264,36 @@ class _Problem:
     def check_cancel(self) -> None:
         if self.cancel is not None and self.cancel():
             raise MotionComposerError("the correction was cancelled")
+
+
+#: [deg/s] added to each joint's speed in :func:`compliance`: a joint the capture holds still
+#: still takes a share (the no-pop rule's own floor: a turn this slow is no pop)
+COMPLIANCE_FLOOR = 100.0
+
+
+def compliance(composed: Motion) -> np.ndarray:
+    """``(F, J)`` how freely each joint takes the correction on each frame, relative to the
+    clip's median: its fastest turn in ``composed`` within a quarter second (the no-pop
+    rule's measure of what the capture itself does there, :mod:`.quality`), averaged over
+    another quarter second so that a correction held over many frames moves between joints
+    gradually, plus :data:`COMPLIANCE_FLOOR`.
+
+    The IK's least-norm step weighs each joint's turn by the inverse (:func:`.ik.solve_frames`):
+    a correction that must change fast, such as planted feet under a capture whose pelvis
+    jerks for a frame, goes to the joints that turn fast there anyway instead of the
+    slowest (a held foot turning 2.1 times its limit on the CMU jumps); three hand and head
+    reaches held while the body walks on grow the correction of the joints that walk, not the
+    neck's."""
+    from scipy.ndimage import maximum_filter1d, uniform_filter1d
+    from .quality import angular_speed
+    speed = np.degrees(angular_speed(composed))
+    w = max(1, int(round(0.25 * composed.fps)))
+    peak = maximum_filter1d(speed, 2 * w + 1, axis=0, mode="nearest")
+    peak = uniform_filter1d(peak, 2 * w + 1, axis=0, mode="nearest") + COMPLIANCE_FLOOR
+    return peak / np.median(peak)
+
+
+_compliance = compliance
 
 
 def _still_joints(composed: Motion) -> frozenset:
@@ -394,7 +426,8 @@ def _solve_in_chunks(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
         f = frames[part]
         rot[f], tra[f], res[part], it[part] = solve_frames(
             problem.skeleton, [task.take(part) for task in tasks], rot[f], tra[f],
-            attraction_rot[f], attraction_tra[f, 0], problem.options, problem.locked)
+            attraction_rot[f], attraction_tra[f, 0], problem.options, problem.locked,
+            None if problem.compliance is None else problem.compliance[f])
         problem.check_cancel()
     return res, it
 
@@ -419,7 +452,7 @@ def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_
         r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
             problem.skeleton, [task.take([k]) for task in tasks], r0, t0,
             attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options,
-            problem.locked)
+            problem.locked, None if problem.compliance is None else problem.compliance[f:f + 1])
         rot[f], tra[f] = r[0], t[0]
         solved[f] = True
         if problem.cancel is not None and k % 64 == 0:
@@ -620,7 +653,8 @@ def _virtual(problem: _Problem, src) -> _Problem:
     composed = problem.composed
     motion = Motion._trusted(composed.skeleton, composed.rotations[src],
                              composed.translations[src], composed.frame_time, composed.name)
-    return dataclasses.replace(problem, composed=motion)
+    return dataclasses.replace(problem, composed=motion, compliance=None
+                               if problem.compliance is None else problem.compliance[src])
 
 
 def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals:
@@ -871,8 +905,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
             chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
-            still: frozenset | None = None, frames: tuple[int, int] | None = None
-            ) -> Correction:
+            still: frozenset | None = None, frames: tuple[int, int] | None = None,
+            compliance: np.ndarray | None = None) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -901,6 +935,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             correction is zero outside ``lo..hi`` (no residuals, no iterations there).
             Ignored with ``warm_start``, where each frame starts from the one before: every
             frame is solved and kept. ``None`` (the default): every frame.
+        compliance: ``(F, J)`` each joint's compliance per frame; ``None`` (the default):
+            the composed motion's (:func:`compliance`). A solve of a few frames cut from a
+            clip passes the whole clip's, cut alike.
     """
     from ..describe import figure_size
 
@@ -921,7 +958,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             wanted[lo:hi + 1] = True
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
                        _still_joints(composed) if still is None else frozenset(still),
-                       wanted=wanted)
+                       wanted=wanted,
+                       compliance=_compliance(composed) if compliance is None
+                       else np.asarray(compliance, dtype=float))
     units = _ramp_units(cons)
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)

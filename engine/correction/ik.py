@@ -745,7 +745,7 @@ class _Rows:
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
                  attraction_rot: np.ndarray, attraction_root: np.ndarray,
-                 options: IKOptions, locked=frozenset()
+                 options: IKOptions, locked=frozenset(), compliance: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of frames that share ``tasks``.
 
@@ -770,6 +770,11 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
         options: the settings; ``options.scale`` must be set.
         locked: joints whose rotation is no unknown (they stay at their attraction posture).
+        compliance: ``(B, J)`` per frame, how much more freely each joint turns than
+            ``colscale`` says (its columns are scaled by the square root too): the least-norm
+            step gives each joint a share of the correction in proportion
+            (:func:`engine.correction.enforcement.compliance`); ``None``: alike on every frame.
+            Ignored with :data:`STIFFNESS` ``None`` (the plain least norm).
 
     Returns:
         ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
@@ -802,9 +807,20 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     # the attraction posture of the unknown joints, taken once (the whole posture only for
     # joint limits)
     attraction_joints = attraction_rot[:, joints]
+    # per frame, each column's weight: the structure's, times the square root of each
+    # joint's compliance on that frame
+    extra = None
+    if compliance is not None and STIFFNESS is not None:
+        extra = np.ones((B, structure.n))
+        extra[:, 3:] = np.repeat(np.sqrt(compliance[:, joints]), 3, axis=1)
+    colscale_all = structure.colscale[None] if extra is None else structure.colscale * extra
+    settle_all = structure.settle_scale[None] if extra is None else structure.settle_scale * extra
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
         err, jac, on, acting = _evaluate(skeleton, structure, r, t, active)
+        if extra is not None:
+            jac = jac * extra[active][:, None, :]
+        colscale = colscale_all if extra is None else colscale_all[active]
         err_on = np.where(acting[:, rows.task], err, 0.0)
         residual[active] = _task_norms(err_on, structure.row0)
         if rows.unit is not None:
@@ -834,7 +850,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                     continue
                 out[sel] = _step(err[f], jac[f], rows_on[sel], rows, active[f], structure.n,
                                  options, polish, t[f, 0], cur[f], home_root[f], home[f],
-                                 0.0 if polish else options.attraction, structure.colscale)
+                                 0.0 if polish else options.attraction,
+                                 colscale if extra is None else colscale[f])
             return out
 
         # one-sided tasks (a floor) act where violated; once they have acted they hold their
@@ -848,7 +865,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         # those are released and it goes on (so that the result is the posture nearest the
         # attraction that meets the tasks, whatever the start). Held tasks are checked so
         # then, and every few iterations (a hold may keep a lower level from being met)
-        size = np.abs(dq * structure.settle_scale).max(axis=1)
+        size = np.abs(dq * (settle_all if extra is None else settle_all[active])).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
         frames = (check & held.any(axis=1)).nonzero()[0]
@@ -893,7 +910,8 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         keep = ~settled
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
-        r, t = _apply_step(dq * structure.colscale, r, t, cur, structure,
+        r, t = _apply_step(dq * (colscale if extra is None else colscale[keep]), r, t, cur,
+                           structure,
                            attraction_rot[active] if options.joint_limits else None,
                            options)
         rot[active] = r
