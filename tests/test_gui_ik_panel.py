@@ -190,9 +190,19 @@ def test_a_goal_set_by_hand_moves_with_the_character_onto_the_floor(qtbot, floor
     assert doc.undo_stack.count() == count + 1
     np.testing.assert_allclose(hand(), before + [0.0, 0.5 - standing, 0.0], atol=1e-12)
     qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    # typing on merges into that step, and typing the height it started from drops it
+    _type(qtbot, floor.height, "0.7")
+    assert doc.undo_stack.count() == count + 1
+    np.testing.assert_allclose(hand(), before + [0.0, 0.7 - standing, 0.0], atol=1e-12)
+    _type(qtbot, floor.height, repr(standing))
+    assert doc.undo_stack.count() == count
+    np.testing.assert_allclose(hand(), before, atol=1e-12)
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
+    _type(qtbot, floor.height, "0.5")
+    qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
     doc.undo_stack.undo()
     assert doc.scene.project.floor == standing
-    np.testing.assert_array_equal(hand(), before)
+    np.testing.assert_allclose(hand(), before, atol=1e-12)
     qtbot.waitUntil(lambda: not doc.pending, timeout=SOLVE_WAIT_MS)
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from motion_composer.app.gui.qt import QtGui
 from motion_composer.engine.conversion.correspondence import Correspondence
+from motion_composer.engine.correction.constraints import Constraint
 
 __all__ = ["push_scene", "replace_scene", "push_sources", "push_correspondence", "push_pair", "push_options",
            "push_constraints", "push_displacement", "push_layer_keys", "push_layers",
@@ -26,10 +27,12 @@ class SceneCommand(QtGui.QUndoCommand):
     """Make ``after`` the document's scene; undo makes ``before`` it again."""
 
     def __init__(self, doc, text: str, before, after, merge: str | None = None,
-                 fields: tuple = ()):
+                 fields: tuple = (), regenerate: bool = False):
         super().__init__(text)
         self.doc, self.before, self.after = doc, before, after
         self.fields = fields
+        # the solve makes the automatic constraints again: they are not part of the edit
+        self.regenerate = regenerate
         self._merge_id = merge_id(merge) if merge else -1
 
     def redo(self):
@@ -47,15 +50,27 @@ class SceneCommand(QtGui.QUndoCommand):
             return False
         self.after = other.after
         self.setText(other.text())
-        same = all(getattr(self.before.project, f) == getattr(self.after.project, f)
-                   for f in self.fields)
+        same = all(_same(getattr(self.before.project, f), getattr(self.after.project, f),
+                         self.regenerate) for f in self.fields)
         self.setObsolete(same and bool(self.fields))   # back where it started: no step
         return True
 
 
+def _same(a, b, regenerate: bool = False) -> bool:
+    """Whether a project field is back to its value: constraints by :meth:`Constraint.same_as`
+    (a goal moved by a floor change and back is a few ulps off), leaving out the automatic
+    ones where the solve makes them again (``regenerate``); anything else by ``==``."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) and any(
+            isinstance(c, Constraint) for c in [*a, *b]):
+        if regenerate:
+            a, b = ([c for c in x if not c.auto] for x in (a, b))
+        return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+    return bool(a == b)
+
+
 def push_scene(doc, text: str, before, after, merge: str | None = None,
-               fields: tuple = ()) -> None:
-    doc.undo_stack.push(SceneCommand(doc, text, before, after, merge, fields))
+               fields: tuple = (), regenerate: bool = False) -> None:
+    doc.undo_stack.push(SceneCommand(doc, text, before, after, merge, fields, regenerate))
 
 
 def replace_scene(doc, old, new) -> None:

@@ -215,7 +215,8 @@ class Document(QtCore.QObject):
         after = current.replace(**changes)
         if solve:
             self._pending[after] = {"regenerate": regenerate}
-        push_scene(self, text, current, after, merge=merge, fields=tuple(changes))
+        push_scene(self, text, current, after, merge=merge, fields=tuple(changes),
+                   regenerate=solve and regenerate)
         return True
 
     def set_source(self, role: str, motion: Motion, source, text: str) -> None:

@@ -127,6 +127,12 @@ class Constraint:
         """``(n, 3)`` goal positions at ``frames`` for position and trajectory kinds."""
         return self.kind_object.goal_point(self, np.asarray(frames))
 
+    def same_as(self, other, tol: float = 1e-9) -> bool:
+        """Whether ``other`` is this constraint again: every field equal, the goal's numbers
+        within ``tol`` [m, or the goal's own units] (a goal moved there and back ends a few
+        ulps away)."""
+        return isinstance(other, Constraint) and _close(self.to_dict(), other.to_dict(), tol)
+
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict:
         data = {"joint": self.joint, "kind": self.kind,
@@ -164,6 +170,19 @@ class Constraint:
                    priority=data.get("priority", 1), weight=data.get("weight", 1.0),
                    name=data.get("name", ""), enabled=data.get("enabled", True),
                    auto=data.get("auto", False), meta=data.get("meta", {}))
+
+
+def _close(a, b, tol: float) -> bool:
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(
+            _close(a[k], b[k], tol) for k in a)
+    if isinstance(a, (list, tuple, np.ndarray)):
+        return isinstance(b, (list, tuple, np.ndarray)) and len(a) == len(b) and all(
+            _close(x, y, tol) for x, y in zip(a, b))
+    if isinstance(a, float) or isinstance(b, float):
+        return (isinstance(a, (int, float)) and isinstance(b, (int, float))
+                and abs(a - b) <= tol)
+    return a == b
 
 
 def constraints_to_json(constraints) -> str:
