@@ -238,18 +238,24 @@ def test_the_grid_lies_on_the_projects_floor(view, qtbot):
         fig = v.figures["target"]
         return float((fig.points - fig.offset)[:, 2].min())
 
+    def performer_lowest():
+        return float(v.figures["performer"].points[:, 2].min())
+
     assert doc.scene.project.floor is None and grid_height() == 0.0
-    standing, before = doc.scene.standing_floor(), lowest()
+    standing, before, performer = doc.scene.standing_floor(), lowest(), performer_lowest()
     assert doc.edit("Floor at 0.5 m", floor=0.5)
     assert grid_height() == pytest.approx(0.5) and v.grid_height == 0.5
-    # the character is as high over the grid as it was over its own floor
+    # the character is as high over the grid as it was over its own floor, and the performer
+    # beside it is raised as much
     assert lowest() - grid_height() == pytest.approx(before - standing, abs=1e-9)
+    assert performer_lowest() == pytest.approx(performer + 0.5 - standing, abs=1e-9)
     assert doc.edit("Floor keeps only the feet above it", stand_on_floor=False)
     assert grid_height() == pytest.approx(0.5)       # the floor is still where the feet go
     doc.undo_stack.undo()
     doc.undo_stack.undo()
     assert doc.scene.project.floor is None and grid_height() == 0.0
     assert lowest() == pytest.approx(before, abs=1e-12)
+    assert performer_lowest() == pytest.approx(performer, abs=1e-12)
     # an edit that solves in the background moves the grid at once, before the solve lands
     assert doc.edit("Floor at 0.25 m", floor=0.25, solve=True)
     assert doc.pending and grid_height() == pytest.approx(0.25)

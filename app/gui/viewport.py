@@ -634,11 +634,14 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         # every skeleton starts where the performer starts (its root over the performer's at
         # frame 0), then travels as it travels; side by side, each is moved along the view's x
         anchor = self._root_start("performer")
+        # the performer is raised as the floor raises the character (Scene.lift), so that on
+        # a raised floor it walks on the grid beside it, not under it
+        lift = 0.0 if editing else self.doc.scene.lift()
         for i, k in enumerate(shown):
             x = (i - (len(shown) - 1) / 2) * gap if v.side_by_side or editing else 0.0
             start = self._root_start(k)
             shift = np.zeros(3) if anchor is None or start is None else anchor - start
-            shift[2] = 0.0
+            shift[2] = lift if k == "performer" else 0.0
             out[k] = np.array([x, 0.0, 0.0]) + shift
         return out
 
