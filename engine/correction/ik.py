@@ -644,11 +644,14 @@ def _point_jacobians(structure: _Structure, positions: np.ndarray,
 
 
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
-              select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              select=None, colscale=None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
     the task acts there or not, with ``on (B, T)`` (its weight is not zero) and ``acting
     (B, T)`` (on, and for a one-sided task violated). ``select`` picks the frames of the
-    tasks' goals that ``rot`` holds (all by default)."""
+    tasks' goals that ``rot`` holds (all by default). The Jacobian's columns are scaled by
+    ``colscale (B, N)`` per frame, by default by the structure's (the same on every
+    frame)."""
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure, rot, tra)
     positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
@@ -677,8 +680,10 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
             rows = slice(row0[ti], row0[ti] + task.rows)
             acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
             err[:, rows] = task.kind.error(goal, state)
-            jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
-                                                     * structure.task_colscale[ti])
+            jac[:, rows, structure.task_cols[ti]] = (
+                task.kind.jacobian(goal, state) * (structure.task_colscale[ti] if colscale
+                                                   is None else colscale[:, None,
+                                                                         structure.task_cols[ti]]))
             continue
         # G tasks of one kind with chains of C joints, as one batch of G B frames (the same
         # arithmetic per frame: bit for bit the tasks one by one, but for the sign of zeros
@@ -698,7 +703,9 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
             rows = slice(row0[ti], row0[ti] + kind.rows)
             acting[:, ti] = on[:, ti] & active[k]
             err[:, rows] = error[k]
-            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * structure.task_colscale[ti]
+            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * (
+                structure.task_colscale[ti] if colscale is None
+                else colscale[:, None, structure.task_cols[ti]])
     return err, jac, on, acting
 
 
@@ -817,10 +824,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     settle_all = structure.settle_scale[None] if extra is None else structure.settle_scale * extra
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
-        err, jac, on, acting = _evaluate(skeleton, structure, r, t, active)
-        if extra is not None:
-            jac = jac * extra[active][:, None, :]
         colscale = colscale_all if extra is None else colscale_all[active]
+        err, jac, on, acting = _evaluate(skeleton, structure, r, t, active,
+                                         None if extra is None else colscale)
         err_on = np.where(acting[:, rows.task], err, 0.0)
         residual[active] = _task_norms(err_on, structure.row0)
         if rows.unit is not None:
