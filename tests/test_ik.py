@@ -159,6 +159,10 @@ def test_the_joints_that_turn_fast_in_the_capture_take_the_correction_there():
         turn = angle_between(result.motion.rotations[220], composed.rotations[220])
         turns[name] = turn[elbow] / (turn[elbow] + turn[shoulder])
     assert turns["soft elbow"] > turns["alike"] + 0.1, turns
+    # one that does not fit the clip is refused, not misaligned
+    for wrong in (alike[:-1], np.where(alike > 2, 0.0, alike), np.full_like(alike, np.nan)):
+        with pytest.raises(ValueError, match="compliance must be"):
+            enforce(composed, [c], compliance=wrong)
     # the composed motion's own compliance is what enforce uses by default
     np.testing.assert_array_equal(enforce(composed, [c]).motion.rotations,
                                   enforce(composed, [c], compliance=alike).motion.rotations)

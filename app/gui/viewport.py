@@ -636,7 +636,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         anchor = self._root_start("performer")
         # the performer is raised as the floor raises the character (Scene.lift), so that on
         # a raised floor it walks on the grid beside it, not under it
-        lift = 0.0 if editing else self.doc.scene.lift()
+        lift = 0.0 if editing else self._lift()
         for i, k in enumerate(shown):
             x = (i - (len(shown) - 1) / 2) * gap if v.side_by_side or editing else 0.0
             start = self._root_start(k)
@@ -644,6 +644,15 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             shift[2] = lift if k == "performer" else 0.0
             out[k] = np.array([x, 0.0, 0.0]) + shift
         return out
+
+    def _lift(self) -> float:
+        """The scene's :meth:`~engine.scene.Scene.lift`, once per scene (drawn on every
+        frame of playback; it looks at the target file to find its cached floor)."""
+        scene = self.doc.scene
+        cached = self.__dict__.get("_lift_of")
+        if cached is None or cached[0] is not scene:
+            self._lift_of = cached = (scene, scene.lift())
+        return cached[1]
 
     def _root_start(self, which: str):
         pose = self._pose(which)

@@ -266,17 +266,22 @@ class _Problem:
             raise MotionComposerError("the correction was cancelled")
 
 
-#: [deg/s] added to each joint's speed in :func:`compliance`: a joint the capture holds still
-#: still takes a share (the no-pop rule's own floor: a turn this slow is no pop)
+#: [deg/s] added to each joint's speed in :func:`compliance`: a joint the motion holds still
+#: still takes a share, and joints that turn slowly weigh nearly alike (with 10, the no-pop
+#: rule's own floor, the light joints of the glTF fox's walking legs took so much of the
+#: correction that one turned 1.05 times its limit; 100: 0.99)
 COMPLIANCE_FLOOR = 100.0
 
 
 def compliance(composed: Motion) -> np.ndarray:
-    """``(F, J)`` how freely each joint takes the correction on each frame, relative to the
-    clip's median: its fastest turn in ``composed`` within a quarter second (the no-pop
-    rule's measure of what the capture itself does there, :mod:`.quality`), averaged over
-    another quarter second so that a correction held over many frames moves between joints
-    gradually, plus :data:`COMPLIANCE_FLOOR`.
+    """``(F, J)`` how freely each joint takes the correction on each frame: its fastest turn
+    in ``composed`` (the motion corrected) within a quarter second (the no-pop rule's measure
+    of what the motion itself does there, :mod:`.quality`), averaged over another quarter
+    second so that a correction held over many frames moves between joints gradually, plus
+    :data:`COMPLIANCE_FLOOR`, relative to its median over every joint and frame (the root's
+    translation, weighed by :data:`.ik.ROOT_TRANSLATION`, weighs against a joint at that
+    median; no cap: a joint the capture flips for a frame takes much of a correction
+    there, which it may).
 
     The IK's least-norm step weighs each joint's turn by the inverse (:func:`.ik.solve_frames`):
     a correction that must change fast, such as planted feet under a capture whose pelvis
@@ -956,11 +961,17 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         if not warm_start:
             wanted = np.zeros(composed.num_frames, dtype=bool)
             wanted[lo:hi + 1] = True
+    if compliance is not None:
+        compliance = np.asarray(compliance, dtype=float)
+        if compliance.shape != (composed.num_frames, composed.skeleton.num_joints) or not (
+                np.all(np.isfinite(compliance)) and np.all(compliance > 0)):
+            raise ValueError(f"compliance must be ({composed.num_frames}, "
+                             f"{composed.skeleton.num_joints}) positive finite numbers, not "
+                             f"an array of shape {compliance.shape}")
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
                        _still_joints(composed) if still is None else frozenset(still),
                        wanted=wanted,
-                       compliance=_compliance(composed) if compliance is None
-                       else np.asarray(compliance, dtype=float))
+                       compliance=_compliance(composed) if compliance is None else compliance)
     units = _ramp_units(cons)
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)

@@ -1043,7 +1043,8 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     ``root (b, 3)`` and ``cur (b, C, 4)`` are the current root translation and rotations of
     the unknown joints, ``home_root`` and ``home`` the attraction posture's; ``stacked``
     ``(b, K, N)`` the tasks' weighted Jacobian and ``gram (b, K, K)`` its Gram matrix. The
-    pull and the step are in the weighted unknowns (``q / colscale (N,)``).
+    pull and the step are in the weighted unknowns (``q / colscale``, ``colscale (b, N)`` per
+    frame or ``(1, N)`` alike for all).
     """
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))
