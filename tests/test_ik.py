@@ -133,41 +133,6 @@ def test_the_papers_warm_start_and_the_batches_agree_with_automatic_contacts(fra
                 assert np.nanmax(result.residual[i][c.start:c.end + 1]) < 1e-3, c.name
 
 
-def test_the_joints_that_turn_fast_in_the_capture_take_the_correction_there():
-    """A hand held 15 cm off its path while the body walks: the least-norm correction goes to
-    each joint in proportion to its compliance (:func:`enforcement.compliance`, from how fast
-    the conversion turns it around each frame). Made 50 times as compliant on every frame,
-    the elbow takes a larger share and the shoulder a smaller one; the goal is met either
-    way, and outside the range nothing changes."""
-    from motion_composer.engine.correction.enforcement import compliance
-    _, _, _, composed = walk_on_holden()
-    sk = composed.skeleton
-    here = _pos(composed, "LeftHand")
-    c = Constraint("LeftHand", "position", {"point": here[220] + [0.1, 0.1, 0.05]},
-                   200, 210, 230, 240)
-    alike = compliance(composed)
-    assert alike.shape == (composed.num_frames, sk.num_joints)
-    assert np.all(np.isfinite(alike)) and np.all(alike > 0)
-    elbow, shoulder = sk.index["LeftForeArm"], sk.index["LeftArm"]
-    soft = alike.copy()
-    soft[:, elbow] *= 50.0
-    turns = {}
-    for name, given in (("alike", alike), ("soft elbow", soft)):
-        result = enforce(composed, [c], compliance=given)
-        assert np.abs(_pos(result.motion, "LeftHand")[210:231] - c.goal["point"]).max() < 1e-3
-        np.testing.assert_array_equal(result.motion.rotations[:200], composed.rotations[:200])
-        turn = angle_between(result.motion.rotations[220], composed.rotations[220])
-        turns[name] = turn[elbow] / (turn[elbow] + turn[shoulder])
-    assert turns["soft elbow"] > turns["alike"] + 0.1, turns
-    # one that does not fit the clip is refused, not misaligned
-    for wrong in (alike[:-1], np.where(alike > 2, 0.0, alike), np.full_like(alike, np.nan)):
-        with pytest.raises(ValueError, match="compliance must be"):
-            enforce(composed, [c], compliance=wrong)
-    # the composed motion's own compliance is what enforce uses by default
-    np.testing.assert_array_equal(enforce(composed, [c]).motion.rotations,
-                                  enforce(composed, [c], compliance=alike).motion.rotations)
-
-
 def test_an_unreachable_goal_stops_at_the_closest_posture_and_reports_the_residual():
     """Both feet pinned where they stand (first priority), the left hand asked to go 3 m
     away (second): the root cannot follow, the arm reaches out as far as it can."""

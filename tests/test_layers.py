@@ -231,9 +231,8 @@ def test_solved_keys_move_the_root_no_faster_than_the_dense_solve(name):
 def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     """The bundled walk's frames 500-699 onto the bundled T-pose (automatic contacts, the
     floor at 0), fitted with the light pull (PULL): rounds of added keys bring the largest
-    miss to 0.44 mm, then keys added for smaller misses move others and the fit stalls at
-    1.50 and 4.02 mm. It goes back to the keys of its best evaluation within TASK_LIMIT and
-    calms and emphasises them from there (0.50 mm at the end). The
+    miss to 0.58 mm, then keys added for smaller misses move others and the fit stalls at
+    2.27 and 2.21 mm. It returns the keys of its best evaluation within TASK_LIMIT. The
     solve keeps such keys where they pop, lurch and part from the dense solve no more than
     allowed; these take a joint 47 cm from the dense solve's path (FIDELITY; the capture
     walks 0.9 m under that floor, and few keys hold the feet in a body far from the dense
@@ -251,8 +250,7 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
                                stats=stats)
     largest = stats["adding_misses_m"]
     assert min(largest) <= keyfit.TASK_LIMIT < largest[-1]         # held, then lost
-    # its best keys within the limit, calmed and emphasised from there: still within it
-    assert stats["stalled"] and stats["worst_task_m"] <= keyfit.TASK_LIMIT
+    assert stats["worst_task_m"] <= min(largest)
     edited = solution.scene.edited
     errors = _goal_errors(keys.apply(edited), solution.constraints)
     assert max(errors) <= keyfit.TASK_LIMIT + 1e-6

@@ -41,6 +41,14 @@ def _reaches(composed, joints, ramps):
             for k, j in enumerate(joints)]
 
 
+@pytest.mark.xfail(strict=True, reason="open (issue 14 point 2): three reaches whose ramps all "
+                   "overlap turn the Neck 1.28 times the limit at frame 230 (241 deg/s) with "
+                   "the joints weighed alike. It is the held goals, not the easing: the body "
+                   "walks away from three fixed points and, while all three are held (to "
+                   "frame 230), the Neck's correction grows 1.4 degrees a frame (frames "
+                   "226-231: 170-230 deg/s; the direct Neck turns 18). With joints stiffer "
+                   "towards the root (ik.STIFFNESS 2) it passed, but the demo's stretched arm "
+                   "then flipped")
 def test_overlapping_ramps_ease_together_without_a_pop():
     performer, _, _, composed = walk_on_holden()
     cons = _reaches(composed, ["LeftHand", "RightHand", "Head"], 20)

@@ -70,8 +70,8 @@ from ..kinematics import fk_joints
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qnormalize
 
-__all__ = ["Correction", "Residuals", "enforce", "compliance", "describe_residuals",
-           "largest_residuals", "CHUNK_FRAMES"]
+__all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "largest_residuals",
+           "CHUNK_FRAMES"]
 
 #: Frames solved together at most: a long clip is solved in chunks of this many frames so
 #: that the solver's per-frame Jacobians stay within a bounded memory (a chunk's result is the
@@ -250,8 +250,6 @@ class _Problem:
     #: ``(F,)`` the frames whose result is wanted (:func:`enforce`'s ``frames``); ``None``:
     #: every frame
     wanted: np.ndarray | None = None
-    #: ``(F, J)`` each joint's compliance per frame (:func:`compliance`); ``None``: alike
-    compliance: np.ndarray | None = None
 
     @property
     def skeleton(self):
@@ -264,41 +262,6 @@ class _Problem:
     def check_cancel(self) -> None:
         if self.cancel is not None and self.cancel():
             raise MotionComposerError("the correction was cancelled")
-
-
-#: [deg/s] added to each joint's speed in :func:`compliance`: a joint the motion holds still
-#: still takes a share, and joints that turn slowly weigh nearly alike (with 10, the no-pop
-#: rule's own floor, the light joints of the glTF fox's walking legs took so much of the
-#: correction that one turned 1.05 times its limit; 100: 0.99)
-COMPLIANCE_FLOOR = 100.0
-
-
-def compliance(composed: Motion) -> np.ndarray:
-    """``(F, J)`` how freely each joint takes the correction on each frame: its fastest turn
-    in ``composed`` (the motion corrected) within a quarter second (the no-pop rule's measure
-    of what the motion itself does there, :mod:`.quality`), averaged over another quarter
-    second so that a correction held over many frames moves between joints gradually, plus
-    :data:`COMPLIANCE_FLOOR`, relative to its median over every joint and frame (the root's
-    translation, weighed by :data:`.ik.ROOT_TRANSLATION`, weighs against a joint at that
-    median; no cap: a joint the capture flips for a frame takes much of a correction
-    there, which it may).
-
-    The IK's least-norm step weighs each joint's turn by the inverse (:func:`.ik.solve_frames`):
-    a correction that must change fast, such as planted feet under a capture whose pelvis
-    jerks for a frame, goes to the joints that turn fast there anyway instead of the
-    slowest (a held foot turning 2.1 times its limit on the CMU jumps); three hand and head
-    reaches held while the body walks on grow the correction of the joints that walk, not the
-    neck's."""
-    from scipy.ndimage import maximum_filter1d, uniform_filter1d
-    from .quality import angular_speed
-    speed = np.degrees(angular_speed(composed))
-    w = max(1, int(round(0.25 * composed.fps)))
-    peak = maximum_filter1d(speed, 2 * w + 1, axis=0, mode="nearest")
-    peak = uniform_filter1d(peak, 2 * w + 1, axis=0, mode="nearest") + COMPLIANCE_FLOOR
-    return peak / np.median(peak)
-
-
-_compliance = compliance
 
 
 def _still_joints(composed: Motion) -> frozenset:
@@ -431,8 +394,7 @@ def _solve_in_chunks(problem: _Problem, tasks, frames, rot, tra, attraction_rot,
         f = frames[part]
         rot[f], tra[f], res[part], it[part] = solve_frames(
             problem.skeleton, [task.take(part) for task in tasks], rot[f], tra[f],
-            attraction_rot[f], attraction_tra[f, 0], problem.options, problem.locked,
-            None if problem.compliance is None else problem.compliance[f])
+            attraction_rot[f], attraction_tra[f, 0], problem.options, problem.locked)
         problem.check_cancel()
     return res, it
 
@@ -457,7 +419,7 @@ def _solve_in_time_order(problem: _Problem, tasks, frames, rot, tra, attraction_
         r, t, res[k:k + 1], it[k:k + 1] = solve_frames(
             problem.skeleton, [task.take([k]) for task in tasks], r0, t0,
             attraction_rot[f:f + 1], attraction_tra[f:f + 1, 0], problem.options,
-            problem.locked, None if problem.compliance is None else problem.compliance[f:f + 1])
+            problem.locked)
         rot[f], tra[f] = r[0], t[0]
         solved[f] = True
         if problem.cancel is not None and k % 64 == 0:
@@ -658,8 +620,7 @@ def _virtual(problem: _Problem, src) -> _Problem:
     composed = problem.composed
     motion = Motion._trusted(composed.skeleton, composed.rotations[src],
                              composed.translations[src], composed.frame_time, composed.name)
-    return dataclasses.replace(problem, composed=motion, compliance=None
-                               if problem.compliance is None else problem.compliance[src])
+    return dataclasses.replace(problem, composed=motion)
 
 
 def _map_residuals(residual: Residuals, src, keep, num_frames: int) -> Residuals:
@@ -910,8 +871,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
             chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
-            still: frozenset | None = None, frames: tuple[int, int] | None = None,
-            compliance: np.ndarray | None = None) -> Correction:
+            still: frozenset | None = None, frames: tuple[int, int] | None = None
+            ) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -940,9 +901,6 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             correction is zero outside ``lo..hi`` (no residuals, no iterations there).
             Ignored with ``warm_start``, where each frame starts from the one before: every
             frame is solved and kept. ``None`` (the default): every frame.
-        compliance: ``(F, J)`` each joint's compliance per frame; ``None`` (the default):
-            the composed motion's (:func:`compliance`). A solve of a few frames cut from a
-            clip passes the whole clip's, cut alike.
     """
     from ..describe import figure_size
 
@@ -961,17 +919,9 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         if not warm_start:
             wanted = np.zeros(composed.num_frames, dtype=bool)
             wanted[lo:hi + 1] = True
-    if compliance is not None:
-        compliance = np.asarray(compliance, dtype=float)
-        if compliance.shape != (composed.num_frames, composed.skeleton.num_joints) or not (
-                np.all(np.isfinite(compliance)) and np.all(compliance > 0)):
-            raise ValueError(f"compliance must be ({composed.num_frames}, "
-                             f"{composed.skeleton.num_joints}) positive finite numbers, not "
-                             f"an array of shape {compliance.shape}")
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
                        _still_joints(composed) if still is None else frozenset(still),
-                       wanted=wanted,
-                       compliance=_compliance(composed) if compliance is None else compliance)
+                       wanted=wanted)
     units = _ramp_units(cons)
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)

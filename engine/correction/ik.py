@@ -644,14 +644,11 @@ def _point_jacobians(structure: _Structure, positions: np.ndarray,
 
 
 def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: np.ndarray,
-              select=None, colscale=None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              select=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every task's error rows ``(B, K)`` and Jacobian ``(B, K, N)`` at the posture, whether
     the task acts there or not, with ``on (B, T)`` (its weight is not zero) and ``acting
     (B, T)`` (on, and for a one-sided task violated). ``select`` picks the frames of the
-    tasks' goals that ``rot`` holds (all by default). The Jacobian's columns are scaled by
-    ``colscale (B, N)`` per frame, by default by the structure's (the same on every
-    frame)."""
+    tasks' goals that ``rot`` holds (all by default)."""
     B = rot.shape[0]
     wq, wp = _fk_partial(skeleton, structure, rot, tra)
     positions = wp.transpose(1, 2, 0)                                           # (n, B, 3)
@@ -680,10 +677,8 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
             rows = slice(row0[ti], row0[ti] + task.rows)
             acting[:, ti] = on[:, ti] & task.kind.active(goal, state)
             err[:, rows] = task.kind.error(goal, state)
-            jac[:, rows, structure.task_cols[ti]] = (
-                task.kind.jacobian(goal, state) * (structure.task_colscale[ti] if colscale
-                                                   is None else colscale[:, None,
-                                                                         structure.task_cols[ti]]))
+            jac[:, rows, structure.task_cols[ti]] = (task.kind.jacobian(goal, state)
+                                                     * structure.task_colscale[ti])
             continue
         # G tasks of one kind with chains of C joints, as one batch of G B frames (the same
         # arithmetic per frame: bit for bit the tasks one by one, but for the sign of zeros
@@ -703,9 +698,7 @@ def _evaluate(skeleton: Skeleton, structure: _Structure, rot: np.ndarray, tra: n
             rows = slice(row0[ti], row0[ti] + kind.rows)
             acting[:, ti] = on[:, ti] & active[k]
             err[:, rows] = error[k]
-            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * (
-                structure.task_colscale[ti] if colscale is None
-                else colscale[:, None, structure.task_cols[ti]])
+            jac[:, rows, structure.task_cols[ti]] = jacobian[k] * structure.task_colscale[ti]
     return err, jac, on, acting
 
 
@@ -752,7 +745,7 @@ class _Rows:
 
 def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np.ndarray,
                  attraction_rot: np.ndarray, attraction_root: np.ndarray,
-                 options: IKOptions, locked=frozenset(), compliance: np.ndarray | None = None
+                 options: IKOptions, locked=frozenset()
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of frames that share ``tasks``.
 
@@ -777,11 +770,6 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         attraction_rot, attraction_root: ``(B, J, 4)`` and ``(B, 3)`` the attraction posture.
         options: the settings; ``options.scale`` must be set.
         locked: joints whose rotation is no unknown (they stay at their attraction posture).
-        compliance: ``(B, J)`` per frame, how much more freely each joint turns than
-            ``colscale`` says (its columns are scaled by the square root too): the least-norm
-            step gives each joint a share of the correction in proportion
-            (:func:`engine.correction.enforcement.compliance`); ``None``: alike on every frame.
-            Ignored with :data:`STIFFNESS` ``None`` (the plain least norm).
 
     Returns:
         ``(rot, tra, residual, iterations)``: the solved posture, the residual per task and
@@ -814,19 +802,9 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
     # the attraction posture of the unknown joints, taken once (the whole posture only for
     # joint limits)
     attraction_joints = attraction_rot[:, joints]
-    # per frame, each column's weight: the structure's, times the square root of each
-    # joint's compliance on that frame
-    extra = None
-    if compliance is not None and STIFFNESS is not None:
-        extra = np.ones((B, structure.n))
-        extra[:, 3:] = np.repeat(np.sqrt(compliance[:, joints]), 3, axis=1)
-    colscale_all = structure.colscale[None] if extra is None else structure.colscale * extra
-    settle_all = structure.settle_scale[None] if extra is None else structure.settle_scale * extra
     for it in range(options.max_iterations + 1):
         r, t = rot[active], tra[active]
-        colscale = colscale_all if extra is None else colscale_all[active]
-        err, jac, on, acting = _evaluate(skeleton, structure, r, t, active,
-                                         None if extra is None else colscale)
+        err, jac, on, acting = _evaluate(skeleton, structure, r, t, active)
         err_on = np.where(acting[:, rows.task], err, 0.0)
         residual[active] = _task_norms(err_on, structure.row0)
         if rows.unit is not None:
@@ -856,8 +834,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
                     continue
                 out[sel] = _step(err[f], jac[f], rows_on[sel], rows, active[f], structure.n,
                                  options, polish, t[f, 0], cur[f], home_root[f], home[f],
-                                 0.0 if polish else options.attraction,
-                                 colscale if extra is None else colscale[f])
+                                 0.0 if polish else options.attraction, structure.colscale)
             return out
 
         # one-sided tasks (a floor) act where violated; once they have acted they hold their
@@ -871,7 +848,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         # those are released and it goes on (so that the result is the posture nearest the
         # attraction that meets the tasks, whatever the start). Held tasks are checked so
         # then, and every few iterations (a hold may keep a lower level from being met)
-        size = np.abs(dq * (settle_all if extra is None else settle_all[active])).max(axis=1)
+        size = np.abs(dq * structure.settle_scale).max(axis=1)
         settled = size < np.where(polishing, POLISH_SETTLE * options.settle, options.settle)
         check = settled | (it % RELEASE_EVERY == RELEASE_EVERY - 1)
         frames = (check & held.any(axis=1)).nonzero()[0]
@@ -916,8 +893,7 @@ def solve_frames(skeleton: Skeleton, tasks: list[Task], rot: np.ndarray, tra: np
         keep = ~settled
         iterations[active[settled]] -= 1
         active, dq, r, t, cur = active[keep], dq[keep], r[keep], t[keep], cur[keep]
-        r, t = _apply_step(dq * (colscale if extra is None else colscale[keep]), r, t, cur,
-                           structure,
+        r, t = _apply_step(dq * structure.colscale, r, t, cur, structure,
                            attraction_rot[active] if options.joint_limits else None,
                            options)
         rot[active] = r
@@ -1043,8 +1019,7 @@ def _attraction_step(stacked: np.ndarray, gram: np.ndarray, root: np.ndarray,
     ``root (b, 3)`` and ``cur (b, C, 4)`` are the current root translation and rotations of
     the unknown joints, ``home_root`` and ``home`` the attraction posture's; ``stacked``
     ``(b, K, N)`` the tasks' weighted Jacobian and ``gram (b, K, K)`` its Gram matrix. The
-    pull and the step are in the weighted unknowns (``q / colscale``, ``colscale (b, N)`` per
-    frame or ``(1, N)`` alike for all).
+    pull and the step are in the weighted unknowns (``q / colscale (N,)``).
     """
     nb = len(root)
     dz = np.empty((nb, stacked.shape[2]))

@@ -197,8 +197,7 @@ class WindowSolver:
     frames alone, cut from the clip and shifted to start at 0, instead of on whole-clip
     arrays: what :func:`~engine.correction.enforcement.enforce` would take from the whole clip
     is worked out once here and passed in, the settings' ``scale`` (the composed motion's
-    stature), the joints the composed motion holds still and each joint's compliance per
-    frame. The frames ``[L, H]`` then get
+    stature) and the joints the composed motion holds still. The frames ``[L, H]`` then get
     the same tasks, key postures and attraction postures as in a solve of the whole clip.
 
     The solver refers to the composed motion weakly: one kept for the next drag does not keep
@@ -206,7 +205,7 @@ class WindowSolver:
 
     def __init__(self, composed, options=None):
         from ..describe import figure_size
-        from .enforcement import _still_joints, compliance
+        from .enforcement import _still_joints
         from .ik import IKOptions
         self._composed = weakref.ref(composed)
         self.given_options = options
@@ -215,7 +214,6 @@ class WindowSolver:
             options = dataclasses.replace(options, scale=figure_size(composed))
         self.options = options
         self.still = _still_joints(composed)
-        self.compliance = compliance(composed)
 
     def serves(self, composed, options) -> bool:
         """Whether this solver is the one for ``composed`` (by identity) and ``options``."""
@@ -242,8 +240,7 @@ class WindowSolver:
         # frames lo..hi alone are spliced: the rest of [first, last] is solved only where
         # they depend on it (the ramps' key postures)
         part = enforce(cut, shifted, options=self.options, pins=True, still=self.still,
-                       frames=(lo - first, hi - first),
-                       compliance=self.compliance[first:last + 1]).motion
+                       frames=(lo - first, hi - first)).motion
         return part, first
 
     def preview(self, constraints: list, base_constraints: list, base_motion):
