@@ -1,6 +1,8 @@
 """Constraints over time on real clips: goals met, ramps smooth, nothing touched outside."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -288,6 +290,25 @@ def test_constraint_ranges_and_fields_are_validated():
     with pytest.raises(ConstraintError, match="past the last frame"):
         enforce(composed, [Constraint("Hips", "position", {"point": [0, 0, 0]}, 0, 0, 1,
                                       10**6)])
+
+
+@pytest.mark.parametrize("constraint", [
+    Constraint("LeftHand", "position", {"point": [0.3, -0.1, 0.2]}, 280, 290, 310, 320),
+    Constraint("LeftHand", "trajectory", {"keys": [[290, 0.3, -0.1, 0.2], [310, 0.4, 0.0, 0.2]]},
+               280, 290, 310, 320, name="path"),
+    Constraint("LeftFoot", "plane", {"point": [0, 0.92, 0], "normal": [0.1, 1, 0],
+                                     "side": "above"}, 0, 0, 99, 99, auto=True)],
+    ids=["position", "trajectory", "plane"])
+def test_a_goal_moved_there_and_back_is_the_same_constraint(constraint):
+    """``Constraint.same_as``: moved up by a floor's lift and down again, a goal ends a few ulps
+    off and is the same constraint (the window's undo merge drops such a step); a millimetre
+    off, another range or another flag is not."""
+    back = constraint.moved([0.0, 0.9217, 0.0]).moved([0.0, -0.9217, 0.0])
+    assert back is not constraint and back.same_as(constraint)
+    assert not constraint.moved([0.0, 1e-3, 0.0]).same_as(constraint)
+    assert not constraint.with_range(280, 291, 310, 320).same_as(constraint)
+    assert not dataclasses.replace(constraint, enabled=False).same_as(constraint)
+    assert not constraint.same_as(constraint.to_dict())
 
 
 def test_constraints_round_trip_through_json():
