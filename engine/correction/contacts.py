@@ -148,6 +148,21 @@ def _close_gaps(mask: np.ndarray, gap: int) -> np.ndarray:
     return mask
 
 
+def _close_edges(mask: np.ndarray, low: np.ndarray, gap: int) -> np.ndarray:
+    """``mask`` with the frames before its first run and after its last filled where they are
+    at most ``gap`` frames, all ``low``, and reach the clip's edge. A contact the clip cuts
+    may be longer than it shows, and a speed at the edge is one-sided (a plant at the first
+    frame reads as sliding into it): a low foot at the edge is taken as planted with the run
+    beside it."""
+    mask = mask.copy()
+    runs = _runs(~mask)
+    for s, e in runs[:1] + runs[-1:]:
+        if (s == 0 or e == len(mask) - 1) and e - s + 1 <= gap and low[s:e + 1].all() \
+                and 0 < len(mask) - (e - s + 1):
+            mask[s:e + 1] = True
+    return mask
+
+
 def _part_runs(mask: np.ndarray, start: int, gap: int) -> tuple:
     """The runs ``(first, last)`` of a part's held ``mask`` over a contact from ``start`` (gaps
     closed, runs of :data:`PART_MIN_FRAMES` frames or more)."""
@@ -186,19 +201,21 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     shortest = max(2, int(round(options.min_duration * fps)))
     contacts = []
     for (ankle, toe), idx in zip(feet, points):
-        parts, heights, slows = [], [], []
+        parts, heights, slows, lows = [], [], [], []
         for j in idx:
             y = pos[j][:, 1] - floor
             rest = np.percentile(y, 5.0)                        # its height when planted
             vel = np.gradient(pos[j][:, [0, 2]], axis=0) * fps
             slow = np.linalg.norm(vel, axis=1) < options.speed * size
-            parts.append((y < rest + options.height * size) & slow)
+            lows.append(y < rest + options.height * size)
+            parts.append(lows[-1] & slow)
             heights.append(y)
             # a part is held while it has not moved off since the frame before
             step = np.zeros(len(y))
             step[1:] = np.linalg.norm(np.diff(pos[j][:, [0, 2]], axis=0), axis=1) * fps
             slows.append(step < options.speed * size)
-        planted = _close_gaps(np.logical_or.reduce(parts), gap)
+        planted = _close_edges(_close_gaps(np.logical_or.reduce(parts), gap),
+                               np.logical_or.reduce(lows), gap)
         for s, e in _runs(planted):
             if e - s + 1 >= shortest:
                 # within the contact a part is held near its lowest there
