@@ -46,7 +46,10 @@ from motion_composer.engine.skinning import skin_character
 #: go on frame 72 and the other foot planted on 73: eased from both sides, the two frames
 #: once swapped their repairs and turned Ely's hips 537 deg/s; with each foot's correction
 #: solved without the other's goals, the fox's repairs were 12 degrees of the hips apart
-#: there, 1.34 times the no-pop limit)
+#: there, 1.34 times the no-pop limit), and a Rokoko dance onto the CMU T-pose (its right foot
+#: flat on the floor from the first frame to the 9th at 100 fps, a plant the clip cuts: the
+#: floor rule lifts the target's toe there, and left free the heel slid 0.13 % of stature more
+#: than the performer's)
 CASES = [
     (("shared", "cmu_max_131_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "bandai1_run_active_001.bvh"), ("shared", "target_mixamo_mannequin.glb")),
@@ -58,10 +61,11 @@ CASES = [
     (("shared", "cmu_max_131_01_walk.bvh"), ("shared", "target_fox.glb")),
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_fox.glb")),
+    (("shared", "rokoko_mixamo_jesse_dance.bvh"), ("shared", "target_cmu_mb_rest_tpose.bvh")),
 ]
 IDS = ["walk-cmumax-ely", "run-bandai-mannequin", "kick-bandai-cmutpose",
        "jump-fair1-ely", "jumps-cmumb-holden", "walk-bandai-kenney", "walk-cmumax-fox",
-       "walk-cc3-ely", "walk-cc3-fox"]
+       "walk-cc3-ely", "walk-cc3-fox", "dance-rokoko-cmutpose"]
 
 NEAR = 0.02          # of the stature above the joint's lowest height
 SLOW = 0.15          # statures per second
@@ -210,6 +214,46 @@ def _drift_excess(solved, part: str):
         theirs = drift(p_pos[:, scene.performer.skeleton.index[pj]], s, e) / p_size
         worst.append((mine - theirs, f"{kind} {tj} {s}-{e}: {mine:.4f} > {theirs:.4f}"))
     return max(worst)
+
+
+def test_a_plant_the_clip_cuts_is_a_contact():
+    """A foot low at a clip's first or last frames is planted with the run beside it even
+    where the clip leaves it shorter than the shortest contact (the speed at the edge is
+    one-sided): the Rokoko dance's right foot on frames 0-8, and every contact of three clips at
+    120 fps (a walk, jumps and a run) with the clip cut a few frames before it ends or after it
+    starts. A foot in the air at the cut is not planted."""
+    from motion_composer.engine.correction.contacts import (PART_MIN_FRAMES, ContactOptions,
+                                                            detect_contacts)
+    dance = read_motion(shared_path("rokoko_mixamo_jesse_dance.bvh"))
+    first = detect_contacts(dance)
+    assert any(c.joint == "RightFoot" and c.start == 0 and c.end >= 7 for c in first)
+    assert not any(c.joint == "LeftFoot" and c.start < 900 for c in first)   # off the floor
+    checked = swings = 0
+    for name in ("cmu_max_131_01_walk.bvh", "cmu_mb_01_01_jumps.bvh",
+                 "cmu_xia_angry_13_000_run.bvh"):
+        clip = read_motion(shared_path(name))
+        shortest = round(ContactOptions().min_duration * clip.fps)
+        left = shortest - 3                         # shorter than the shortest contact
+        assert left >= PART_MIN_FRAMES
+        F = clip.num_frames
+        whole = detect_contacts(clip)
+        for c in whole:
+            if c.end - c.start + 1 < 2 * shortest or c.start < 10 or c.end > F - 11:
+                continue
+            # the excerpt's floor and speeds at its edge are its own: a frame either way
+            head = detect_contacts(clip.excerpt(c.end - left + 1, None))
+            assert any(h.joint == c.joint and h.start == 0 and h.end >= left - 2 for h in head)
+            tail = detect_contacts(clip.excerpt(None, c.start + left - 1))
+            assert any(t.joint == c.joint and abs(t.start - c.start) <= 1 and
+                       t.end == c.start + left - 1 for t in tail)
+            checked += 1
+            # cut mid-swing (a third of a second or more since the foot's contact before)
+            before = [b.end for b in whole if b.joint == c.joint and b.end < c.start]
+            if before and c.start - before[-1] > clip.fps / 3:
+                air = detect_contacts(clip.excerpt((before[-1] + c.start) // 2, None))
+                assert not any(a.joint == c.joint and a.start == 0 for a in air)
+                swings += 1
+    assert checked >= 6 and swings >= 3
 
 
 def test_planted_heels_drift_no_more_than_the_performers(solved):

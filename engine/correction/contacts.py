@@ -42,7 +42,9 @@ class ContactOptions:
         height: a point within this fraction of the stature above its planted height counts
             as low (0.03 of 1.7 m is 5 cm).
         speed: [statures per second] horizontal speed under which a low point is planted.
-        min_duration: [s] shorter contacts are dropped.
+        min_duration: [s] shorter contacts are dropped (but for one the clip's first or last
+            frame cuts, which may be longer than it shows: it is kept from
+            :data:`PART_MIN_FRAMES` frames).
         max_gap: [s] gaps shorter than this inside a contact are closed.
         ramp: [s] ease-in and ease-out around each contact.
     """
@@ -178,7 +180,9 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     (within ``options.height`` of the stature above its planted height, the 5th percentile of
     its height above the floor) and slow (horizontally under ``options.speed`` statures per
     second). A foot is on the ground where either part is planted, gaps under
-    ``options.max_gap`` closed and contacts under ``options.min_duration`` dropped; each
+    ``options.max_gap`` closed (and, where the foot is low, the frames between a contact and
+    the clip's edge) and contacts under ``options.min_duration`` dropped unless the clip cuts
+    them; each
     contact keeps the runs where each part is held: slow, and within :data:`PART_HEIGHT` of
     ``options.height`` above its lowest height in the contact."""
     from ..describe import figure_size
@@ -217,7 +221,10 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
         planted = _close_edges(_close_gaps(np.logical_or.reduce(parts), gap),
                                np.logical_or.reduce(lows), gap)
         for s, e in _runs(planted):
-            if e - s + 1 >= shortest:
+            # a contact the clip cuts may be longer than it shows: at the clip's edge it is
+            # kept as long as it can hold a part
+            cut = s == 0 or e == len(planted) - 1
+            if e - s + 1 >= (PART_MIN_FRAMES if cut else shortest):
                 # within the contact a part is held near its lowest there
                 held = [slow[s:e + 1] & (y[s:e + 1] < y[s:e + 1].min() +
                                          PART_HEIGHT * options.height * size)
