@@ -37,6 +37,7 @@ from .conversion.automap import automap
 from .conversion.binding import bind
 from .conversion.composer import compose
 from .conversion.converter import convert
+from .conversion.followers import follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
@@ -281,12 +282,13 @@ class Scene:
                 binding, pose, self.performer.frame_time, name=name))
         composed = self._raw("composed")
         layers = tuple((layer.displacement, layer.weight, layer.mute) for layer in p.layers)
+        # the control joints carried with the limbs stand where the changed limbs put them
         if stage == "edited":
-            return self.derived.get("edited", (key, layers),
-                                    lambda: _apply_layers(p.layers, composed))
+            return self.derived.get("edited", (key, layers), lambda: follow(
+                binding.followers, _apply_layers(p.layers, composed)))
         edited = self._raw("edited")
-        return self.derived.get("motion", (key, layers, p.displacement),
-                                lambda: p.displacement.apply(edited))
+        return self.derived.get("motion", (key, layers, p.displacement), lambda: follow(
+            binding.followers, p.displacement.apply(edited)))
 
     def _value(self, stage: str):
         value = self._raw(stage)
@@ -593,8 +595,9 @@ class Scene:
                 self.derived.computed["window solver"] += 1
             motion = solver.preview(constraints, base_constraints, base_motion)
             if motion is not None:
-                return motion, "window"
-        return enforce(composed, constraints, options=options).motion, "full"
+                return follow(self.binding.followers, motion), "window"
+        return follow(self.binding.followers,
+                      enforce(composed, constraints, options=options).motion), "full"
 
 
 _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))

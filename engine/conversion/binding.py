@@ -39,6 +39,7 @@ import numpy as np
 
 from .chains import CHAINS, ChainSettings, ChainSettingsError
 from .correspondence import Correspondence
+from .followers import find_followers
 from ..errors import MappingError, MotionComposerError
 from ..kinematics import fk_arrays
 from ..motion import Motion
@@ -272,8 +273,8 @@ class Binding:
         chains: per mapped target joint, the unmapped joints between it and its primary
             child (turned together with ``distribute="even"``); none for a branching joint.
         body_root: the top-most mapped target joint (its translation follows the performer).
-        above_mapped: ``(J,)`` joints with a mapped descendant (the only unmapped joints whose
-            world rotation conversion needs).
+        above_mapped: ``(J,)`` joints with a mapped descendant or a follower below them (the
+            only unmapped joints whose world rotation conversion needs).
         driven: target joints whose world position follows their performer joint's (scaled):
             the body root, and mapped joints with animated translation whose performer joint's
             translation is animated too (Bandai's hips under its ground-level root).
@@ -282,6 +283,9 @@ class Binding:
             reference (bound) poses, the default root scale.
         options: the :class:`BindOptions` used.
         notes: how references were chosen, for display.
+        followers: the control joints carried with the limbs
+            (:class:`~engine.conversion.followers.Follower`: a foot kept as an IK target under
+            the root); their ancestors count in ``above_mapped``.
     """
 
     target: Skeleton
@@ -308,6 +312,7 @@ class Binding:
     hip_height_ratio: float
     options: BindOptions
     notes: dict = field(default_factory=dict)
+    followers: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,7 +323,8 @@ class _Bones:
     their performer joints; ``target_local``: ``(C, 3)`` each child's position in ``j``'s frame
     in the bound rest posture; ``reference``: ``(C, 3)`` the performer's virtual bones
     (world, reference pose). ``roll_by_bones``: the roll comes from the secondary bones (a
-    branching joint) rather than from the performer joint's twist.
+    branching joint) rather than from the performer joint's twist. ``carries``: the one bone
+    goes to a follower the joint carries (:mod:`.followers`), not to a child.
     """
 
     children: list
@@ -326,6 +332,7 @@ class _Bones:
     target_local: np.ndarray
     reference: np.ndarray
     roll_by_bones: bool
+    carries: bool = False
 
 
 def _height_above_floor(positions: np.ndarray, joint: int,
@@ -445,7 +452,10 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
         performer, max(float(np.ptp(p_ref.all_positions, axis=0).max()), 1e-6))
     t_moving = _moving_joints(
         target, max(float(np.ptp(t_ref.all_positions, axis=0).max()), 1e-6))
-    bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving)
+    followers = find_followers(tsk, psk, mapped, (t_ref.world, t_ref.positions),
+                               (p_ref.world, p_ref.positions))
+    bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving,
+                           followers)
     chains = _chains(tsk, bones)
 
     aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
@@ -474,11 +484,12 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                    performer_rest_world=p_ref.world, performer_rest_positions=p_ref.positions,
                    bones=bones, chains=chains, body_root=body_root,
                    driven=_driven(tsk, mapped, body_root, p_moving),
-                   above_mapped=_above_mapped(tsk, mapped),
+                   above_mapped=_above_mapped(tsk, mapped, followers),
                    root_translation=t_ref.translations, hip_height_ratio=float(ratio),
                    options=options,
                    notes={"performer reference": p_ref.label, "target reference": t_ref.label,
-                          "hip height ratio": f"{ratio:.4f}"})
+                          "hip height ratio": f"{ratio:.4f}"},
+                   followers=followers)
 
 
 def _offsets(tsk: Skeleton, options: BindOptions) -> np.ndarray:
@@ -558,10 +569,14 @@ def _moving_joints(motion: Motion, size: float) -> set[int]:
 
 def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
                    p_ref: _Reference, t_ref: _Reference, p_moving: set[int],
-                   t_moving: set[int] = frozenset()) -> dict:
+                   t_moving: set[int] = frozenset(), followers=()) -> dict:
     """Per mapped target joint, its :class:`_Bones`: the virtual bones towards its mapped
     children that give a direction, in the reference poses (``target_local`` in the target's
-    reference posture; :func:`_bones_in_posture` moves it to the bound one)."""
+    reference posture; :func:`_bones_in_posture` moves it to the bound one). A chain's last
+    joint with none that carries a follower (:mod:`.followers`: the robot's shin, whose foot
+    is a control joint under the root) has one towards it, the performer's along the joint
+    that continues its chain (the ankle), so that it points as the performer's bone does
+    rather than turning as the performer's joint turned from its reference pose."""
     J = tsk.num_joints
     kids: dict[int, list[int]] = {j: [] for j in range(J) if mapped[j] >= 0}
     for j in range(J):
@@ -585,6 +600,14 @@ def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.
         main = max(children, key=lambda c: subtree[c]) if children else None
         if usable and main is not None and usable[0][0] != main:
             usable = []
+        if not usable and not children:
+            usable = [u for u in (_follower_bone(f, p_ref, mapped, p_moving, scale_len,
+                                                 t_height) for f in followers if f.anchor == j)
+                      if u is not None][:1]
+            if usable:
+                bones[j] = _Bones([usable[0][0]], [usable[0][1]], usable[0][3][None],
+                                  usable[0][2][None], False, carries=True)
+                continue
         if not usable:
             bones[j] = _Bones([], [], np.zeros((0, 3)), np.zeros((0, 3)), False)
             continue
@@ -593,6 +616,21 @@ def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.
         bones[j] = _Bones([u[0] for u in usable], [int(mapped[u[0]]) for u in usable], loc, ref,
                           _rolls_by_bones(ref))
     return bones
+
+
+def _follower_bone(f, p_ref: _Reference, mapped: np.ndarray, p_moving: set[int],
+                   scale_len: float, t_height: float):
+    """The virtual bone from a follower's anchor to it (:func:`_virtual_bones`), as ``(the
+    follower, its source performer joint, performer bone (3,) [m] in the world, target bone
+    (3,) [m] in the anchor's reference frame)``, or ``None`` (no source, a bone too short, or a
+    performer bone across an animated translation)."""
+    if f.source < 0 or f.source in p_moving:
+        return None
+    v = p_ref.positions[f.source] - p_ref.positions[mapped[f.anchor]]
+    if not (np.linalg.norm(v) > _MIN_BONE * scale_len and
+            np.linalg.norm(f.offset) > _MIN_BONE * t_height):
+        return None
+    return f.joint, f.source, v, f.offset
 
 
 def _usable_bone(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, j: int, c: int,
@@ -640,7 +678,7 @@ def _chains(tsk: Skeleton, bones: dict) -> dict[int, list[int]]:
     towards its primary finger), so it is not spread down one of them."""
     chains: dict[int, list[int]] = {}
     for j, b in bones.items():
-        if b.children and not b.roll_by_bones:
+        if b.children and not b.roll_by_bones and not b.carries:
             path = []
             k = tsk.parents[b.children[0]]
             while k != j:
@@ -673,17 +711,18 @@ def _bones_in_posture(bones: dict, rest_world: np.ndarray, rest_positions: np.nd
     positions ``(J, 3)`` [m]) instead of the target's reference posture."""
     out = dict(bones)
     for j, b in bones.items():
-        if b.children:
+        if b.children and not b.carries:          # a follower is carried rigidly
             loc = qrot(qconj(rest_world[j]), rest_positions[b.children] - rest_positions[j])
             out[j] = _Bones(b.children, b.performer, loc, b.reference, b.roll_by_bones)
     return out
 
 
-def _above_mapped(tsk: Skeleton, mapped: np.ndarray) -> np.ndarray:
-    """``(J,)`` bool: the joints with a mapped descendant."""
+def _above_mapped(tsk: Skeleton, mapped: np.ndarray, followers=()) -> np.ndarray:
+    """``(J,)`` bool: the joints with a mapped descendant or a follower below them."""
     above = np.zeros(tsk.num_joints, dtype=bool)
+    carried = {f.joint for f in followers}
     for j in range(tsk.num_joints):
-        if mapped[j] >= 0:
+        if mapped[j] >= 0 or j in carried:
             for a in tsk.ancestors(j):
                 above[a] = True
     return above

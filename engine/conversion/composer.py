@@ -92,6 +92,13 @@ def _compose_into(binding: Binding, world: np.ndarray, positions: dict, known: n
         if parent >= 0:
             shift = crot(cconj(rot[parent]), shift)
         moved[:, slot[carrier]] += shift
+    for f in binding.followers:
+        # carried with its anchor: where the anchor's frame puts it, in its parent's frame
+        rot, pos = _chain_fk(binding, rows, moved, slot, f.anchor)
+        at = pos[f.anchor] + crot(rot[f.anchor], np.broadcast_to(f.offset[:, None], (3, F)))
+        parent = int(tsk.parents[f.joint])
+        rot, pos = _chain_fk(binding, rows, moved, slot, parent)
+        moved[:, slot[f.joint]] = crot(cconj(rot[parent]), at - pos[parent])
     translations[:] = moved.T
 
 

@@ -164,6 +164,12 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         known[j] = True
     if binding.options.pose_offsets or binding.chain_of:
         world = _posed(binding, world, known)
+    for f in binding.followers:
+        # a control joint carried with a limb turns as the performer joint that continues
+        # the limb's chain, or with the limb (engine.conversion.followers)
+        world[:, f.joint] = cmul(pq[:, f.source] if f.source >= 0 else world[:, f.anchor],
+                                 f.turn[:, None])
+        known[f.joint] = True
     positions = {}
     for j in binding.driven:
         ph = mapped[j]

@@ -1,0 +1,183 @@
+"""Control joints that follow the body: a character's IK targets kept in step with the limbs.
+
+Game and Blender rigs often keep a foot (or a hand's weapon socket) as a joint of its own,
+parented to the root rather than to the leg: Quaternius' robot's ``FootL`` sits under the root
+``Bone`` at the end of the leg chain ``UpperLegL > LowerLegL``, Unreal's ``ik_foot_l`` under ``ik_foot_root`` on ``foot_l``, and
+Kenney's Maya character its ``LeftFootCtrl`` under ``Root`` on ``LeftFoot``. In the character's own clips an IK solver kept the shin pointing
+at that joint; retargeted, nothing moves it, so the skinned foot stays where the rest pose put
+it while the legs walk away. A *follower* is such a joint: animated translation, unmapped, hanging off the
+trunk (the joints from the root to the hips) rather than a limb, with no mapped joint below it,
+standing either on a mapped joint or past the end of a mapped
+chain along its last bone. It is carried rigidly with that joint (its *anchor*), as the
+character's own IK carried the chain to it, and turns as the performer joint that continues the
+anchor's chain (the performer's ankle past its knee) where there is one, else with the anchor.
+
+:func:`find_followers` finds them when the binding is made; the converter and composer place
+them (:mod:`.converter`, :mod:`.composer`), and :func:`follow` places them again on a motion
+whose limbs a correction or an animator's layer changed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kinematics import fk_joints
+from ..motion import Motion
+from ..quaternions import qconj, qmul, qrot
+from ..skeleton import Skeleton
+
+__all__ = ["Follower", "find_followers", "follow"]
+
+#: a joint within this share of the character's size of a mapped joint stands on it
+ON_JOINT = 0.01
+#: past a chain's end: within this angle of the end bone's direction [deg] ...
+ALONG_DEG = 30.0
+#: ... and at most this many times the end bone's length beyond its end joint
+REACH = 2.5
+#: of several performer children, the one that continues the chain is within this angle of the
+#: target's anchor-to-follower direction in the two reference poses [deg] (loose: the two
+#: poses may bend the limb otherwise)
+CONTINUES_DEG = 60.0
+
+FK_CHUNK = 4096
+
+
+@dataclass(frozen=True, eq=False)
+class Follower:
+    """A target ``joint`` carried with mapped target joint ``anchor``.
+
+    Attributes:
+        offset: ``(3,)`` [m] its position in the anchor's frame in the binding pose.
+        source: the performer joint whose turn it takes, or -1 (it turns with the anchor).
+        turn: ``(4,)`` its world rotation after the source's (or the anchor's) in the two
+            reference poses: ``world = source world * turn``.
+    """
+
+    joint: int
+    anchor: int
+    offset: np.ndarray
+    source: int
+    turn: np.ndarray
+
+
+def _trunk(tsk: Skeleton, has_mapped_below: np.ndarray, mapped: np.ndarray) -> set:
+    """The joints from the root down to where the mapped body branches (the hips: legs and
+    spine part there), which carry the whole body and nothing else."""
+    trunk, j = set(), int(np.flatnonzero(tsk.parents < 0)[0])
+    while True:
+        trunk.add(j)
+        below = [c for c in np.flatnonzero(tsk.parents == j)
+                 if has_mapped_below[c] or mapped[c] >= 0]
+        if len(below) != 1:
+            return trunk
+        j = int(below[0])
+
+
+def _candidates(tsk: Skeleton, mapped: np.ndarray) -> list[int]:
+    """Translated unmapped non-root joints hanging off the trunk (:func:`_trunk`: no mapped
+    limb carries them) with no mapped joint below them, and none of them above another (a
+    joint below a follower moves with it)."""
+    has_mapped_below = np.zeros(tsk.num_joints, dtype=bool)
+    for j in np.flatnonzero(mapped >= 0):
+        has_mapped_below[tsk.ancestors(int(j))] = True
+    trunk = _trunk(tsk, has_mapped_below, mapped)
+    out = []
+    for j in tsk.translated:
+        j = int(j)
+        above = tsk.ancestors(j)
+        if tsk.parents[j] < 0 or mapped[j] >= 0 or has_mapped_below[j] \
+                or any(mapped[a] >= 0 and a not in trunk for a in above) or set(above) & set(out):
+            continue
+        out.append(j)
+    return out
+
+
+def _anchor(tsk: Skeleton, mapped: np.ndarray, positions: np.ndarray, j: int,
+            size: float) -> int:
+    """The mapped joint ``j`` follows (-1: none), from the binding pose's ``positions``."""
+    joints = np.flatnonzero(mapped >= 0)
+    gaps = np.linalg.norm(positions[joints] - positions[j], axis=1)
+    if gaps.min() <= ON_JOINT * size:
+        return int(joints[np.argmin(gaps)])
+    has_mapped_below = {a for k in joints for a in tsk.ancestors(int(k))}
+    best, found = np.inf, -1
+    for k in joints:
+        k = int(k)
+        p = tsk.parents[k]
+        if k in has_mapped_below or p < 0:
+            continue
+        bone = positions[k] - positions[p]
+        past = positions[j] - positions[k]
+        length, reach = float(np.linalg.norm(bone)), float(np.linalg.norm(past))
+        if length < 1e-9 or reach > REACH * length:
+            continue
+        if bone @ past >= np.cos(np.radians(ALONG_DEG)) * length * reach and reach < best:
+            best, found = reach, k
+    return found
+
+
+def _source(psk: Skeleton, p_positions: np.ndarray, anchor_p: int, direction: np.ndarray,
+            shortest: float) -> int:
+    """The performer child of ``anchor_p`` that continues its chain (-1: none): its only child
+    with a bone longer than ``shortest`` [m], or of several the one nearest ``direction`` (the
+    target's, anchor to follower, in the two reference poses) within :data:`CONTINUES_DEG`."""
+    kids = [int(c) for c in np.flatnonzero(psk.parents == anchor_p)
+            if np.linalg.norm(p_positions[c] - p_positions[anchor_p]) > shortest]
+    if len(kids) == 1:
+        return kids[0]
+    best, found = np.cos(np.radians(CONTINUES_DEG)), -1
+    for c in kids:
+        bone = p_positions[c] - p_positions[anchor_p]
+        cos = float(bone @ direction) / (np.linalg.norm(bone) * max(np.linalg.norm(direction),
+                                                                    1e-12))
+        if cos > best:
+            best, found = cos, c
+    return found
+
+
+def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: tuple,
+                   performer: tuple) -> tuple:
+    """The :class:`Follower` joints of a binding: ``mapped`` (target joint -> performer joint
+    or -1) and two poses, each ``(world rotations (J, 4), positions (J, 3))``: the target's
+    own reference pose (where its IK placed its control joints: which limb carries a joint,
+    and where on it, are read there) and the performer's reference pose."""
+    t_world, t_pos = reference
+    p_world, p_pos = performer
+    size = max(float(np.ptp(t_pos, axis=0).max()), 1e-9)
+    p_size = max(float(np.ptp(p_pos, axis=0).max()), 1e-9)
+    out = []
+    for j in _candidates(tsk, mapped):
+        k = _anchor(tsk, mapped, t_pos, j, size)
+        if k < 0:
+            continue
+        offset = qrot(qconj(t_world[k]), t_pos[j] - t_pos[k])
+        source = -1
+        if np.linalg.norm(offset) > ON_JOINT * size:
+            source = _source(psk, p_pos, int(mapped[k]), t_pos[j] - t_pos[k], ON_JOINT * p_size)
+        turn = (qmul(qconj(p_world[source]), t_world[j]) if source >= 0 else
+                qmul(qconj(t_world[k]), t_world[j]))
+        out.append(Follower(joint=j, anchor=k, offset=offset, source=source, turn=turn))
+    return tuple(out)
+
+
+def follow(followers, motion: Motion) -> Motion:
+    """``motion`` with each follower's translation set so that it stands where its anchor
+    carries it (its rotation is left as it is). For a motion whose limbs changed after the
+    conversion placed them: a correction, a displacement layer."""
+    if not followers:
+        return motion
+    sk = motion.skeleton
+    slot = {int(j): k for k, j in enumerate(sk.translated)}
+    joints = sorted({f.anchor for f in followers} | {int(sk.parents[f.joint]) for f in followers})
+    translations = motion.translations.copy()
+    F = motion.num_frames
+    for lo in range(0, F, FK_CHUNK):
+        hi = min(F, lo + FK_CHUNK)
+        rot, pos = fk_joints(sk, motion.rotations[lo:hi], motion.translations[lo:hi], joints)
+        at = {j: n for n, j in enumerate(joints)}
+        for f in followers:
+            a, p = at[f.anchor], at[int(sk.parents[f.joint])]
+            world = pos[:, a] + qrot(rot[:, a], np.broadcast_to(f.offset, (hi - lo, 3)))
+            translations[lo:hi, slot[f.joint]] = qrot(qconj(rot[:, p]), world - pos[:, p])
+    return motion.replace(translations=translations)

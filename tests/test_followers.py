@@ -1,0 +1,181 @@
+"""Control joints carried with the limbs (engine/conversion/followers.py): the robot's feet are
+IK targets under its root ``Bone`` (its legs end at ``LowerLegL``), Kenney's Maya character has
+``LeftFootCtrl`` under ``Root`` on ``LeftFoot``. Retargeted, they stay with the legs."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from conftest import clip_path, shared_path
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.conversion.binding import bind
+from motion_composer.engine.conversion.composer import retarget
+from motion_composer.engine.correction.constraints import Constraint
+from motion_composer.engine.correction.displacement import Curve, DisplacementMap, Layer
+from motion_composer.engine.describe import stature
+from motion_composer.engine.formats import read_character, read_motion, read_performer
+from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.project import Project, Source
+from motion_composer.engine.quaternions import qconj, qmul, qrot
+from motion_composer.engine.scene import Scene
+
+ROBOT = shared_path("target_robot_expressive.glb")
+KENNEY = shared_path("fbx/maya_kenney_character_7700_binary.fbx")
+#: clips of four conventions, two of them (BANDAI) bound on their first frame, mid-stride
+CLIPS = ["cmu_max_131_01_walk.bvh", "bandai1_run_active_001.bvh", "cc3_cmu_02_01_walk.bvh",
+         "cmu_mb_01_01_jumps.bvh", "bandai1_kick_normal_001.bvh"]
+
+
+@functools.lru_cache(maxsize=None)
+def _character(path):
+    return read_character(path)
+
+
+@functools.lru_cache(maxsize=None)
+def _performer(name):
+    return read_performer(shared_path(name))
+
+
+def _world(motion):
+    pose = fk_arrays(motion.skeleton, motion.rotations, motion.translations, end_sites=False)
+    return pose.rotations, pose.positions
+
+
+def _angle(a, b):
+    """[deg] between rotations ``a`` and ``b`` (same shapes)."""
+    return np.degrees(2.0 * np.arccos(np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0)))
+
+
+def _own_feet(character):
+    """The robot's foot positions in its shins' frames over every frame of its own 14 clips
+    (where its IK put them): ``(n, 3)`` per side."""
+    out = {}
+    for side in "LR":
+        rel = []
+        for clip in character.motions:
+            rot, pos = _world(clip)
+            a, f = clip.skeleton.index[f"LowerLeg{side}"], clip.skeleton.index[f"Foot{side}"]
+            rel.append(qrot(qconj(rot[:, a]), pos[:, f] - pos[:, a]))
+        out[side] = np.concatenate(rel)
+    return out
+
+
+@pytest.mark.parametrize("clip", CLIPS)
+def test_the_robots_feet_walk_with_its_legs(clip):
+    """Each foot stays at its shin's end where the robot's own clips keep it, the shin points
+    along the performer's (knee to ankle, even where the performer is bound mid-stride), and
+    the foot turns as the performer's ankle turns."""
+    character = _character(ROBOT)
+    target, performer = character.rest_motion(), _performer(clip)
+    correspondence = automap(target.skeleton, performer.skeleton)
+    binding = bind(performer, target, correspondence)
+    sk, psk = target.skeleton, performer.skeleton
+    carried = {sk.names[f.joint]: (sk.names[f.anchor], psk.names[f.source])
+               for f in binding.followers}
+    assert set(carried) == {"FootL", "FootR"}
+    motion = retarget(performer, target, correspondence)
+    rot, pos = _world(motion)
+    p_rot, p_pos = _world(performer)
+    size = stature(target)
+    own = _own_feet(character)
+    for side in "LR":
+        shin, ankle = carried[f"Foot{side}"]
+        assert shin == f"LowerLeg{side}"
+        a, f = sk.index[shin], sk.index[f"Foot{side}"]
+        knee, p_ankle = psk.index[correspondence.pairs[shin]], psk.index[ankle]
+        assert psk.parents[p_ankle] == knee
+        rel = qrot(qconj(rot[:, a]), pos[:, f] - pos[:, a])
+        # rigid on the shin, where the robot's own IK held it on some frame of its clips (they
+        # hold it 0.88-0.97 m from the knee, rolled two ways about the shin)
+        assert np.ptp(rel, axis=0).max() < 1e-9 * size
+        assert np.linalg.norm(own[side] - rel[0], axis=1).min() < 0.005 * size
+        # the shin along the performer's shin
+        shin_dir = pos[:, f] - pos[:, a]
+        p_dir = p_pos[:, p_ankle] - p_pos[:, knee]
+        cos = np.sum(shin_dir * p_dir, axis=1) / (np.linalg.norm(shin_dir, axis=1) *
+                                                  np.linalg.norm(p_dir, axis=1))
+        assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.01
+        # the foot turns as the performer's ankle (a constant rotation between the two)
+        between = qmul(qconj(p_rot[:, p_ankle]), rot[:, f])
+        assert _angle(between, between[:1]).max() < 1e-4
+    # the knees' pole targets are not carried: they keep their rest place on the root
+    rest_rot, rest_pos = _world(target)
+    for pole in ("PoleTargetL", "PoleTargetR"):
+        j = sk.index[pole]
+        assert sk.parents[j] == 0
+        on_root = qrot(qconj(rot[:, 0]), pos[:, j] - pos[:, 0])
+        rest = qrot(qconj(rest_rot[0, 0]), rest_pos[0, j] - rest_pos[0, 0])
+        assert np.abs(on_root - rest).max() < 1e-9 * size
+
+
+def test_a_control_joint_on_a_mapped_joint_moves_with_it():
+    """Kenney's ``LeftFootCtrl`` / ``RightFootCtrl`` (under ``Root``, on the feet) stay on the
+    feet, turned as they are, through a walk."""
+    character = _character(KENNEY)
+    target, performer = character.rest_motion(), _performer(CLIPS[0])
+    correspondence = automap(target.skeleton, performer.skeleton)
+    motion = retarget(performer, target, correspondence)
+    sk = target.skeleton
+    rot, pos = _world(motion)
+    for side in ("Left", "Right"):
+        ctrl, foot = sk.index[f"{side}FootCtrl"], sk.index[f"{side}Foot"]
+        assert f"{side}Foot" in correspondence.pairs
+        gap = np.linalg.norm(pos[:, ctrl] - pos[:, foot], axis=1)
+        assert gap.max() < 1e-3 * stature(target)
+        assert np.ptp(pos[:, foot], axis=0).max() > 0.3 * stature(target)   # the feet walk
+        between = qmul(qconj(rot[:, foot]), rot[:, ctrl])
+        assert _angle(between, between[:1]).max() < 1e-4
+
+
+@pytest.mark.parametrize("target", ["target_mixamo_ely.glb", "target_fox.glb",
+                                    "target_cmu_mb_rest_tpose.bvh", "fbx/mixamo.fbx",
+                                    "fbx/maya_character_7500_binary.fbx"])
+def test_no_joint_is_carried_where_no_rig_has_a_control_joint(target):
+    character = read_character(shared_path(target))
+    t = character.rest_motion() if character is not None else read_motion(shared_path(target))
+    for clip in CLIPS[:3]:
+        performer = _performer(clip)
+        binding = bind(performer, t, automap(t.skeleton, performer.skeleton))
+        assert binding.followers == ()
+
+
+def _feet_on_shins(scene):
+    motion = scene.motion
+    rot, pos = _world(motion)
+    sk = motion.skeleton
+    out = []
+    for side in "LR":
+        a, f = sk.index[f"LowerLeg{side}"], sk.index[f"Foot{side}"]
+        out.append(qrot(qconj(rot[:, a]), pos[:, f] - pos[:, a]))
+    return np.array(out), pos
+
+
+def test_the_feet_follow_a_correction_and_a_layer():
+    """A solved constraint on a knee and an animator's layer on a thigh move the shins: the
+    feet come along (the final motion, not the conversion's)."""
+    walk = clip_path("cmu_131_01_walk.bvh")
+    performer, target = read_motion(walk), _character(ROBOT).rest_motion()
+    project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
+                      correspondence=automap(target.skeleton, performer.skeleton))
+    scene = Scene(project, performer, target)
+    before, pos0 = _feet_on_shins(scene)
+    sk = scene.target.skeleton
+    knee = sk.index["LowerLegL"]
+    goal = pos0[100, knee] + np.array([0.0, 0.4, 0.3])
+    solved = scene.replace(constraints=(Constraint(
+        joint="LowerLegL", kind="position", goal={"point": goal.tolist()}, smooth_in=80,
+        start=100, end=120, smooth_out=140, name="knee up"),)).solve().scene
+    after, pos1 = _feet_on_shins(solved)
+    assert np.linalg.norm(pos1[110, knee] - goal) < 1e-3             # the knee moved up
+    foot = sk.index["FootL"]
+    assert np.linalg.norm(pos1[110, foot] - pos0[110, foot]) > 0.2    # and the foot with it
+    assert np.abs(after - before[:, :1]).max() < 1e-9                 # still on the shin
+    layer = Layer("lift the thigh", DisplacementMap({("UpperLegR", "rx"): Curve(
+        [0.0, 150.0, 300.0], [0.0, 40.0, 0.0], ("smooth",) * 3)}))
+    layered = scene.replace(layers=(layer,))
+    after, pos2 = _feet_on_shins(layered)
+    foot = sk.index["FootR"]
+    assert np.linalg.norm(pos2[150, foot] - pos0[150, foot]) > 0.2
+    assert np.abs(after - before[:, :1]).max() < 1e-9
