@@ -593,20 +593,21 @@ def detect_position_modes(record: BVHRecord) -> dict[str, str]:
     equal: *absolute*.
     """
     _, pos_cols = _column_layout(record.channels)
-    modes = {}
-    for j, cols in enumerate(pos_cols):
-        if not cols:
-            continue
-        off = record.offsets[j]
-        axes = [a for a in cols if abs(off[a]) >= 0.1 * np.linalg.norm(off) and abs(off[a]) > 0]
-        if not axes:
-            modes[record.names[j]] = "absolute"
-            continue
-        first = np.array([record.values[0, cols[a]] for a in axes])
-        near_offset = np.linalg.norm(first - off[axes])
-        near_zero = np.linalg.norm(first)
-        modes[record.names[j]] = "relative" if near_zero < near_offset else "absolute"
-    return modes
+    return {record.names[j]: _position_mode(record.offsets[j], {
+        a: record.values[0, c] for a, c in cols.items()}) for j, cols in enumerate(pos_cols)
+        if cols}
+
+
+def _position_mode(offset: np.ndarray, first: dict) -> str:
+    """:func:`detect_position_modes` for one joint: its ``offset (3,)`` and its position
+    channels' values on the first frame ``{axis: value}``."""
+    axes = [a for a in first if abs(offset[a]) >= 0.1 * np.linalg.norm(offset) and
+            abs(offset[a]) > 0]
+    if not axes:
+        return "absolute"
+    values = np.array([first[a] for a in axes])
+    near_offset = np.linalg.norm(values - offset[axes])
+    return "relative" if np.linalg.norm(values) < near_offset else "absolute"
 
 
 #: angles turned into quaternions at a time by :func:`_local_arrays` (2 MB of them)
@@ -984,6 +985,14 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                 raise ExportError(f"joint {sk.names[j]!r} moves, but it has no position "
                                   "channels to write the movement in")
             continue
+        if j and F and _position_mode(offsets[j], {
+                a: t[0, a] - (offsets[j][a] if modes[j] == "relative" else 0.0)
+                for a in cols}) != modes[j]:
+            # a reader tells the two modes apart by the first frame (detect_position_modes):
+            # a joint that has moved far from its OFFSET there (the robot's foot, an IK target
+            # carried away from its rest place) is written with its first frame's position as
+            # its OFFSET, as exporters write it
+            offsets[j] = t[0].copy()
         for axis, col in cols.items():
             values[:, col] = t[:, axis] - offsets[j][axis] if modes[j] == "relative" \
                 else t[:, axis]
