@@ -2,15 +2,18 @@
 
 Game and Blender rigs often keep a foot (or a hand's weapon socket) as a joint of its own,
 parented to the root rather than to the leg: Quaternius' robot's ``FootL`` sits under the root
-``Bone`` at the end of the leg chain ``UpperLegL > LowerLegL``, Unreal's ``ik_foot_l`` under ``ik_foot_root`` on ``foot_l``, and
-Kenney's Maya character its ``LeftFootCtrl`` under ``Root`` on ``LeftFoot``. In the character's own clips an IK solver kept the shin pointing
-at that joint; retargeted, nothing moves it, so the skinned foot stays where the rest pose put
-it while the legs walk away. A *follower* is such a joint: animated translation, unmapped, hanging off the
-trunk (the joints from the root to the hips) rather than a limb, with no mapped joint below it,
-standing either on a mapped joint or past the end of a mapped
-chain along its last bone. It is carried rigidly with that joint (its *anchor*), as the
-character's own IK carried the chain to it, and turns as the performer joint that continues the
-anchor's chain (the performer's ankle past its knee) where there is one, else with the anchor.
+``Bone`` at the end of the leg chain ``UpperLegL > LowerLegL``, Unreal's ``ik_foot_l`` under
+``ik_foot_root`` on ``foot_l``, and Kenney's Maya character its ``LeftFootCtrl`` under ``Root``
+on ``LeftFoot``. In the character's own clips an IK solver kept the shin pointing at that joint;
+retargeted, nothing moves it, so the skinned foot stays where the rest pose put it while the
+legs walk away.
+
+A *follower* is such a joint: animated translation, unmapped, hanging off the trunk (the joints
+from the root to the hips) rather than a limb, with no mapped joint below it, and standing
+either on a mapped joint or past the end of a mapped chain along its last bone. It is carried
+rigidly with that joint (its *anchor*), as the character's own IK carried the chain to it, and
+turns as the performer joint that continues the anchor's chain (the performer's ankle past its
+knee) where there is one, else with the anchor.
 
 :func:`find_followers` finds them when the binding is made; the converter and composer place
 them (:mod:`.converter`, :mod:`.composer`), and :func:`follow` places them again on a motion
@@ -48,7 +51,8 @@ class Follower:
     """A target ``joint`` carried with mapped target joint ``anchor``.
 
     Attributes:
-        offset: ``(3,)`` [m] its position in the anchor's frame in the binding pose.
+        offset: ``(3,)`` [m] its position in the anchor's frame in the target's reference
+            pose (where the character's own rig placed it).
         source: the performer joint whose turn it takes, or -1 (it turns with the anchor).
         turn: ``(4,)`` its world rotation after the source's (or the anchor's) in the two
             reference poses: ``world = source world * turn``.
