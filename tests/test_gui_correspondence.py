@@ -569,3 +569,29 @@ def test_screenshot(qtbot, clips, tmp_path):
     assert len(colours) > 20
     assert image.save(str(tmp_path / "correspondence.png"))
     doc.close()
+
+
+def test_a_control_joint_says_what_carries_it(qtbot, clips):
+    """The robot's feet are IK targets under its root, not mapped: their rows say which limb
+    carries them and whose turn they take, and say so no more once that limb is unmapped."""
+    from motion_composer.engine.formats import read_character
+    performer, _ = clips
+    robot = shared_path("target_robot_expressive.glb")
+    document = Document()
+    push_sources(document, performer=performer, performer_path=clip_path("cmu_131_01_walk.bvh"),
+                 target=read_character(robot).rest_motion(), target_path=robot)
+    push_correspondence(document, auto(document), "Auto-map")
+    widget = CorrespondencePanel(document)
+    qtbot.addWidget(widget)
+    tree = widget.target_tree
+    tip = tree.items["FootL"].toolTip(0)
+    assert tree.state("FootL") == "unmapped"
+    assert "carried with LowerLegL" in tip and "LeftAnkle" in tip, tip
+    assert "carried with LowerLegR" in tree.items["FootR"].toolTip(0)
+    assert "follows its parent" in tree.items["PoleTargetL"].toolTip(0)
+    push_pair(document, "LowerLegL", None)
+    assert "follows its parent" in tree.items["FootL"].toolTip(0)
+    assert "carried with LowerLegR" in tree.items["FootR"].toolTip(0)
+    document.undo_stack.undo()
+    assert "carried with LowerLegL" in tree.items["FootL"].toolTip(0)
+    document.close()

@@ -742,9 +742,21 @@ class CorrespondencePanel(QtWidgets.QWidget):
         self._update_actions()
         self.links.update()
 
+    def _carried(self) -> dict:
+        """Target joint -> what carries it, for the control joints the binding carries with
+        the limbs (:mod:`engine.conversion.followers`); empty without a binding."""
+        binding = self.doc.scene.binding
+        if binding is None:
+            return {}
+        tsk, psk = binding.target, binding.performer
+        return {tsk.names[f.joint]: (tsk.names[f.anchor],
+                                     psk.names[f.source] if f.source >= 0 else None)
+                for f in binding.followers}
+
     def _refresh_marks(self) -> None:
         corr = self.doc.scene.correspondence
         driven = {p: t for t, p in corr.pairs.items()}
+        carried = self._carried()
         with QtCore.QSignalBlocker(self.target_tree):
             for name in self.target_tree.items:
                 performer = corr.performer_of(name)
@@ -759,6 +771,13 @@ class CorrespondencePanel(QtWidgets.QWidget):
                     self.target_tree.set_state(
                         name, "required", f"{name} ({role}) is required and unmapped: map it "
                         "to a performer joint")
+                elif name in carried:
+                    anchor, source = carried[name]
+                    turn = (f"turned as performer joint {source}" if source else
+                            f"turned with {anchor}")
+                    self.target_tree.set_state(
+                        name, "unmapped", f"{name} is a control joint: unmapped, it is carried "
+                        f"with {anchor}, {turn}")
                 else:
                     self.target_tree.set_state(
                         name, "unmapped", f"{name} is unmapped: it follows its parent")
