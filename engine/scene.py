@@ -39,7 +39,7 @@ from .conversion.composer import compose
 from .conversion.converter import convert
 from .conversion.followers import follow
 from .conversion.correspondence import Correspondence
-from .correction.constraints import Constraint, floor_constraint
+from .correction.constraints import Constraint, ConstraintError, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
                                   horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
@@ -511,6 +511,7 @@ class Scene:
             t0 = time.perf_counter()
             chosen = [c for c in chosen if not c.auto] + self.automatic_constraints()
             timings["contact_detection_s"] = time.perf_counter() - t0
+        _refuse_carried(self.binding, chosen)
         chosen, unreached = self._with_reach(chosen)
         warnings += unreached + goal_jumps(self.edited, chosen)
         correction = None
@@ -585,6 +586,7 @@ class Scene:
         composed = self.edited
         if composed is None:
             raise MotionComposerError("nothing to preview: the scene has no direct conversion")
+        _refuse_carried(self.binding, constraints)
         options = self.project.ik_options
         if not whole and base_constraints is not None and base_motion is not None:
             # the window's frames alone, with what the whole clip gives them worked out once
@@ -660,6 +662,21 @@ def remap(correspondence: Correspondence, target, performer) -> Correspondence:
     ordered = {t: pairs[t] for t in target.names if t in pairs}
     notes.update({t: correspondence.notes[t] for t in kept if t in correspondence.notes})
     return Correspondence(ordered, notes)
+
+
+def _refuse_carried(binding, constraints) -> None:
+    """Raise :class:`ConstraintError` for an enabled constraint on a control joint the binding
+    carries with a limb (:mod:`engine.conversion.followers`): the IK does not move it (it is
+    placed from its anchor after the correction), so its goal would pull the joints above it
+    (the root) and still not be met."""
+    carried = {binding.target.names[f.joint]: binding.target.names[f.anchor]
+               for f in binding.followers}
+    for c in constraints:
+        if c.enabled and c.joint in carried:
+            raise ConstraintError(
+                f"constraint {c.name or c.joint!r}: {c.joint} is a control joint carried with "
+                f"{carried[c.joint]} (unmapped, placed from it after the IK): put the goal on "
+                f"{carried[c.joint]} or map {c.joint} to a performer joint")
 
 
 def _apply_layers(layers, motion: Motion) -> Motion:

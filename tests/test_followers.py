@@ -179,3 +179,30 @@ def test_the_feet_follow_a_correction_and_a_layer():
     foot = sk.index["FootR"]
     assert np.linalg.norm(pos2[150, foot] - pos0[150, foot]) > 0.2
     assert np.abs(after - before[:, :1]).max() < 1e-9
+
+
+def test_a_goal_on_a_carried_joint_is_refused_in_one_line(tmp_path, capsys):
+    """The IK does not move a carried control joint (it is placed from its limb after the
+    correction): a goal on the robot's FootL would drag the root and still miss. The CLI says
+    so in one line naming the limb to constrain, and writes nothing; the same goal on the
+    shin is solved."""
+    import json
+    from motion_composer.app.cli import main
+    walk = clip_path("cmu_131_01_walk.bvh")
+    for joint, code in (("FootL", 2), ("LowerLegL", 0)):
+        cons = tmp_path / f"{joint}.json"
+        cons.write_text(json.dumps({"constraints": [
+            {"joint": joint, "kind": "position", "goal": {"point": [0.6, 0.5, 0.3]},
+             "range": [100, 110, 130, 140], "name": "step"}]}))
+        out = tmp_path / f"{joint}.bvh"
+        assert main(["retarget", str(walk), "--target", str(ROBOT), "-o", str(out),
+                     "--constraints", str(cons)]) == code
+        err = capsys.readouterr().err
+        if code:
+            lines = err.strip().splitlines()
+            assert len(lines) == 1 and "Traceback" not in err, err
+            assert "FootL is a control joint carried with LowerLegL" in lines[0]
+            assert "'step'" in lines[0] and "put the goal on LowerLegL" in lines[0]
+            assert not out.exists()
+        else:
+            assert out.exists(), err
