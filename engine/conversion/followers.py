@@ -78,13 +78,18 @@ def _trunk(tsk: Skeleton, has_mapped_below: np.ndarray, mapped: np.ndarray) -> s
         j = int(below[0])
 
 
-def _candidates(tsk: Skeleton, mapped: np.ndarray) -> list[int]:
+def _mapped_below(tsk: Skeleton, mapped: np.ndarray) -> np.ndarray:
+    """``(J,)`` bool: the joints with a mapped joint below them."""
+    below = np.zeros(tsk.num_joints, dtype=bool)
+    for j in np.flatnonzero(mapped >= 0):
+        below[tsk.ancestors(int(j))] = True
+    return below
+
+
+def _candidates(tsk: Skeleton, mapped: np.ndarray, has_mapped_below: np.ndarray) -> list[int]:
     """Translated unmapped non-root joints hanging off the trunk (:func:`_trunk`: no mapped
     limb carries them) with no mapped joint below them, and none of them above another (a
     joint below a follower moves with it)."""
-    has_mapped_below = np.zeros(tsk.num_joints, dtype=bool)
-    for j in np.flatnonzero(mapped >= 0):
-        has_mapped_below[tsk.ancestors(int(j))] = True
     trunk = _trunk(tsk, has_mapped_below, mapped)
     out = []
     for j in tsk.translated:
@@ -97,19 +102,20 @@ def _candidates(tsk: Skeleton, mapped: np.ndarray) -> list[int]:
     return out
 
 
-def _anchor(tsk: Skeleton, mapped: np.ndarray, positions: np.ndarray, j: int,
-            size: float) -> int:
-    """The mapped joint ``j`` follows (-1: none), from the binding pose's ``positions``."""
+def _anchor(tsk: Skeleton, mapped: np.ndarray, has_mapped_below: np.ndarray,
+            positions: np.ndarray, j: int, size: float) -> int:
+    """The mapped joint ``j`` follows (-1: none), from the target's reference pose
+    ``positions``: the one it stands on, else the chain end (no mapped joint below) it lies
+    nearest past, along its last bone."""
     joints = np.flatnonzero(mapped >= 0)
     gaps = np.linalg.norm(positions[joints] - positions[j], axis=1)
     if gaps.min() <= ON_JOINT * size:
         return int(joints[np.argmin(gaps)])
-    has_mapped_below = {a for k in joints for a in tsk.ancestors(int(k))}
     best, found = np.inf, -1
     for k in joints:
         k = int(k)
         p = tsk.parents[k]
-        if k in has_mapped_below or p < 0:
+        if has_mapped_below[k] or p < 0:
             continue
         bone = positions[k] - positions[p]
         past = positions[j] - positions[k]
@@ -150,9 +156,10 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
     p_world, p_pos = performer
     size = max(float(np.ptp(t_pos, axis=0).max()), 1e-9)
     p_size = max(float(np.ptp(p_pos, axis=0).max()), 1e-9)
+    below = _mapped_below(tsk, mapped)
     out = []
-    for j in _candidates(tsk, mapped):
-        k = _anchor(tsk, mapped, t_pos, j, size)
+    for j in _candidates(tsk, mapped, below):
+        k = _anchor(tsk, mapped, below, t_pos, j, size)
         if k < 0:
             continue
         offset = qrot(qconj(t_world[k]), t_pos[j] - t_pos[k])
