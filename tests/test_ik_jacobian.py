@@ -189,3 +189,43 @@ def test_the_solvers_small_solves_are_numpys(private, monkeypatch):
         assert np.array_equal(ik._solve(a, b), np.linalg.solve(a, b))
     with pytest.raises(np.linalg.LinAlgError):
         ik._solve(np.zeros((2, 3, 3)), np.ones((2, 3, 1)))
+
+
+@pytest.mark.parametrize("joint, offset", [("LeftLeg", [0.03, -0.35, 0.08]),
+                                           ("RightForeArm", [0.2, 0.05, -0.1])])
+def test_a_point_a_joint_carries(joint, offset):
+    """A task on a point fixed in a joint's frame (``Task.point``: a control joint carried with
+    a limb) has the point's Jacobian, the joint's own turn among its columns; the plane's too,
+    and a task on the point where a child joint sits is that child's task, row for row."""
+    sk, rot, tra = _posture()
+    j = sk.index[joint]
+    pose = _world(sk, rot, tra)
+    point = pose.positions[:, j] + np.einsum(
+        "bij,j->bi", _matrices(pose.rotations[:, j]), offset)
+    B = len(rot)
+    task = Task(POSITION, j, point + [0.04, 0.01, -0.02], np.ones(B), point=offset)
+    structure = _check(sk, [task], rot, tra)
+    assert j in structure.joints                        # the joint's own turn moves the point
+    plane = Task(PLANE, j, PLANE.task_goal(point + [0, 0.02, 0], [0.0, 1.0, 0.0], 1),
+                 np.ones(B), point=offset)
+    _check(sk, [plane], rot, tra)
+    child = sk.children[j][0]
+    at_child = Task(POSITION, j, point, np.ones(B), point=sk.offsets[child])
+    alone = Task(POSITION, child, point, np.ones(B))
+    e1, j1 = task_error_and_jacobian(sk, _Structure(sk, [at_child]), rot, tra)
+    e2, j2 = task_error_and_jacobian(sk, _Structure(sk, [alone]), rot, tra)
+    np.testing.assert_allclose(e1, e2, atol=1e-12)
+    np.testing.assert_allclose(j1, j2, atol=1e-12)
+
+
+def test_an_orientation_of_a_carried_point_is_refused():
+    sk, rot, _ = _posture()
+    with pytest.raises(ValueError, match="orientation"):
+        Task(ORIENTATION, sk.index["LeftLeg"], np.zeros((len(rot), 4)), np.ones(len(rot)),
+             point=[0.0, -0.4, 0.0])
+
+
+def _matrices(q):
+    from motion_composer.engine.quaternions import qrot
+    return np.stack([qrot(q, np.broadcast_to(e, q.shape[:-1] + (3,))) for e in np.eye(3)],
+                    axis=-1)

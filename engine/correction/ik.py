@@ -139,6 +139,10 @@ class Task:
         weight: ``(B,)`` scales the task's rows within its level; 0 switches it off.
         priority: 1 is the highest.
         label: for reports.
+        point: ``(3,)`` [m] where the task acts is this point fixed in ``joint``'s frame,
+            not the joint itself (``None``): a control joint carried with a limb
+            (:mod:`engine.conversion.followers`, the robot's foot past its shin) is held
+            through the limb. Point kinds only (not an orientation).
     """
 
     kind: ConstraintKind
@@ -147,15 +151,30 @@ class Task:
     weight: np.ndarray
     priority: int = 1
     label: str = ""
+    point: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.point is not None:
+            if self.kind.angular:
+                raise ValueError(f"task {self.label or self.kind}: an orientation acts on a "
+                                 "joint, not on a point carried by it")
+            point = np.array(self.point, dtype=float).reshape(3)
+            point.setflags(write=False)
+            object.__setattr__(self, "point", point)
 
     @property
     def rows(self) -> int:
         return self.kind.rows
 
+    @property
+    def acts_on(self) -> tuple:
+        """What the task moves, as a key: the joint, or the joint and the point it carries."""
+        return (self.joint,) if self.point is None else (self.joint, self.point.tobytes())
+
     def take(self, index) -> "Task":
         """The task on a subset of the batch's frames."""
         return Task(self.kind, self.joint, self.goal[index], self.weight[index], self.priority,
-                    self.label)
+                    self.label, self.point)
 
 
 @dataclass(frozen=True)
@@ -425,6 +444,30 @@ def _eye(n: int) -> np.ndarray:
 _EYES: dict[int, np.ndarray] = {}
 
 
+def effector(joint: int, carried=None) -> tuple[int, np.ndarray | None]:
+    """Where a task on ``joint`` acts, as ``(Task.joint, Task.point)``: the joint itself, or
+    for a joint in ``carried`` (joint -> ``(anchor, offset)``, the control joints a binding
+    carries with its limbs: :func:`engine.conversion.followers.carriers`) the point
+    ``offset`` [m] in its anchor's frame, which the limb's turns move."""
+    if carried and joint in carried:
+        anchor, offset = carried[joint]
+        return int(anchor), offset
+    return joint, None
+
+
+def point_chain(kind, skeleton: Skeleton, joint: int, point=None) -> list[int]:
+    """The joints whose turn moves a task of ``kind`` on ``joint`` (its kind's chain), and
+    the joint itself where the task acts on a ``point`` it carries."""
+    chain = kind.chain(skeleton, joint)
+    return chain if point is None else sorted(chain + [joint])
+
+
+def effector_chain(kind, skeleton: Skeleton, joint: int, carried=None) -> list[int]:
+    """:func:`point_chain` of a task on ``joint`` where it acts (:func:`effector`): for a
+    carried joint its anchor's chain and the anchor."""
+    return point_chain(kind, skeleton, *effector(joint, carried))
+
+
 class _Structure:
     """What a task set needs from the skeleton: the unknown joints, each task's chain, the
     index arrays that evaluate every task at once (the joints forward kinematics places,
@@ -437,7 +480,7 @@ class _Structure:
         # priorities only: worked out once per skeleton and task set (a live preview solves
         # the same few task sets on every step of a drag)
         # (and on the column weights' settings, which a caller may change)
-        key = (tuple((t.kind, t.joint, t.priority) for t in tasks), frozenset(locked),
+        key = (tuple((t.kind, t.acts_on, t.priority) for t in tasks), frozenset(locked),
                None if options is None else options.scale, STIFFNESS, ROOT_TRANSLATION)
         layouts = _LAYOUTS.setdefault(skeleton, {})
         layout = layouts.get(key)
@@ -461,7 +504,8 @@ class _Structure:
         moving: set[int] = set()
         chains = []
         for t in tasks:
-            chain = [j for j in t.kind.chain(skeleton, t.joint) if j not in locked]
+            chain = [j for j in point_chain(t.kind, skeleton, t.joint, t.point)
+                     if j not in locked]
             chains.append(np.array(chain, dtype=np.intp))
             moving.update(chain)
         self.joints = np.array(sorted(moving), dtype=np.intp)     # unknown rotations
@@ -515,7 +559,18 @@ class _Structure:
         self.parent_root = self.unknown_parent < 0          # unknowns in the world frame
         self.parent_local = self.unknown_parent[~self.parent_root]
         unknown = {int(j): k for k, j in enumerate(self.joints)}
-        self.task_local = [local[t.joint] for t in self.tasks]
+        # the points tasks act on that joints carry (Task.point), placed after the FK joints:
+        # per point its joint's place among them and its offset ``(3, m, 1)``
+        points: dict[tuple, int] = {}
+        for t in self.tasks:
+            if t.point is not None:
+                points.setdefault(t.acts_on, len(points))
+        self.point_joint = np.array([local[e[0]] for e in points], dtype=np.intp)
+        self.point_offset = np.array([np.frombuffer(e[1]) for e in points]).reshape(
+            -1, 3).T[:, :, None]
+        n = len(self.fk_joints)
+        self.task_local = [local[t.joint] if t.point is None else n + points[t.acts_on]
+                           for t in self.tasks]
         self.chain_local = [np.array([local[int(a)] for a in c], dtype=np.intp)
                             for c in self.chains]
         self.chain_unknown = [np.array([unknown[int(a)] for a in c], dtype=np.intp)
@@ -526,7 +581,7 @@ class _Structure:
         # does not hold it on its bound where one is on: the pin decides, and it may hold the
         # joint clear of the bound)
         self.pins = [[k for k, u in enumerate(self.tasks) if u.kind.fixed_point
-                      and u.joint == t.joint] for t in self.tasks]
+                      and u.acts_on == t.acts_on] for t in self.tasks]
         # the point tasks' (not angular) point Jacobians, one per joint and chain (the tasks
         # on one joint share it), all computed together (:func:`_point_jacobians`): per task
         # its group (None: angular), per group the range of its pairs (the group's joint and
@@ -538,7 +593,7 @@ class _Structure:
             if t.kind.angular:
                 self.point_group.append(None)
                 continue
-            key = (t.joint, tuple(chain.tolist()))
+            key = (t.acts_on, tuple(chain.tolist()))
             if key not in groups:
                 groups[key] = len(groups)
                 pairs.append(ti)
@@ -597,7 +652,8 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
     level at a time, from local rotations ``rot (B, J, 4)`` and the translated joints'
     translations ``tra (B, K, 3)`` (each translated joint's place there:
     ``structure.fk_moved_slot``). A level whose joints are not translated turns their
-    offsets ``(3, m, 1)`` as they are (broadcast over the batch)."""
+    offsets ``(3, m, 1)`` as they are (broadcast over the batch). The points the tasks act on
+    that joints carry (``Task.point``) follow the joints, with their joints' rotations."""
     joints = structure.fk_joints
     B, n = rot.shape[0], len(joints)
     local_q = rot[:, joints].transpose(2, 1, 0)                                 # (4, n, B)
@@ -614,6 +670,11 @@ def _fk_partial(skeleton: Skeleton, structure: _Structure, rot: np.ndarray,
         parent_q = wq[:, up]
         wq[:, here] = cmul_small(parent_q, local_q[:, here])
         np.add(wp[:, up], crot_small(parent_q, local_t[:, here]), out=wp[:, here])
+    if len(structure.point_joint):
+        carrier = wq[:, structure.point_joint]
+        wq = np.concatenate([wq, carrier], axis=1)
+        wp = np.concatenate([wp, wp[:, structure.point_joint]
+                             + crot_small(carrier, structure.point_offset)], axis=1)
     return wq, wp
 
 
