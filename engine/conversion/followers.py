@@ -17,7 +17,11 @@ knee) where there is one, else with the anchor.
 
 :func:`find_followers` finds them when the binding is made; the converter and composer place
 them (:mod:`.converter`, :mod:`.composer`), and :func:`follow` places them again on a motion
-whose limbs a correction or an animator's layer changed.
+whose limbs a correction or an animator's layer changed. A point goal on a follower (a foot
+contact, the floor) is met through its anchor's chain: the IK's task acts on the point of the
+anchor's frame it stands on (:func:`carriers`, :func:`engine.correction.ik.effector`), and a
+follower that takes a performer foot joint's turn is that foot for the automatic contacts
+(:meth:`engine.scene.Scene.foot_pairs`).
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot
 from ..skeleton import Skeleton
 
-__all__ = ["Follower", "find_followers", "follow"]
+__all__ = ["Follower", "find_followers", "follow", "carriers"]
 
 #: a joint within this share of the character's size of a mapped joint stands on it
 ON_JOINT = 0.01
@@ -192,3 +196,10 @@ def follow(followers, motion: Motion) -> Motion:
             world = pos[:, a] + qrot(rot[:, a], np.broadcast_to(f.offset, (hi - lo, 3)))
             translations[lo:hi, slot[f.joint]] = qrot(qconj(rot[:, p]), world - pos[:, p])
     return motion.replace(translations=translations)
+
+
+def carriers(followers) -> dict:
+    """Per follower joint ``(anchor, offset)``: the point of its anchor's frame it stands on,
+    where a goal on it is met (the IK holds it through the limb:
+    :func:`engine.correction.ik.effector`)."""
+    return {f.joint: (f.anchor, f.offset) for f in followers}

@@ -64,11 +64,11 @@ import numpy as np
 
 from .constraints import ConstraintError
 from .displacement import DisplacementMap
-from .ik import IKOptions, Task, quat_to_rotvec, solve_frames
+from .ik import IKOptions, Task, effector, quat_to_rotvec, solve_frames
 from ..errors import MotionComposerError
 from ..kinematics import fk_joints
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qnormalize
+from ..quaternions import qconj, qmul, qnormalize, qrot
 
 __all__ = ["Correction", "Residuals", "enforce", "describe_residuals", "largest_residuals",
            "CHUNK_FRAMES"]
@@ -250,6 +250,9 @@ class _Problem:
     #: ``(F,)`` the frames whose result is wanted (:func:`enforce`'s ``frames``); ``None``:
     #: every frame
     wanted: np.ndarray | None = None
+    #: joint -> ``(anchor, offset)``: the control joints carried with limbs, held through
+    #: them (:func:`~.ik.effector`)
+    carried: dict | None = None
 
     @property
     def skeleton(self):
@@ -299,6 +302,9 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
             solved[frames] = True
     sk = problem.skeleton
     joints = sorted({sk.index[problem.cons[entries[k][0]].joint] for k in lone})
+    # where each acts (a carried control joint: the point its limb carries)
+    acts = {j: effector(j, problem.carried) for j in joints}
+    anchors = sorted({a for a, _ in acts.values()})
     # the effectors' positions on the frames solved for nothing else (in chunks: bounded
     # memory on a long clip)
     position = {j: np.zeros((F, 3)) for j in joints}
@@ -306,9 +312,11 @@ def _where_needed(problem: _Problem, entries, attraction_rot, attraction_tra) ->
     for lo in range(0, len(free_frames), problem.chunk_frames):
         f = free_frames[lo:lo + problem.chunk_frames]
         # those joints alone (fk_arrays' positions bit for bit)
-        _, pose = fk_joints(sk, attraction_rot[f], attraction_tra[f], joints)
-        for k, j in enumerate(joints):
-            position[j][f] = pose[:, k]
+        turn, pose = fk_joints(sk, attraction_rot[f], attraction_tra[f], anchors)
+        for j, (a, point) in acts.items():
+            k = anchors.index(a)
+            position[j][f] = pose[:, k] if point is None else \
+                pose[:, k] + qrot(turn[:, k], np.broadcast_to(point, (len(f), 3)))
     # a frame where one plane acts is solved, and then every plane holds there too: left
     # out, a plane its joint is on the right side of at the start could not stop the solve
     # pushing the joint through it (a floor under one foot lifting the body while the other
@@ -357,9 +365,11 @@ def _solve(problem: _Problem, entries, attraction_rot, attraction_tra, start=Non
     frames = np.flatnonzero(covered)
     if not len(frames):
         return rot, tra, residual, iters
-    tasks = [Task(sl["kind"], sl["joint"], sl["goal"][frames], sl["weight"][frames],
-                  sl["priority"])
-             for sl in slots]
+    tasks = []
+    for sl in slots:
+        joint, point = effector(sl["joint"], problem.carried)
+        tasks.append(Task(sl["kind"], joint, sl["goal"][frames], sl["weight"][frames],
+                          sl["priority"], point=point))
     if problem.warm_start:
         res, it = _solve_in_time_order(problem, tasks, frames, rot, tra, attraction_rot,
                                        attraction_tra)
@@ -871,8 +881,8 @@ def _correction(composed: Motion, rot2, tra2, changed, residual, iters, timings)
 def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
             chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
-            still: frozenset | None = None, frames: tuple[int, int] | None = None
-            ) -> Correction:
+            still: frozenset | None = None, frames: tuple[int, int] | None = None,
+            carried: dict | None = None) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -901,6 +911,10 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             correction is zero outside ``lo..hi`` (no residuals, no iterations there).
             Ignored with ``warm_start``, where each frame starts from the one before: every
             frame is solved and kept. ``None`` (the default): every frame.
+        carried: joint index -> ``(anchor, offset)``: control joints the binding carries with
+            a limb (:func:`engine.conversion.followers.carriers`), whose goals the IK meets
+            through the limb (:func:`~.ik.effector`): the motion it returns leaves them where
+            they were, for :func:`~engine.conversion.followers.follow` to place.
     """
     from ..describe import figure_size
 
@@ -921,7 +935,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             wanted[lo:hi + 1] = True
     problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
                        _still_joints(composed) if still is None else frozenset(still),
-                       wanted=wanted)
+                       wanted=wanted, carried=carried or None)
     units = _ramp_units(cons)
     # the frames pass two's repairs are eased from are solved too (bit for bit as in a solve
     # of every frame: each is solved on its own)

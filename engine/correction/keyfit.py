@@ -121,7 +121,8 @@ from ..motion import Motion
 from ..quaternions import qmul
 from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
                            DisplacementMap, chain_lengths, hermite_basis)
-from .ik import Task, _Structure, length_share, rotvec_to_quat, task_error_and_jacobian
+from .ik import (Task, _Structure, effector, effector_chain, length_share, rotvec_to_quat,
+                 task_error_and_jacobian)
 
 __all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND",
            "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY"]
@@ -271,15 +272,17 @@ def _spans(moved: np.ndarray, window: np.ndarray) -> list[tuple[int, int]]:
     return out
 
 
-def _windows(constraints, skeleton, num_frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(J, F)`` per joint the frames of the windows of the constraints on it or below it,
-    and ``(F,)`` every constraint's window."""
+def _windows(constraints, skeleton, num_frames: int,
+             carried=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(J, F)`` per joint the frames of the windows of the constraints on it or below it
+    (on a point it carries: ``carried``, :func:`~.ik.effector`), and ``(F,)`` every
+    constraint's window."""
     per_joint = np.zeros((skeleton.num_joints, num_frames), dtype=bool)
     every = np.zeros(num_frames, dtype=bool)
     for c in constraints:
         span = slice(c.smooth_in, c.smooth_out + 1)
         every[span] = True
-        j = skeleton.index[c.joint]
+        j, _ = effector(skeleton.index[c.joint], carried)
         for a in skeleton.ancestors(j) + [j]:
             per_joint[a, span] = True
     return per_joint, every
@@ -373,7 +376,7 @@ class _Tasks:
     """The held tasks, the constraints of one task kind, joint, priority and weight in one
     batch: per batch its frames, goals, row weight and IK structure."""
 
-    def __init__(self, constraints, skeleton, locked, share: float = 1.0):
+    def __init__(self, constraints, skeleton, locked, share: float = 1.0, carried=None):
         batches: dict = {}
         for c in constraints:
             kind = c.kind_object.task_kind
@@ -389,8 +392,9 @@ class _Tasks:
         self.emphasis = []
         for kind, c, frames, goals in batches.values():
             frames = np.concatenate(frames)
-            task = Task(kind, skeleton.index[c.joint], np.concatenate(goals),
-                        np.ones(len(frames)), c.priority)
+            joint, point = effector(skeleton.index[c.joint], carried)
+            task = Task(kind, joint, np.concatenate(goals), np.ones(len(frames)), c.priority,
+                        point=point)
             weight = c.weight ** 0.5
             if kind.angular:
                 weight *= ANGLE_LEVER * share * LEVEL_WEIGHT ** (c.priority - 1)
@@ -416,13 +420,14 @@ class _Tasks:
 def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndarray, *,
                  budget: float | None = None, tolerance: float = TASK_TOLERANCE,
                  pull: float = PULL, stats: dict | None = None,
-                 cancel=None) -> DisplacementMap:
+                 cancel=None, carried=None) -> DisplacementMap:
     """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
     the fit's figures (largest held-task error [m], evaluations, rounds, whether it stalled
     and the largest miss after each round of added keys); ``cancel()``
-    returning True stops it (:class:`~engine.errors.MotionComposerError`).
+    returning True stops it (:class:`~engine.errors.MotionComposerError`). ``carried``:
+    the control joints carried with limbs, held through them (:func:`~.ik.effector`).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
     metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
@@ -435,7 +440,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     tolerance = tolerance * share
     limit = TASK_LIMIT * share
     cons = [c for c in constraints if c.enabled]
-    per_joint, every = _windows(cons, sk, F)
+    per_joint, every = _windows(cons, sk, F, carried)
     moved = np.any(rotvecs != 0, axis=2)                                    # (F, J)
     moved_root = np.any(root != 0, axis=1)
     budget = key_budget(edited.fps) if budget is None else budget
@@ -459,11 +464,11 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
     lever[:-1] = np.maximum(lever[:-1], LEVER_FLOOR * share)
     locked = frozenset(range(sk.num_joints)) - {jt.index for jt in joints}
-    tasks = _Tasks(cons, sk, locked, share)
+    tasks = _Tasks(cons, sk, locked, share, carried)
     layout = _Layout(joints, F)
     # the rows (joint, keyed frame, channel) depend on the keyed frames only, not the keys
     dense = _stacked(layout, rotvecs, root)
-    held = _held(cons, sk, F)
+    held = _held(cons, sk, F, carried)
     scale = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
         held[jt.index][jt.frames], pull, PULL_FREE), 3) for jt in joints])
     speed_w = np.concatenate([np.repeat(_lever(jt, lever) * np.where(
@@ -543,7 +548,7 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     return result
 
 
-def _held(constraints, skeleton, num_frames: int) -> dict:
+def _held(constraints, skeleton, num_frames: int, carried=None) -> dict:
     """Per joint (-1: the root's translation) ``(F,)`` where a constraint (not a one-sided
     plane over the whole clip) is held through it."""
     out = {j: np.zeros(num_frames, dtype=bool) for j in range(-1, skeleton.num_joints)}
@@ -551,7 +556,8 @@ def _held(constraints, skeleton, num_frames: int) -> dict:
         if c.kind_object.one_sided(c.goal) and c.smooth_in == c.start and \
                 c.end == c.smooth_out:
             continue
-        for a in [-1] + c.kind_object.chain(skeleton, skeleton.index[c.joint]):
+        for a in [-1] + effector_chain(c.kind_object, skeleton, skeleton.index[c.joint],
+                                       carried):
             out[a][c.start:c.end + 1] = True
     return out
 
@@ -932,7 +938,8 @@ def _parting(here: np.ndarray, path: np.ndarray) -> tuple[float, int, int]:
     return float(apart[f, j]), int(f), int(j)
 
 
-def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None):
+def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None,
+                carried=None):
     """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), pulled towards
     the dense correction with :data:`FAITHFUL_PULL` or, where those are not kept, with
     :data:`PULL`; or None when neither is kept, that is when the keys
@@ -942,14 +949,15 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     ratio against ``direct``, the direct conversion, over 1) more than the dense solve does,
     or move the root in a lurch it does not make (:func:`_root_allowance`): the caller then
     keeps keys fitted to the dense curves. ``cancel()``
-    returning True stops the fit (:class:`~engine.errors.MotionComposerError`)."""
+    returning True stops the fit (:class:`~engine.errors.MotionComposerError`).
+    ``carried``: :func:`fit_to_tasks`'s."""
     if correction is None or edited.num_frames < 3:
         return None
     judge = _Judge(direct, edited, constraints, correction)
     for pull in (FAITHFUL_PULL, PULL):
         stats: dict = {}
         keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root,
-                            pull=pull, stats=stats, cancel=cancel)
+                            pull=pull, stats=stats, cancel=cancel, carried=carried)
         if judge.keeps(keys, stats):
             return keys
     return None

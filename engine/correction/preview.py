@@ -203,7 +203,7 @@ class WindowSolver:
     The solver refers to the composed motion weakly: one kept for the next drag does not keep
     a replaced conversion (a whole clip's arrays) alive."""
 
-    def __init__(self, composed, options=None):
+    def __init__(self, composed, options=None, carried=None):
         from ..describe import figure_size
         from .enforcement import _still_joints
         from .ik import IKOptions
@@ -214,6 +214,8 @@ class WindowSolver:
             options = dataclasses.replace(options, scale=figure_size(composed))
         self.options = options
         self.still = _still_joints(composed)
+        #: the control joints carried with limbs (:func:`~.enforcement.enforce`'s)
+        self.carried = carried
 
     def serves(self, composed, options) -> bool:
         """Whether this solver is the one for ``composed`` (by identity) and ``options``."""
@@ -240,7 +242,7 @@ class WindowSolver:
         # frames lo..hi alone are spliced: the rest of [first, last] is solved only where
         # they depend on it (the ramps' key postures)
         part = enforce(cut, shifted, options=self.options, pins=True, still=self.still,
-                       frames=(lo - first, hi - first)).motion
+                       frames=(lo - first, hi - first), carried=self.carried).motion
         return part, first
 
     def preview(self, constraints: list, base_constraints: list, base_motion):
