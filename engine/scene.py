@@ -37,7 +37,7 @@ from .conversion.automap import automap
 from .conversion.binding import bind
 from .conversion.composer import compose
 from .conversion.converter import convert
-from .conversion.followers import follow
+from .conversion.followers import carriers, follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, ConstraintError, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
@@ -301,6 +301,32 @@ class Scene:
         return self._value("binding")
 
     @property
+    def carried(self) -> dict:
+        """The control joints the binding carries with the limbs (joint index -> ``(anchor,
+        offset)``, :func:`~engine.conversion.followers.carriers`): the IK holds their goals
+        through the limbs. Empty without a binding."""
+        binding = self.binding
+        return carriers(binding.followers) if binding is not None else {}
+
+    def foot_pairs(self) -> dict[str, str]:
+        """The map the feet are found by (target joint -> performer joint): the
+        correspondence, and each carried control joint that takes the turn of a performer
+        joint the map leaves unmapped (the robot's ``FootL``, past its shin, for the
+        performer's ankle): its contacts are held through the limb that carries it."""
+        pairs = dict(self.correspondence.pairs)
+        binding = self.binding
+        if binding is None:
+            return pairs
+        mapped = set(pairs.values())
+        for f in binding.followers:
+            if f.source >= 0:
+                source = binding.performer.names[f.source]
+                if source not in mapped:
+                    pairs[binding.target.names[f.joint]] = source
+                    mapped.add(source)
+        return pairs
+
+    @property
     def intermediate(self):
         """The Intermediate Skeleton over frames (Motion Converter), or None."""
         return self._value("intermediate")
@@ -364,15 +390,16 @@ class Scene:
         p = self.project
         out: list[Constraint] = []
         ground = self.ground()
+        pairs = self.foot_pairs()
+        sk = self.target.skeleton
         if p.auto_contacts:
-            out += contact_constraints(self.contacts(), self.performer, composed,
-                                       p.correspondence.pairs, p.contact_options,
-                                       ground=ground)
+            out += contact_constraints(self.contacts(), self.performer, composed, pairs,
+                                       p.contact_options, ground=ground,
+                                       carried={sk.names[j] for j in self.carried})
         if p.floor is not None:
-            sk = self.target.skeleton
             # the contacts' floor planes stand on the same floor (``ground``): once is enough
             floored = {c.joint for c in out if c.meta.get("floor")}
-            for ankle, toe in find_feet(sk):
+            for ankle, toe in self.target_feet(pairs):
                 below = [sk.names[k] for k in below_foot(sk, ankle, toe)]
                 for joint in (ankle, toe, *below):
                     if joint and joint in ground.heights and joint not in floored:
@@ -450,13 +477,24 @@ class Scene:
                 character = self.character
             except MotionComposerError:      # unreadable now: the feet's joints, not its mesh
                 character = None
-            by_performer = {a: t for t, a in self.correspondence.pairs.items()}
-            mapped = [(by_performer[a], by_performer.get(t)) for a, t in
-                      find_feet(self.performer.skeleton) if a in by_performer]
-            feet = list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
+            feet = self.target_feet(self.foot_pairs())
             sole = _sole(character, self.target, feet, reference)
             return target_ground(self.target, feet, reference=reference, sole=sole)
         return self.derived.get("standing", key, compute)
+
+    def target_feet(self, pairs: dict | None = None) -> list:
+        """The target's feet ``(ankle, toe)``: those :func:`find_feet` finds on its skeleton,
+        and the target joints the map (``pairs``, by default :meth:`foot_pairs`) puts the
+        performer's feet on: the robot's feet, control joints carried with its shins. Empty
+        without both sources."""
+        if not self.has_sources:
+            return []
+        if pairs is None:
+            pairs = self.foot_pairs()
+        by_performer = {a: t for t, a in pairs.items()}
+        mapped = [(by_performer[a], by_performer.get(t)) for a, t in
+                  find_feet(self.performer.skeleton) if a in by_performer]
+        return list(dict.fromkeys(find_feet(self.target.skeleton) + mapped))
 
     def contact_warnings(self) -> list[str]:
         """Why automatic contacts (``auto_contacts``) cannot pin some or all feet, one line
@@ -465,7 +503,7 @@ class Scene:
         if not self.project.auto_contacts or not self.has_sources:
             return []
         performer_feet = [a for a, _ in find_feet(self.performer.skeleton)]
-        mapped = set(self.correspondence.pairs.values())
+        mapped = set(self.foot_pairs().values())
         unmapped = [a for a in performer_feet if a not in mapped]
         if not find_feet(self.target.skeleton) and len(unmapped) == len(performer_feet):
             return ["no feet found on the target: no automatic contacts"]
@@ -478,10 +516,14 @@ class Scene:
                 "contacts on it" for a in unmapped]
 
     def contacts(self) -> list:
-        """The performer's foot contacts (on mapped feet) under the project's options."""
-        mapped = set(self.correspondence.pairs.values())
-        feet = [(a, t if t in mapped else None) for a, t in find_feet(self.performer.skeleton)
-                if a in mapped]
+        """The performer's foot contacts (on mapped feet) under the project's options. A foot
+        is on the ground where its heel or its toe is, whether the map has the toe or not:
+        a target foot without one (the robot's) holds its ankle over the whole contact
+        (:func:`~engine.correction.contacts.contact_constraints`), heel-off and toe pivot
+        included; found from the heel alone, a run's contacts ended as the heel rose, with
+        the foot still planted."""
+        mapped = set(self.foot_pairs().values())
+        feet = [(a, t) for a, t in find_feet(self.performer.skeleton) if a in mapped]
         return detect_contacts(self.performer, feet, self.project.contact_options)
 
     def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,
@@ -519,15 +561,22 @@ class Scene:
             t0 = time.perf_counter()
             options = ik_options if ik_options is not None else self.project.ik_options
             correction = enforce(self.edited, chosen, options=options,
-                                 progress=progress, cancel=cancel, warm_start=warm_start)
+                                 progress=progress, cancel=cancel, warm_start=warm_start,
+                                 carried=self.carried)
             timings["ik_s"] = time.perf_counter() - t0
             timings.update({f"ik_{k.replace(' ', '_')}_s": v
                             for k, v in correction.seconds.items()})
         # the solved layer: keys fitted to the tasks where they hold them and pop no more
         # than the dense solve, else keys fitted to the dense curves
         t0 = time.perf_counter()
-        keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel)
+        keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel,
+                           carried=self.carried)
         timings["keys_s"] = time.perf_counter() - t0
+        if correction is not None and self.binding.followers:
+            # the dense solve as delivered: its carried control joints where its limbs put
+            # them (the IK holds their goals through the limbs and leaves them behind)
+            correction = dataclasses.replace(correction, motion=follow(
+                self.binding.followers, correction.motion))
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
@@ -593,13 +642,14 @@ class Scene:
             # per conversion and settings (kept with the derived results across a drag)
             solver = self.derived.window_solver
             if solver is None or not solver.serves(composed, options):
-                solver = self.derived.window_solver = _preview.WindowSolver(composed, options)
+                solver = self.derived.window_solver = _preview.WindowSolver(
+                    composed, options, self.carried)
                 self.derived.computed["window solver"] += 1
             motion = solver.preview(constraints, base_constraints, base_motion)
             if motion is not None:
                 return follow(self.binding.followers, motion), "window"
-        return follow(self.binding.followers,
-                      enforce(composed, constraints, options=options).motion), "full"
+        return follow(self.binding.followers, enforce(
+            composed, constraints, options=options, carried=self.carried).motion), "full"
 
 
 _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))
@@ -665,17 +715,19 @@ def remap(correspondence: Correspondence, target, performer) -> Correspondence:
 
 
 def _refuse_carried(binding, constraints) -> None:
-    """Raise :class:`ConstraintError` for an enabled constraint on a control joint the binding
-    carries with a limb (:mod:`engine.conversion.followers`): the IK does not move it (it is
-    placed from its anchor after the correction), so its goal would pull the joints above it
-    (the root) and still not be met."""
+    """Raise :class:`ConstraintError` for an enabled orientation constraint on a control joint
+    the binding carries with a limb (:mod:`engine.conversion.followers`): the IK holds a
+    point there through the limb that carries it, but the joint turns as its performer
+    joint (or its anchor), placed after the correction, so no turn of the limb meets an
+    orientation goal on it."""
     carried = {binding.target.names[f.joint]: binding.target.names[f.anchor]
                for f in binding.followers}
     for c in constraints:
-        if c.enabled and c.joint in carried:
+        if c.enabled and c.joint in carried and c.kind_object.task_kind.angular:
             raise ConstraintError(
                 f"constraint {c.name or c.joint!r}: {c.joint} is a control joint carried with "
-                f"{carried[c.joint]} (unmapped, placed from it after the IK): put the goal on "
+                f"{carried[c.joint]} (unmapped, turned as the performer's joint after the "
+                f"IK): no turn of the limb holds its orientation; put the orientation goal on "
                 f"{carried[c.joint]} or map {c.joint} to a performer joint")
 
 

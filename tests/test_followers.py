@@ -181,20 +181,54 @@ def test_the_feet_follow_a_correction_and_a_layer():
     assert np.abs(after - before[:, :1]).max() < 1e-9
 
 
-def test_a_goal_on_a_carried_joint_is_refused_in_one_line(tmp_path, capsys):
-    """The IK does not move a carried control joint (it is placed from its limb after the
-    correction): a goal on the robot's FootL would drag the root and still miss. The CLI says
-    so in one line naming the limb to constrain, and writes nothing; the same goal on the
-    shin is solved."""
+def test_a_goal_on_a_carried_joint_is_held_through_its_limb():
+    """A point goal on the robot's FootL (a control joint under the root, carried with the
+    shin) is met by turning the leg that carries it (``Task.point``), not by dragging the
+    root: the delivered foot stands on the goal, still on its shin, and outside the
+    constraint's range the motion is the conversion's bit for bit."""
+    walk = clip_path("cmu_131_01_walk.bvh")
+    performer, target = read_motion(walk), _character(ROBOT).rest_motion()
+    project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
+                      correspondence=automap(target.skeleton, performer.skeleton))
+    scene = Scene(project, performer, target)
+    before, pos0 = _feet_on_shins(scene)
+    sk = scene.target.skeleton
+    foot, shin = sk.index["FootL"], sk.index["LowerLegL"]
+    # the foot 25 cm higher and 15 cm to the side over the hold, where it strides
+    goal = pos0[120, foot] + np.array([0.15, 0.25, 0.0])
+    solution = scene.replace(constraints=(Constraint(
+        joint="FootL", kind="position", goal={"point": goal.tolist()}, smooth_in=100,
+        start=110, end=130, smooth_out=140, name="step"),)).solve()
+    after, pos1 = _feet_on_shins(solution.scene)
+    assert np.linalg.norm(pos1[110:131, foot] - goal, axis=1).max() < 1e-3
+    assert solution.report["constraints"][0]["max_residual"] < 1e-3
+    assert np.abs(after - before[:, :1]).max() < 1e-9                 # still on the shin
+    # the leg took a share (the root alone, as before, moves the hips as much as the foot)
+    hips = sk.index["Hips"]
+    leg = (pos1[120, foot] - pos1[120, hips]) - (pos0[120, foot] - pos0[120, hips])
+    assert np.linalg.norm(leg) > 0.1, leg
+    composed, motion = scene.composed, solution.scene.motion
+    outside = np.r_[0:100, 141:composed.num_frames]
+    np.testing.assert_array_equal(motion.rotations[outside], composed.rotations[outside])
+    np.testing.assert_array_equal(motion.translations[outside],
+                                  composed.translations[outside])
+
+
+def test_an_orientation_on_a_carried_joint_is_refused_in_one_line(tmp_path, capsys):
+    """A carried control joint turns as its performer joint (the robot's FootL as the
+    performer's ankle), placed after the IK: no turn of the limb holds an orientation goal on
+    it. The CLI says so in one line naming the limb, and writes nothing; a point goal on it
+    is solved."""
     import json
     from motion_composer.app.cli import main
     walk = clip_path("cmu_131_01_walk.bvh")
-    for joint, code in (("FootL", 2), ("LowerLegL", 0)):
-        cons = tmp_path / f"{joint}.json"
+    for kind, goal, code in (("orientation", {"quaternion": [0.0, 0.0, 0.0, 1.0]}, 2),
+                             ("position", {"point": [0.6, 0.5, 0.3]}, 0)):
+        cons = tmp_path / f"{kind}.json"
         cons.write_text(json.dumps({"constraints": [
-            {"joint": joint, "kind": "position", "goal": {"point": [0.6, 0.5, 0.3]},
-             "range": [100, 110, 130, 140], "name": "step"}]}))
-        out = tmp_path / f"{joint}.bvh"
+            {"joint": "FootL", "kind": kind, "goal": goal, "range": [100, 110, 130, 140],
+             "name": "step"}]}))
+        out = tmp_path / f"{kind}.bvh"
         assert main(["retarget", str(walk), "--target", str(ROBOT), "-o", str(out),
                      "--constraints", str(cons)]) == code
         err = capsys.readouterr().err
@@ -202,7 +236,7 @@ def test_a_goal_on_a_carried_joint_is_refused_in_one_line(tmp_path, capsys):
             lines = err.strip().splitlines()
             assert len(lines) == 1 and "Traceback" not in err, err
             assert "FootL is a control joint carried with LowerLegL" in lines[0]
-            assert "'step'" in lines[0] and "put the goal on LowerLegL" in lines[0]
+            assert "'step'" in lines[0] and "orientation goal on LowerLegL" in lines[0]
             assert not out.exists()
         else:
             assert out.exists(), err

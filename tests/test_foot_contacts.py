@@ -49,7 +49,11 @@ from motion_composer.engine.skinning import skin_character
 #: there, 1.34 times the no-pop limit), and a Rokoko dance onto the CMU T-pose (its right foot
 #: flat on the floor from the first frame to the 9th at 100 fps, a plant the clip cuts: the
 #: floor rule lifts the target's toe there, and left free the heel slid 0.13 % of stature more
-#: than the performer's)
+#: than the performer's), and a Bandai kick onto Quaternius' robot (its legs end at the shins;
+#: its feet are control joints under the root, carried with the shins, with no toe: held
+#: through the shins over the performer's whole contacts, heel and toe; found from the heel
+#: alone, a contact ended while the performer's heel was still down and the hold on the other
+#: foot carried the right foot 19 cm in the next frame)
 CASES = [
     (("shared", "cmu_max_131_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "bandai1_run_active_001.bvh"), ("shared", "target_mixamo_mannequin.glb")),
@@ -62,10 +66,11 @@ CASES = [
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_fox.glb")),
     (("shared", "rokoko_mixamo_jesse_dance.bvh"), ("shared", "target_cmu_mb_rest_tpose.bvh")),
+    (("shared", "bandai1_kick_normal_001.bvh"), ("shared", "target_robot_expressive.glb")),
 ]
 IDS = ["walk-cmumax-ely", "run-bandai-mannequin", "kick-bandai-cmutpose",
        "jump-fair1-ely", "jumps-cmumb-holden", "walk-bandai-kenney", "walk-cmumax-fox",
-       "walk-cc3-ely", "walk-cc3-fox", "dance-rokoko-cmutpose"]
+       "walk-cc3-ely", "walk-cc3-fox", "dance-rokoko-cmutpose", "kick-bandai-robot"]
 
 NEAR = 0.02          # of the stature above the joint's lowest height
 SLOW = 0.15          # statures per second
@@ -152,8 +157,10 @@ def solved(request):
 
 
 def _feet(scene):
-    """``(performer joint, target joint, part)`` of every mapped foot joint."""
-    by_performer = {p: t for t, p in scene.correspondence.pairs.items()}
+    """``(performer joint, target joint, part)`` of every mapped foot joint (and of every
+    control joint carried with a leg that takes a performer foot joint's turn:
+    :meth:`Scene.foot_pairs`)."""
+    by_performer = {p: t for t, p in scene.foot_pairs().items()}
     out = []
     for ankle, toe in find_feet(scene.performer.skeleton):
         for joint, part in ((ankle, "heel"), (toe, "toe")):

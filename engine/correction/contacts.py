@@ -408,7 +408,7 @@ def _spans(runs: list[tuple[str, int, int]], ramp: int, F: int) -> list[tuple[in
 def contact_constraints(contacts: list[Contact], performer: Motion, composed: Motion,
                         pairs: dict[str, str], options: ContactOptions | None = None, *,
                         floor: float | None = None, ground: Ground | None = None,
-                        priority: int = 1) -> list[Constraint]:
+                        priority: int = 1, carried=frozenset()) -> list[Constraint]:
     """Constraints that hold the target's feet during the performer's ``contacts``.
 
     ``pairs``: target joint -> performer joint (the correspondence). The foot is held whole
@@ -431,7 +431,11 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
       ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes).
 
     ``ground``: where the feet stand (:func:`target_ground`); by default the direct
-    conversion's own (:func:`converted_ground`, on ``floor`` where given).
+    conversion's own (:func:`converted_ground`, on ``floor`` where given). ``carried``: the
+    target ankles that are control joints carried with a limb
+    (:mod:`engine.conversion.followers`, the robot's ``FootL`` past its shin): they are
+    pinned through the limb, and turn as the performer's ankle (flat where it is), so no
+    orientation is held on them.
     """
     options = options or ContactOptions()
     by_performer = {p: t for t, p in pairs.items()}
@@ -459,8 +463,9 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             goal = np.median(t_pos[a][frames], axis=0)
             goal[1] = ground.floor + ground.heights[ankle]
             turn = t_rot[a][(c.start + c.end) // 2]
-            runs += [(ankle, "pin", c.start, c.end, None, "heel", c, goal, 0),
-                     (ankle, "turn", c.start, c.end, None, None, c, turn, 1)]
+            runs.append((ankle, "pin", c.start, c.end, None, "heel", c, goal, 0))
+            if ankle not in carried:
+                runs.append((ankle, "turn", c.start, c.end, None, None, c, turn, 1))
             continue
         rest_turn, rest_toe = ground.flat[ankle]
         # a heel that comes down within a ramp after the toe is taken as down with it: the
