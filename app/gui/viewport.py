@@ -824,9 +824,11 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
         or None where the target has no motion or no legs that can be found.
 
         The feet are the ankle and toe joints :func:`~engine.correction.contacts.find_feet`
-        names; a leg that ends without a foot joint (a game rig whose feet are IK controls
-        beside the legs, as the robot's) is followed at its shin's End Site, the ankle, with
-        the planted frames the engine's contact detection finds for the shin."""
+        names, else those the scene puts the performer's feet on
+        (:meth:`~engine.scene.Scene.target_feet`: a game rig's foot controls carried with its
+        shins, as the robot's); a leg that ends without a foot joint and no control on it is
+        followed at its shin's End Site, the ankle, with the planted frames the engine's
+        contact detection finds for the shin."""
         motion = self.doc.motion
         if motion is None or self.doc.scene.target is None:
             return None
@@ -838,7 +840,8 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
                                                                 estimate_floor, find_feet)
         sk = motion.skeleton
         pose = self.doc.pose("target")
-        feet = [(a, t) for a, t in find_feet(sk) if a in sk.index]
+        feet = [(a, t) for a, t in find_feet(sk) or self.doc.scene.target_feet()
+                if a in sk.index]
         if feet:
             joints = [name for pair in feet for name in pair if name is not None]
             tracks = pose.positions[:, [sk.index[name] for name in joints]]
