@@ -278,6 +278,31 @@ def test_the_skinned_mesh_is_lit_from_its_skinned_normals(qtbot, tmp_path):
     assert np.median(on_mesh.mean(axis=-1)) > 140
 
 
+def test_the_robots_trails_follow_its_carried_feet(qtbot, tmp_path):
+    """The robot's legs end at the shins and its skeleton names no foot: its trails follow the
+    feet the scene puts the performer's feet on (FootL and FootR, control joints carried with
+    the shins), planted where the contacts detected on the motion shown hold them."""
+    from conftest import shared_path
+    from gui_support import skinned_character_in_window
+    from motion_composer.engine.correction.contacts import detect_contacts, find_feet
+    robot = shared_path("target_robot_expressive.glb")
+    doc, v, _first, _second, _back = skinned_character_in_window(qtbot, tmp_path, robot)
+    sk = doc.scene.target.skeleton
+    assert find_feet(sk) == []
+    trails = v.foot_trails()
+    assert trails.joints == ["FootL", "FootR"]
+    lo, hi = trails.frames
+    pose = doc.pose("target").positions
+    for k, name in enumerate(trails.joints):
+        np.testing.assert_allclose(trails.paths[k], pose[lo:hi + 1, sk.index[name]])
+    planted = np.zeros(hi - lo + 1, dtype=bool)
+    for c in detect_contacts(doc.motion, [("FootL", None), ("FootR", None)]):
+        if c.joint == "FootL":
+            planted[c.start - lo:c.end - lo + 1] = True
+    assert 0 < planted.sum() < len(planted)
+    np.testing.assert_array_equal(trails.planted[0], planted)
+
+
 def _drop(qtbot, w, *paths):
     """A real drop of ``paths`` on the window: drag enter, then drop, with file URLs."""
     from motion_composer.app.gui.qt import QtCore, QtGui, QtWidgets
