@@ -55,6 +55,9 @@ def solved(request):
 
 def test_a_flat_foot_is_held_at_the_converted_foots_heading(solved):
     scene, solution = solved
+    if not any(toe for _, toe in scene.target_feet()):
+        pytest.skip("the character's feet have no toe: its ankles are pinned, and turn as "
+                    "the performer's (the robot's feet, carried with its shins)")
     checked = 0
     for ankle, toe in find_feet(scene.target.skeleton):
         flats = _flats(solution.constraints, ankle)

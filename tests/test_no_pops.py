@@ -293,24 +293,32 @@ def test_goals_set_by_hand_move_with_the_character_onto_the_floor():
 
 
 def test_a_floor_moves_nothing_on_a_target_without_feet():
-    """The robot's feet are IK controls on its root, not ends of its legs: no feet are found
-    on it, so where it stands is not known (``standing_floor`` None) and a floor neither
-    moves its conversion nor adds planes."""
+    """A target without feet (the T-pose skeleton with its legs removed): where it stands is
+    not known (``standing_floor`` None), so a floor neither moves its conversion nor adds
+    planes. The robot, whose legs end at the shins, stands on its feet (control joints
+    carried with the shins): a floor moves it onto itself and holds both feet above it."""
     from conftest import shared_path
+    from test_edge_cases import TPOSE, WALK, scene_of, without_legs
     from motion_composer.engine.conversion.automap import automap
-    from motion_composer.engine.formats import read_character, read_performer
+    from motion_composer.engine.formats import read_character, read_motion, read_performer
     from motion_composer.engine.project import Project, Source
     from motion_composer.engine.scene import Scene
+    scene = scene_of(read_motion(WALK), without_legs(read_motion(TPOSE)), floor=0.5)
+    assert scene.ready and scene.standing_floor() is None and scene.lift() == 0.0
+    np.testing.assert_array_equal(scene.composed.translations,
+                                  scene.replace(floor=None).composed.translations)
+    assert scene.automatic_constraints() == []
     clip, robot = shared_path("bandai1_walk_normal_001.bvh"), \
         shared_path("target_robot_expressive.glb")
     performer, target = read_performer(clip), read_character(robot).rest_motion()
     project = Project(performer=Source(str(clip)), target=Source(str(robot)),
                       correspondence=automap(target.skeleton, performer.skeleton), floor=0.5)
     scene = Scene(project, performer, target)
-    assert scene.ready and scene.standing_floor() is None and scene.lift() == 0.0
-    np.testing.assert_array_equal(scene.composed.translations,
-                                  scene.replace(floor=None).composed.translations)
-    assert scene.automatic_constraints() == []
+    standing = scene.standing_floor()
+    assert standing is not None and scene.lift() == pytest.approx(0.5 - standing)
+    planes = scene.automatic_constraints()
+    assert sorted(c.joint for c in planes) == ["FootL", "FootR"]
+    assert all(c.kind == "plane" and c.goal["point"][1] > 0.5 for c in planes)
 
 
 def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
