@@ -139,3 +139,36 @@ def test_a_window_eased_towards_a_key_back_to_back_with_another_previews_as_the_
         assert ranges["LeftHand"][2:] == (120, 135)               # its ramp out is kept
         motion = enforce(composed, problem, pins=True).motion
         assert np.array_equal(_positions(motion)[lo:hi + 1], _positions(full)[lo:hi + 1])
+
+
+def test_a_moved_contact_on_a_carried_foot_previews_as_the_full_solve():
+    """The robot's feet are control joints carried with its shins: a contact's handle dragged
+    on FootL previews in its window (the window solver holds the foot through the shin, as
+    the full solve does), and the foot stands where the full solve puts it."""
+    from conftest import clip_path, shared_path
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character, read_motion
+    from motion_composer.engine.project import Project, Source
+    walk, robot = clip_path("cmu_131_01_walk.bvh"), shared_path("target_robot_expressive.glb")
+    performer, target = read_motion(walk), read_character(robot).rest_motion()
+    project = Project(performer=Source(str(walk)), target=Source(str(robot)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True)
+    solution = Scene(project, performer, target).solve(regenerate=True)
+    scene, constraints = solution.scene, list(solution.constraints)
+    i = next(k for k, c in enumerate(constraints) if c.joint == "FootL" and c.kind ==
+             "position" and c.smooth_in >= 8 and c.end < scene.num_frames - 8)
+    c = constraints[i]
+    after = list(constraints)
+    after[i] = c.with_range(c.smooth_in - 6, c.start - 6, c.end, c.smooth_out)
+    lo, hi = changed_window(constraints, after)
+    motion, mode = scene.preview(after, base_constraints=constraints,
+                                 base_motion=scene.motion, whole=False)
+    assert mode == "window"
+    full, _ = scene.preview(after)
+    foot = scene.target.skeleton.index["FootL"]
+    here, there = _positions(motion), _positions(full)
+    assert np.abs(here - there)[lo:hi + 1].max() < 1e-4
+    # held through the shin: still on the moved goal from its new start
+    goal = np.asarray(c.goal["point"])
+    assert np.linalg.norm(here[c.start - 6:c.end + 1, foot] - goal, axis=1).max() < 1e-3
