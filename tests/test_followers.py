@@ -193,7 +193,7 @@ def test_a_goal_on_a_carried_joint_is_held_through_its_limb():
     scene = Scene(project, performer, target)
     before, pos0 = _feet_on_shins(scene)
     sk = scene.target.skeleton
-    foot, shin = sk.index["FootL"], sk.index["LowerLegL"]
+    foot = sk.index["FootL"]
     # the foot 25 cm higher and 15 cm to the side over the hold, where it strides
     goal = pos0[120, foot] + np.array([0.15, 0.25, 0.0])
     solution = scene.replace(constraints=(Constraint(
@@ -240,3 +240,49 @@ def test_an_orientation_on_a_carried_joint_is_refused_in_one_line(tmp_path, caps
             assert not out.exists()
         else:
             assert out.exists(), err
+
+
+@pytest.mark.parametrize("clip", ["bandai1_walk_normal_001.bvh", "bandai1_kick_normal_001.bvh"])
+def test_the_robots_feet_stand_flat_where_the_performers_do(clip):
+    """A carried foot turns as the performer's ankle turns from standing flat (the pitch of
+    its foot on the frames where it is low), not from the reference pose: BANDAI clips are
+    bound on a mid-stride frame 0, where the left foot points 79 degrees down, and the robot's
+    left foot stood 56 degrees off the floor wherever the performer's was flat."""
+    character = _character(ROBOT)
+    target, performer = character.rest_motion(), _performer(clip)
+    project = Project(performer=Source(shared_path(clip)), target=Source(str(ROBOT)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True)
+    scene = Scene(project, performer, target)
+    rot, _ = _world(scene.composed)
+    rest, _ = _world(target)
+    sk = target.skeleton
+    checked = 0
+    for c in scene.contacts():
+        name = "FootL" if c.joint.endswith("_L") else "FootR"
+        j = sk.index[name]
+        for s, e in c.heel:
+            # the foot's up axis against the rest pose's (its tilt, whatever its heading)
+            turn = qmul(rot[s:e + 1, j], qconj(np.broadcast_to(rest[0, j], (e - s + 1, 4))))
+            up = qrot(turn, np.broadcast_to([0.0, 1.0, 0.0], (e - s + 1, 3)))
+            tilt = np.degrees(np.arccos(np.clip(up[:, 1], -1.0, 1.0)))
+            assert np.median(tilt) < 8.0, (name, s, e, np.median(tilt))
+            checked += 1
+    assert checked >= 6
+
+
+def test_an_orientation_on_a_carried_joint_is_refused_by_the_engine_too():
+    """``enforce`` given the carried joints refuses an orientation goal on one with a
+    ConstraintError naming it (not a bare ValueError from the IK's task)."""
+    from motion_composer.engine.correction.constraints import ConstraintError
+    from motion_composer.engine.correction.enforcement import enforce
+    from motion_composer.engine.conversion.followers import carriers
+    walk = clip_path("cmu_131_01_walk.bvh")
+    performer, target = read_motion(walk), _character(ROBOT).rest_motion()
+    project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
+                      correspondence=automap(target.skeleton, performer.skeleton))
+    scene = Scene(project, performer, target)
+    turn = Constraint(joint="FootL", kind="orientation", goal={"quaternion": [0, 0, 0, 1]},
+                      smooth_in=100, start=110, end=130, smooth_out=140, name="turn")
+    with pytest.raises(ConstraintError, match="FootL is carried"):
+        enforce(scene.edited, [turn], carried=carriers(scene.binding.followers))

@@ -453,7 +453,7 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     t_moving = _moving_joints(
         target, max(float(np.ptp(t_ref.all_positions, axis=0).max()), 1e-6))
     followers = find_followers(tsk, psk, mapped, (t_ref.world, t_ref.positions),
-                               (p_ref.world, p_ref.positions))
+                               (p_ref.world, p_ref.positions), performer)
     bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving,
                            followers)
     chains = _chains(tsk, bones)

@@ -42,6 +42,11 @@ ON_JOINT = 0.01
 ALONG_DEG = 30.0
 #: ... and at most this many times the end bone's length beyond its end joint
 REACH = 2.5
+#: a performer foot is flat where its ankle and its toe are both within this share of the
+#: performer's size of their planted heights (each one's 5th percentile over the clip, as
+#: :func:`engine.correction.contacts.detect_contacts` has them)
+FLAT_LOW = 0.03
+
 #: of several performer children, the one that continues the chain is within this angle of the
 #: target's anchor-to-follower direction in the two reference poses [deg] (loose: the two
 #: poses may bend the limb otherwise)
@@ -59,7 +64,8 @@ class Follower:
             pose (where the character's own rig placed it).
         source: the performer joint whose turn it takes, or -1 (it turns with the anchor).
         turn: ``(4,)`` its world rotation after the source's (or the anchor's) in the two
-            reference poses: ``world = source world * turn``.
+            reference poses: ``world = source world * turn``; for a source that is a foot,
+            after the source's as it stands flat (:func:`find_followers`).
     """
 
     joint: int
@@ -150,12 +156,58 @@ def _source(psk: Skeleton, p_positions: np.ndarray, anchor_p: int, direction: np
     return found
 
 
+def _toe(psk: Skeleton, p_positions: np.ndarray, joint: int, shortest: float) -> int:
+    """The performer joint's farthest child with a bone longer than ``shortest`` [m] (a
+    foot's toe), or -1."""
+    kids = [int(c) for c in np.flatnonzero(psk.parents == joint)]
+    lengths = [float(np.linalg.norm(p_positions[c] - p_positions[joint])) for c in kids]
+    if not kids or max(lengths) <= shortest:
+        return -1
+    return kids[int(np.argmax(lengths))]
+
+
+def _pitch(v: np.ndarray) -> np.ndarray:
+    """[rad] how far vectors ``(..., 3)`` point below the horizontal (+Y up)."""
+    return np.arctan2(-v[..., 1], np.linalg.norm(v[..., [0, 2]], axis=-1))
+
+
+def _standing(motion: Motion, ankle: int, toe: int, size: float,
+              reference: np.ndarray) -> np.ndarray | None:
+    """The performer ``ankle``'s world rotation as it stands flat, turned about the vertical
+    to the heading nearest its ``reference`` world rotation; or None (the foot is never low).
+    Flat is the frame of median pitch (``ankle`` to ``toe``) among those where both are low
+    (:data:`FLAT_LOW`); its roll is the capture's own."""
+    F = motion.num_frames
+    rot, pos = np.empty((F, 2, 4)), np.empty((F, 2, 3))
+    for lo in range(0, F, FK_CHUNK):
+        hi = min(F, lo + FK_CHUNK)
+        rot[lo:hi], pos[lo:hi] = fk_joints(motion.skeleton, motion.rotations[lo:hi],
+                                           motion.translations[lo:hi], [ankle, toe])
+    y = pos[..., 1]
+    low = np.flatnonzero(np.all(y < np.percentile(y, 5.0, axis=0) + FLAT_LOW * size, axis=1))
+    if not len(low):
+        return None
+    pitch = _pitch(pos[low, 1] - pos[low, 0])
+    flat = rot[low[int(np.argmin(np.abs(pitch - np.median(pitch))))], 0]
+    # the turn about the vertical (the twist about +Y) from the flat foot to the reference
+    d = qmul(reference, qconj(flat))
+    twist = np.array([0.0, d[1], 0.0, d[3]])
+    norm = float(np.linalg.norm(twist))
+    return flat if norm < 1e-9 else qmul(twist / norm, flat)
+
+
 def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: tuple,
-                   performer: tuple) -> tuple:
+                   performer: tuple, motion: Motion | None = None) -> tuple:
     """The :class:`Follower` joints of a binding: ``mapped`` (target joint -> performer joint
     or -1) and two poses, each ``(world rotations (J, 4), positions (J, 3))``: the target's
     own reference pose (where its IK placed its control joints: which limb carries a joint,
-    and where on it, are read there) and the performer's reference pose."""
+    and where on it, are read there) and the performer's reference pose.
+
+    A follower that takes the turn of a performer foot (a ``source`` with a toe below it)
+    turns as it turns from standing flat (its pitch over the frames of the performer's
+    ``motion`` where the foot is low), not from the reference pose: a clip bound on a
+    mid-stride frame (BANDAI's) has the foot pitched there, and the robot's foot would stand
+    56 degrees off the floor through the whole clip."""
     t_world, t_pos = reference
     p_world, p_pos = performer
     size = max(float(np.ptp(t_pos, axis=0).max()), 1e-9)
@@ -170,7 +222,13 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
         source = -1
         if np.linalg.norm(offset) > ON_JOINT * size:
             source = _source(psk, p_pos, int(mapped[k]), t_pos[j] - t_pos[k], ON_JOINT * p_size)
-        turn = (qmul(qconj(p_world[source]), t_world[j]) if source >= 0 else
+        standing = p_world[source] if source >= 0 else None
+        toe = _toe(psk, p_pos, source, ON_JOINT * p_size) if source >= 0 else -1
+        if toe >= 0 and motion is not None:
+            flat = _standing(motion, source, toe, p_size, p_world[source])
+            if flat is not None:
+                standing = flat
+        turn = (qmul(qconj(standing), t_world[j]) if source >= 0 else
                 qmul(qconj(t_world[k]), t_world[j]))
         out.append(Follower(joint=j, anchor=k, offset=offset, source=source, turn=turn))
     return tuple(out)
