@@ -403,6 +403,7 @@ class Scene:
                 below = [sk.names[k] for k in below_foot(sk, ankle, toe)]
                 for joint in (ankle, toe, *below):
                     if joint and joint in ground.heights and joint not in floored:
+                        floored.add(joint)          # a foot found twice gets one plane each
                         out.append(floor_constraint(joint, composed.num_frames,
                                                     p.floor + ground.heights[joint]))
         return out
@@ -469,8 +470,9 @@ class Scene:
         reference = p.bind_options.target_reference
         path = p.target.path
         stat = os.stat(path) if path is not None and os.path.isfile(path) else None
-        key = (self.performer, self.target, _pairs_key(p.correspondence), reference, path,
-               stat and (stat.st_size, stat.st_mtime_ns))
+        # (the bind options too: the feet carried with the limbs are the binding's followers)
+        key = (self.performer, self.target, _pairs_key(p.correspondence), p.bind_options,
+               path, stat and (stat.st_size, stat.st_mtime_ns))
 
         def compute():
             try:
@@ -516,14 +518,15 @@ class Scene:
                 "contacts on it" for a in unmapped]
 
     def contacts(self) -> list:
-        """The performer's foot contacts (on mapped feet) under the project's options. A foot
-        is on the ground where its heel or its toe is, whether the map has the toe or not:
-        a target foot without one (the robot's) holds its ankle over the whole contact
-        (:func:`~engine.correction.contacts.contact_constraints`), heel-off and toe pivot
-        included; found from the heel alone, a run's contacts ended as the heel rose, with
-        the foot still planted."""
+        """The performer's foot contacts (on mapped feet) under the project's options: from
+        the heel alone where the map leaves the toe out (a target foot without a toe, the
+        robot's, holds its ankle over the contact, which the heel's plant bounds: found
+        from the toe too, the contact ran on through heel-off, and the ankle held down at
+        its flat height while the foot pitched with the performer's drove its toe into the
+        floor)."""
         mapped = set(self.foot_pairs().values())
-        feet = [(a, t) for a, t in find_feet(self.performer.skeleton) if a in mapped]
+        feet = [(a, t if t in mapped else None) for a, t in find_feet(self.performer.skeleton)
+                if a in mapped]
         return detect_contacts(self.performer, feet, self.project.contact_options)
 
     def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,

@@ -134,6 +134,26 @@ def test_the_scene_reports_missing_feet_on_either_side():
         constraints=[]).report["warnings"] == []
 
 
+def test_a_foot_whose_toe_the_map_leaves_out_is_held_by_its_ankle_once():
+    """With the toes unmapped, the target's feet are found twice (by its own skeleton, with
+    toes, and through the map, without): each foot joint still gets one floor plane, and the
+    contacts are found from the performer's heels (each ankle pinned over its contact, its
+    orientation held)."""
+    walk, tpose = read_motion(WALK), read_motion(TPOSE)
+    full = full_map()
+    toes = [t for _, t in find_feet(walk.skeleton) if t]
+    assert toes
+    corr = Correspondence({t: p for t, p in full.pairs.items() if p not in toes})
+    floors = scene_of(walk, tpose, corr, floor=0.0).automatic_constraints()
+    planes = [c.joint for c in floors if c.kind == "plane"]
+    assert planes and len(planes) == len(set(planes))
+    scene = scene_of(walk, tpose, corr, auto_contacts=True, floor=0.0)
+    assert all(c.toe is None for c in scene.contacts())
+    held = [c for c in scene.automatic_constraints() if c.kind == "position"]
+    turned = [c for c in scene.automatic_constraints() if c.kind == "orientation"]
+    assert held and [(c.joint, c.range) for c in held] == [(c.joint, c.range) for c in turned]
+
+
 def test_performer_feet_the_map_leaves_out_are_named():
     walk, tpose = read_motion(WALK), read_motion(TPOSE)
     full = full_map()

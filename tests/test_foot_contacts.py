@@ -49,11 +49,10 @@ from motion_composer.engine.skinning import skin_character
 #: there, 1.34 times the no-pop limit), and a Rokoko dance onto the CMU T-pose (its right foot
 #: flat on the floor from the first frame to the 9th at 100 fps, a plant the clip cuts: the
 #: floor rule lifts the target's toe there, and left free the heel slid 0.13 % of stature more
-#: than the performer's), and a Bandai kick onto Quaternius' robot (its legs end at the shins;
+#: than the performer's), and a Bandai walk onto Quaternius' robot (its legs end at the shins;
 #: its feet are control joints under the root, carried with the shins, with no toe: held
-#: through the shins over the performer's whole contacts, heel and toe; found from the heel
-#: alone, a contact ended while the performer's heel was still down and the hold on the other
-#: foot carried the right foot 19 cm in the next frame)
+#: through the shins; the clip is bound on a mid-stride frame, where the left foot pitches
+#: 79 degrees down)
 CASES = [
     (("shared", "cmu_max_131_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "bandai1_run_active_001.bvh"), ("shared", "target_mixamo_mannequin.glb")),
@@ -66,11 +65,11 @@ CASES = [
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_mixamo_ely.glb")),
     (("shared", "cc3_cmu_02_01_walk.bvh"), ("shared", "target_fox.glb")),
     (("shared", "rokoko_mixamo_jesse_dance.bvh"), ("shared", "target_cmu_mb_rest_tpose.bvh")),
-    (("shared", "bandai1_kick_normal_001.bvh"), ("shared", "target_robot_expressive.glb")),
+    (("shared", "bandai1_walk_normal_001.bvh"), ("shared", "target_robot_expressive.glb")),
 ]
 IDS = ["walk-cmumax-ely", "run-bandai-mannequin", "kick-bandai-cmutpose",
        "jump-fair1-ely", "jumps-cmumb-holden", "walk-bandai-kenney", "walk-cmumax-fox",
-       "walk-cc3-ely", "walk-cc3-fox", "dance-rokoko-cmutpose", "kick-bandai-robot"]
+       "walk-cc3-ely", "walk-cc3-fox", "dance-rokoko-cmutpose", "walk-bandai-robot"]
 
 NEAR = 0.02          # of the stature above the joint's lowest height
 SLOW = 0.15          # statures per second

@@ -218,6 +218,35 @@ def test_a_point_a_joint_carries(joint, offset):
     np.testing.assert_allclose(j1, j2, atol=1e-12)
 
 
+def test_points_and_joints_mixed_in_one_task_set():
+    """Point tasks beside plain ones on the same joint, two points of one joint, and a point
+    task of the same kind and chain length as a plain one (evaluated as one group): the
+    stacked Jacobian matches finite differences, and each task's rows are its own alone."""
+    sk, rot, tra = _posture()
+    pose = _world(sk, rot, tra)
+    B = len(rot)
+    shin, foot, hand = sk.index["LeftLeg"], sk.index["LeftFoot"], sk.index["RightHand"]
+    tasks = [Task(POSITION, shin, pose.positions[:, shin] + 0.02, np.ones(B),
+                  point=[0.05, -0.3, 0.1]),
+             Task(POSITION, shin, pose.positions[:, shin] - 0.01, np.ones(B)),
+             Task(PLANE, shin, PLANE.task_goal(pose.positions[:, foot] + [0, 0.05, 0],
+                                               [0.0, 1.0, 0.0], 1), np.ones(B),
+                  point=[0.0, -0.45, 0.05]),
+             Task(POSITION, foot, pose.positions[:, foot] + 0.03, np.ones(B)),
+             Task(POSITION, hand, pose.positions[:, hand] + 0.02, np.ones(B), point=[0.1, 0, 0])]
+    structure = _check(sk, tasks, rot, tra)
+    err, jac = task_error_and_jacobian(sk, structure, rot, tra)
+    cols = {int(j): 3 + 3 * k for k, j in enumerate(structure.joints)}
+    for t, task in enumerate(tasks):
+        alone = _Structure(sk, [task])
+        e1, j1 = task_error_and_jacobian(sk, alone, rot, tra)
+        rows = slice(structure.row0[t], structure.row0[t + 1])
+        np.testing.assert_array_equal(err[:, rows], e1)
+        mine = np.concatenate([[0, 1, 2]] + [np.arange(cols[int(j)], cols[int(j)] + 3)
+                                              for j in alone.joints])
+        np.testing.assert_allclose(jac[:, rows][:, :, mine], j1, atol=1e-12)
+
+
 def test_an_orientation_of_a_carried_point_is_refused():
     sk, rot, _ = _posture()
     with pytest.raises(ValueError, match="orientation"):

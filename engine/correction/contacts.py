@@ -479,7 +479,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         pins = []
         for k, (s, e) in enumerate(c.ball):
             flats = [(max(s, hs), min(e, he)) for hs, he in heel_runs if hs <= e and s <= he]
-            for flat in flats:
+            for flat in flats if ankle not in carried else ():
                 runs.append((ankle, "turn", flat[0], flat[1], None, None, c,
                              feet.turns[flat], 1))
             first = flats[0][0] if flats else None

@@ -919,6 +919,11 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     from ..describe import figure_size
 
     cons = _check(constraints, composed, pins)
+    for c in cons:
+        if carried and composed.skeleton.index[c.joint] in carried and \
+                c.kind_object.task_kind.angular:
+            raise ConstraintError(f"constraint {c.name or c.joint!r}: {c.joint} is carried with "
+                                  "a limb, which holds a point on it, not its orientation")
     options = options if options is not None else IKOptions()
     if options.scale is None:
         options = dataclasses.replace(options, scale=figure_size(composed))
