@@ -524,9 +524,15 @@ class Scene:
         from the toe too, the contact ran on through heel-off, and the ankle held down at
         its flat height while the foot pitched with the performer's drove its toe into the
         floor)."""
-        mapped = set(self.foot_pairs().values())
-        feet = [(a, t if t in mapped else None) for a, t in find_feet(self.performer.skeleton)
-                if a in mapped]
+        pairs = self.foot_pairs()
+        mapped = set(pairs.values())
+        # a foot carried with a limb is found from heel and toe: it has no toe of its own
+        # (contact_constraints holds its ankle where it planted through heel-off)
+        binding = self.binding
+        carried = {binding.performer.names[f.source] for f in binding.followers
+                   if f.source >= 0} if binding is not None else set()
+        feet = [(a, t if t in mapped or a in carried else None)
+                for a, t in find_feet(self.performer.skeleton) if a in mapped]
         return detect_contacts(self.performer, feet, self.project.contact_options)
 
     def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,

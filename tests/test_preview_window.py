@@ -148,6 +148,7 @@ def test_a_moved_contact_on_a_carried_foot_previews_as_the_full_solve():
     from conftest import clip_path, shared_path
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.formats import read_character, read_motion
+    from motion_composer.engine.correction.preview import retimed
     from motion_composer.engine.project import Project, Source
     walk, robot = clip_path("cmu_131_01_walk.bvh"), shared_path("target_robot_expressive.glb")
     performer, target = read_motion(walk), read_character(robot).rest_motion()
@@ -157,10 +158,11 @@ def test_a_moved_contact_on_a_carried_foot_previews_as_the_full_solve():
     solution = Scene(project, performer, target).solve(regenerate=True)
     scene, constraints = solution.scene, list(solution.constraints)
     i = next(k for k, c in enumerate(constraints) if c.joint == "FootL" and c.kind ==
-             "position" and c.smooth_in >= 8 and c.end < scene.num_frames - 8)
+             "trajectory" and c.smooth_in >= 8 and c.end < scene.num_frames - 8)
     c = constraints[i]
     after = list(constraints)
-    after[i] = c.with_range(c.smooth_in - 6, c.start - 6, c.end, c.smooth_out)
+    # as the timeline drags it: the per-frame path becomes keys at its frames
+    after[i] = retimed(c, (c.smooth_in - 6, c.start - 6, c.end, c.smooth_out))
     lo, hi = changed_window(constraints, after)
     motion, mode = scene.preview(after, base_constraints=constraints,
                                  base_motion=scene.motion, whole=False)
@@ -169,6 +171,8 @@ def test_a_moved_contact_on_a_carried_foot_previews_as_the_full_solve():
     foot = scene.target.skeleton.index["FootL"]
     here, there = _positions(motion), _positions(full)
     assert np.abs(here - there)[lo:hi + 1].max() < 1e-4
-    # held through the shin: still on the moved goal from its new start
-    goal = np.asarray(c.goal["point"])
-    assert np.linalg.norm(here[c.start - 6:c.end + 1, foot] - goal, axis=1).max() < 1e-3
+    # held through the shin: on its path (where it planted, rising through heel-off), and
+    # from the new start on the path's first point
+    path = np.asarray(c.goal["points"])
+    assert np.linalg.norm(here[c.start:c.end + 1, foot] - path, axis=1).max() < 1e-3
+    assert np.linalg.norm(here[c.start - 6:c.start, foot] - path[0], axis=1).max() < 1e-3

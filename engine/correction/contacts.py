@@ -458,6 +458,21 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         toe = by_performer.get(c.toe) if c.toe else None
         a = sk.index[ankle]
         frames = slice(c.start, c.end + 1)
+        if toe is None and c.toe and ankle in carried:
+            # a carried foot without a toe, its contact found from the performer's heel and
+            # toe: its ankle stays where it planted through the whole contact, on the floor
+            # while the heel is down and rising as the converted one rises through heel-off
+            # (held down there, a foot that pitches with the performer's drove its toe into
+            # the floor); a path, one point per frame
+            down = [f for s, e in c.heel for f in range(s, e + 1)] or list(range(c.start,
+                                                                                c.end + 1))
+            goal = np.median(t_pos[a][down], axis=0)
+            y = t_pos[a][frames, 1]
+            rise = np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
+            path = np.tile(goal, (c.end - c.start + 1, 1))
+            path[:, 1] = ground.floor + ground.heights[ankle] + rise
+            runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
+            continue
         if toe is None:
             # without a toe the ankle holds the whole contact, its orientation too
             goal = np.median(t_pos[a][frames], axis=0)
@@ -514,7 +529,14 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         number[label] = number.get(label, 0) + 1
         lo = lo if first is None else min(max(lo, first), s)
         performer_joint = c.toe if part == "toe" else c.joint
-        if part is not None:
+        if part is not None and goal.ndim == 2:
+            out.append(Constraint(joint=joint, kind="trajectory", goal={"points": goal},
+                                  smooth_in=lo, start=s, end=e, smooth_out=hi,
+                                  priority=priority + below, name=f"contact {joint} #{number[label]}",
+                                  auto=True,
+                                  meta={"source": "contact", "part": part,
+                                        "performer_joint": performer_joint}))
+        elif part is not None:
             out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
                                   priority=priority + below, name=f"contact {joint} #{number[label]}",
