@@ -66,7 +66,7 @@ def _own_feet(character):
 def test_the_robots_feet_walk_with_its_legs(clip):
     """Each foot stays at its shin's end where the robot's own clips keep it, the shin points
     along the performer's (knee to ankle, even where the performer is bound mid-stride), and
-    the foot turns as the performer's ankle turns."""
+    the foot pitches as the performer's foot pitches, without its roll."""
     character = _character(ROBOT)
     target, performer = character.rest_motion(), _performer(clip)
     correspondence = automap(target.skeleton, performer.skeleton)
@@ -97,9 +97,18 @@ def test_the_robots_feet_walk_with_its_legs(clip):
         cos = np.sum(shin_dir * p_dir, axis=1) / (np.linalg.norm(shin_dir, axis=1) *
                                                   np.linalg.norm(p_dir, axis=1))
         assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 0.01
-        # the foot turns as the performer's ankle (a constant rotation between the two)
-        between = qmul(qconj(p_rot[:, p_ankle]), rot[:, f])
-        assert _angle(between, between[:1]).max() < 1e-4
+        # the foot pitches as the performer's foot (ankle to toe) pitches from standing
+        # flat, and never rolls: its up axis tilts by that pitch alone
+        follower = next(x for x in binding.followers if x.joint == f)
+        assert follower.toe >= 0 and psk.parents[follower.toe] == p_ankle
+        foot = p_pos[:, follower.toe] - p_pos[:, p_ankle]
+        pitch = np.degrees(np.arctan2(-foot[:, 1], np.linalg.norm(foot[:, [0, 2]], axis=1)))
+        up = qrot(qmul(rot[:, f], qconj(np.broadcast_to(_world(target)[0][0, f],
+                                                        rot[:, f].shape))),
+                  np.broadcast_to([0.0, 1.0, 0.0], pos[:, f].shape))
+        tilt = np.degrees(np.arccos(np.clip(up[:, 1], -1.0, 1.0)))
+        np.testing.assert_allclose(tilt, np.abs(pitch - np.degrees(follower.pitch)),
+                                   atol=1e-3)
     # the knees' pole targets are not carried: they keep their rest place on the root
     rest_rot, rest_pos = _world(target)
     for pole in ("PoleTargetL", "PoleTargetR"):

@@ -166,9 +166,14 @@ def convert_frames(binding: Binding, performer: Motion, lo: int, hi: int, root: 
         world = _posed(binding, world, known)
     for f in binding.followers:
         # a control joint carried with a limb turns as the performer joint that continues
-        # the limb's chain, or with the limb (engine.conversion.followers)
-        world[:, f.joint] = cmul(pq[:, f.source] if f.source >= 0 else world[:, f.anchor],
-                                 f.turn[:, None])
+        # the limb's chain (a foot: as its heading and pitch turn), or with the limb
+        # (engine.conversion.followers)
+        if f.toe >= 0:
+            world[:, f.joint] = f.foot_turn(pq[:, f.source].T, pp[:, f.source].T,
+                                            pp[:, f.toe].T).T
+        else:
+            world[:, f.joint] = cmul(pq[:, f.source] if f.source >= 0 else
+                                     world[:, f.anchor], f.turn[:, None])
         known[f.joint] = True
     positions = {}
     for j in binding.driven:

@@ -64,8 +64,15 @@ class Follower:
             pose (where the character's own rig placed it).
         source: the performer joint whose turn it takes, or -1 (it turns with the anchor).
         turn: ``(4,)`` its world rotation after the source's (or the anchor's) in the two
-            reference poses: ``world = source world * turn``; for a source that is a foot,
-            after the source's as it stands flat (:func:`find_followers`).
+            reference poses: ``world = source world * turn``.
+        toe: where the source is a performer foot, its toe (else -1): the follower then
+            turns as that foot's heading and pitch turn from standing flat, never rolling
+            (:meth:`foot_turn`).
+        standing: ``(4,)`` the source's world rotation as it stands flat (the reference
+            pose's heading); ``pitch`` [rad] its foot's pitch (ankle to toe) then; ``axis``
+            ``(3,)`` the horizontal axis about which a turn by a positive angle pitches that
+            foot down; ``rest`` ``(4,)`` the follower's world rotation in the target's
+            reference pose.
     """
 
     joint: int
@@ -73,6 +80,30 @@ class Follower:
     offset: np.ndarray
     source: int
     turn: np.ndarray
+    toe: int = -1
+    standing: np.ndarray | None = None
+    pitch: float = 0.0
+    axis: np.ndarray | None = None
+    rest: np.ndarray | None = None
+
+    def foot_turn(self, source: np.ndarray, ankle: np.ndarray, toe: np.ndarray) -> np.ndarray:
+        """``(F, 4)`` the follower's world rotation from the performer foot's world rotation
+        ``source (F, 4)`` and its ankle's and toe's positions ``(F, 3)``: its reference
+        rotation pitched as the foot's pitch differs from standing flat, then turned about
+        the vertical as the ankle's heading turned. A capture's foot also rolls about its
+        own length, which a line skeleton does not show; carried onto a rigid foot a metre
+        long (the robot's) that roll stood it on its edge (113 degrees off flat on a frame
+        of the CMU walk)."""
+        F = len(source)
+        d = qmul(source, qconj(np.broadcast_to(self.standing, (F, 4))))
+        heading = np.zeros((F, 4))
+        heading[:, 1], heading[:, 3] = d[:, 1], d[:, 3]
+        norm = np.linalg.norm(heading, axis=1, keepdims=True)
+        heading = np.where(norm > 1e-9, heading / np.maximum(norm, 1e-12), [0.0, 0.0, 0.0, 1.0])
+        half = 0.5 * (_pitch(toe - ankle) - self.pitch)
+        pitched = np.concatenate([np.outer(np.sin(half), self.axis), np.cos(half)[:, None]],
+                                 axis=1)
+        return qmul(heading, qmul(pitched, np.broadcast_to(self.rest, (F, 4))))
 
 
 def _trunk(tsk: Skeleton, has_mapped_below: np.ndarray, mapped: np.ndarray) -> set:
@@ -204,10 +235,11 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
     and where on it, are read there) and the performer's reference pose.
 
     A follower that takes the turn of a performer foot (a ``source`` with a toe below it)
-    turns as it turns from standing flat (its pitch over the frames of the performer's
-    ``motion`` where the foot is low), not from the reference pose: a clip bound on a
-    mid-stride frame (BANDAI's) has the foot pitched there, and the robot's foot would stand
-    56 degrees off the floor through the whole clip."""
+    turns as that foot turns from standing flat (:func:`_standing`, found in the
+    performer's ``motion``) in heading and pitch (:meth:`Follower.foot_turn`), not as the
+    ankle turns from the reference pose: a clip bound on a mid-stride frame (BANDAI's) has
+    the foot pitched there, and the robot's foot stood 56 degrees off the floor through the
+    whole clip."""
     t_world, t_pos = reference
     p_world, p_pos = performer
     size = max(float(np.ptp(t_pos, axis=0).max()), 1e-9)
@@ -222,15 +254,25 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
         source = -1
         if np.linalg.norm(offset) > ON_JOINT * size:
             source = _source(psk, p_pos, int(mapped[k]), t_pos[j] - t_pos[k], ON_JOINT * p_size)
-        standing = p_world[source] if source >= 0 else None
-        toe = _toe(psk, p_pos, source, ON_JOINT * p_size) if source >= 0 else -1
-        if toe >= 0 and motion is not None:
-            flat = _standing(motion, source, toe, p_size, p_world[source])
-            if flat is not None:
-                standing = flat
-        turn = (qmul(qconj(standing), t_world[j]) if source >= 0 else
+        turn = (qmul(qconj(p_world[source]), t_world[j]) if source >= 0 else
                 qmul(qconj(t_world[k]), t_world[j]))
-        out.append(Follower(joint=j, anchor=k, offset=offset, source=source, turn=turn))
+        foot = {}
+        toe = _toe(psk, p_pos, source, ON_JOINT * p_size) if source >= 0 else -1
+        standing = (_standing(motion, source, toe, p_size, p_world[source])
+                    if toe >= 0 and motion is not None else None)
+        if standing is not None:
+            # the foot as it stands flat, and the axis across it that pitches it down
+            v = qrot(standing, qrot(qconj(p_world[source]), p_pos[toe] - p_pos[source]))
+            axis = np.cross(v, [0.0, 1.0, 0.0])
+            if np.linalg.norm(axis) > 1e-9:
+                axis /= np.linalg.norm(axis)
+                down = np.r_[axis * np.sin(0.05), np.cos(0.05)]
+                if _pitch(qrot(down, v)) < _pitch(v):
+                    axis = -axis
+                foot = dict(toe=toe, standing=standing, pitch=float(_pitch(v)), axis=axis,
+                            rest=t_world[j])
+        out.append(Follower(joint=j, anchor=k, offset=offset, source=source, turn=turn,
+                            **foot))
     return tuple(out)
 
 

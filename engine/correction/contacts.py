@@ -451,6 +451,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                                [sk.index[n] for foot in feet_t for n in foot if n])
     if ground is None:
         ground = converted_ground(composed, feet_t, floor=floor)
+    # the character's size, for a carried foot's heel (below)
+    size = _figure_size(composed) if carried else None
     # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
     runs = []
     for c in used:
@@ -464,13 +466,19 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             # while the heel is down and rising as the converted one rises through heel-off
             # (held down there, a foot that pitches with the performer's drove its toe into
             # the floor); a path, one point per frame
-            down = [f for s, e in c.heel for f in range(s, e + 1)] or list(range(c.start,
-                                                                                c.end + 1))
-            goal = np.median(t_pos[a][down], axis=0)
+            # (a contact on the ball alone, the heel never down, keeps the converted height,
+            # at least its median over the contact: on tiptoe the foot pitches, and held at
+            # its flat height its toe went 0.6 m into the floor)
             y = t_pos[a][frames, 1]
-            rise = np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
-            path = np.tile(goal, (c.end - c.start + 1, 1))
-            path[:, 1] = ground.floor + ground.heights[ankle] + rise
+            flat = ground.floor + ground.heights[ankle]
+            # the heel is down where the performer's is held and the converted one is low
+            # (a heel held on tiptoe is not)
+            down = [f for s, e in c.heel for f in range(s, e + 1)
+                    if y[f - c.start] < flat + options.height * size]
+            path = np.tile(np.median(t_pos[a][down or frames], axis=0),
+                           (c.end - c.start + 1, 1))
+            path[:, 1] = (flat + np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
+                          if down else np.maximum(y, np.median(y)))
             runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
             continue
         if toe is None:
@@ -573,6 +581,11 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                                     "performer_joint": floors[joint]}))
     out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
+
+
+def _figure_size(motion: Motion) -> float:
+    from ..describe import figure_size
+    return figure_size(motion)
 
 
 def horizontal_drift(motion: Motion, joint: str, start: int, end: int) -> float:
