@@ -161,14 +161,19 @@ def _feet_on_shins(scene):
     return np.array(out), pos
 
 
-def test_the_feet_follow_a_correction_and_a_layer():
-    """A solved constraint on a knee and an animator's layer on a thigh move the shins: the
-    feet come along (the final motion, not the conversion's)."""
+def _walking_robot() -> Scene:
+    """The bundled CMU walk onto the robot, mapped automatically."""
     walk = clip_path("cmu_131_01_walk.bvh")
     performer, target = read_motion(walk), _character(ROBOT).rest_motion()
     project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
                       correspondence=automap(target.skeleton, performer.skeleton))
-    scene = Scene(project, performer, target)
+    return Scene(project, performer, target)
+
+
+def test_the_feet_follow_a_correction_and_a_layer():
+    """A solved constraint on a knee and an animator's layer on a thigh move the shins: the
+    feet come along (the final motion, not the conversion's)."""
+    scene = _walking_robot()
     before, pos0 = _feet_on_shins(scene)
     sk = scene.target.skeleton
     knee = sk.index["LowerLegL"]
@@ -195,11 +200,7 @@ def test_a_goal_on_a_carried_joint_is_held_through_its_limb():
     shin) is met by turning the leg that carries it (``Task.point``), not by dragging the
     root: the delivered foot stands on the goal, still on its shin, and outside the
     constraint's range the motion is the conversion's bit for bit."""
-    walk = clip_path("cmu_131_01_walk.bvh")
-    performer, target = read_motion(walk), _character(ROBOT).rest_motion()
-    project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
-                      correspondence=automap(target.skeleton, performer.skeleton))
-    scene = Scene(project, performer, target)
+    scene = _walking_robot()
     before, pos0 = _feet_on_shins(scene)
     sk = scene.target.skeleton
     foot = sk.index["FootL"]
@@ -286,11 +287,7 @@ def test_an_orientation_on_a_carried_joint_is_refused_by_the_engine_too():
     from motion_composer.engine.correction.constraints import ConstraintError
     from motion_composer.engine.correction.enforcement import enforce
     from motion_composer.engine.conversion.followers import carriers
-    walk = clip_path("cmu_131_01_walk.bvh")
-    performer, target = read_motion(walk), _character(ROBOT).rest_motion()
-    project = Project(performer=Source(str(walk)), target=Source(str(ROBOT)),
-                      correspondence=automap(target.skeleton, performer.skeleton))
-    scene = Scene(project, performer, target)
+    scene = _walking_robot()
     turn = Constraint(joint="FootL", kind="orientation", goal={"quaternion": [0, 0, 0, 1]},
                       smooth_in=100, start=110, end=130, smooth_out=140, name="turn")
     with pytest.raises(ConstraintError, match="FootL is carried"):

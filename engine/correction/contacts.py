@@ -537,15 +537,11 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         number[label] = number.get(label, 0) + 1
         lo = lo if first is None else min(max(lo, first), s)
         performer_joint = c.toe if part == "toe" else c.joint
-        if part is not None and goal.ndim == 2:
-            out.append(Constraint(joint=joint, kind="trajectory", goal={"points": goal},
-                                  smooth_in=lo, start=s, end=e, smooth_out=hi,
-                                  priority=priority + below, name=f"contact {joint} #{number[label]}",
-                                  auto=True,
-                                  meta={"source": "contact", "part": part,
-                                        "performer_joint": performer_joint}))
-        elif part is not None:
-            out.append(Constraint(joint=joint, kind="position", goal={"point": goal},
+        if part is not None:
+            # a pin on a point, or a carried foot's path (a point per frame)
+            kind, held = (("trajectory", {"points": goal}) if goal.ndim == 2 else
+                          ("position", {"point": goal}))
+            out.append(Constraint(joint=joint, kind=kind, goal=held,
                                   smooth_in=lo, start=s, end=e, smooth_out=hi,
                                   priority=priority + below, name=f"contact {joint} #{number[label]}",
                                   auto=True,
