@@ -519,15 +519,15 @@ class Scene:
 
     def contacts(self) -> list:
         """The performer's foot contacts (on mapped feet) under the project's options: from
-        the heel alone where the map leaves the toe out (a target foot without a toe, the
-        robot's, holds its ankle over the contact, which the heel's plant bounds: found
-        from the toe too, the contact ran on through heel-off, and the ankle held down at
-        its flat height while the foot pitched with the performer's drove its toe into the
-        floor)."""
+        the heel alone where the map leaves the toe out (the ankle is then held over the
+        contact, its orientation too), but for a foot carried with a limb (the robot's),
+        found from heel and toe: it has no toe of its own, and
+        :func:`~engine.correction.contacts.contact_constraints` holds its ankle where it
+        planted on a path that rises through heel-off (found from the heel alone, a
+        contact ended before the performer's heel rose and the hold on the other foot threw
+        the released one 19 cm in a frame)."""
         pairs = self.foot_pairs()
         mapped = set(pairs.values())
-        # a foot carried with a limb is found from heel and toe: it has no toe of its own
-        # (contact_constraints holds its ankle where it planted through heel-off)
         binding = self.binding
         carried = {binding.performer.names[f.source] for f in binding.followers
                    if f.source >= 0} if binding is not None else set()
