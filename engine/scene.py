@@ -481,7 +481,12 @@ class Scene:
                 character = None
             feet = self.target_feet(self.foot_pairs())
             sole = _sole(character, self.target, feet, reference)
-            return target_ground(self.target, feet, reference=reference, sole=sole)
+            ground = target_ground(self.target, feet, reference=reference, sole=sole)
+            carried = {self.target.skeleton.names[j] for j in self.carried}
+            soles = _sole_points(character, self.target, [a for a, t in feet
+                                                           if a in carried and t is None],
+                                 reference)
+            return dataclasses.replace(ground, soles=soles) if soles else ground
         return self.derived.get("standing", key, compute)
 
     def target_feet(self, pairs: dict | None = None) -> list:
@@ -769,6 +774,36 @@ def _sole(character, target: Motion, feet, reference) -> float | None:
         if on_feet.any():
             lowest.append(float(vertices[0, on_feet, 1].min()))
     return min(lowest) if lowest else None
+
+
+def _sole_points(character, target: Motion, ankles, reference) -> dict:
+    """Per ankle in ``ankles`` the vertices of ``character``'s mesh bound mostly to it or a
+    joint below it, in the ankle's frame in ``target``'s reference pose (``{}`` without a
+    mesh)."""
+    if character is None or not character.meshes or not ankles or \
+            character.skeleton.names != target.skeleton.names:
+        return {}
+    from .conversion.binding import reference_pose
+    from .kinematics import fk_arrays
+    from .quaternions import qconj, qrot
+    from .skinning import skin_character
+    sk = target.skeleton
+    rot, tra, _ = reference_pose(target, reference)
+    pose = Motion._trusted(sk, rot[None], tra[None], target.frame_time, target.name)
+    world = fk_arrays(sk, rot[None], tra[None], end_sites=False)
+    skinned = list(zip(character.meshes, skin_character(character, pose)))
+    out = {}
+    for name in ankles:
+        a = sk.index[name]
+        foot = np.array([a == j or a in sk.ancestors(j) for j in range(sk.num_joints)])
+        points = [vertices[0, foot[mesh.joints[np.arange(len(mesh.joints)),
+                                               np.argmax(mesh.weights, axis=1)]]]
+                  for mesh, vertices in skinned]
+        points = np.concatenate(points) if points else np.zeros((0, 3))
+        if len(points):
+            q = np.broadcast_to(qconj(world.rotations[0, a]), (len(points), 4))
+            out[name] = qrot(q, points - world.positions[0, a])
+    return out
 
 
 def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:

@@ -292,3 +292,35 @@ def test_an_orientation_on_a_carried_joint_is_refused_by_the_engine_too():
                       smooth_in=100, start=110, end=130, smooth_out=140, name="turn")
     with pytest.raises(ConstraintError, match="FootL is carried"):
         enforce(scene.edited, [turn], carried=carriers(scene.binding.followers))
+
+
+def test_the_robots_soles_stay_on_the_floor_through_its_contacts():
+    """The robot's feet have no toe joint and pitch with the performer's feet (its rigid
+    foot is 0.95 m long): held at the ankle alone, its toe sank 0.2-0.4 m under the floor
+    through heel-off. Each contact's path keeps every vertex of the foot's mesh (skinned, as
+    drawn) above the floor, within 1 cm."""
+    from motion_composer.engine.skinning import skin_character
+    character = _character(ROBOT)
+    target, performer = character.rest_motion(), _performer("bandai1_walk_normal_001.bvh")
+    project = Project(performer=Source(shared_path("bandai1_walk_normal_001.bvh")),
+                      target=Source(str(ROBOT)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True)
+    solution = Scene(project, performer, target).solve(regenerate=True)
+    motion, sk = solution.motion, target.skeleton
+    floor = solution.scene.ground().floor
+    skinned = list(zip(character.meshes, skin_character(character, motion)))
+    checked = 0
+    for c in solution.constraints:
+        if c.meta.get("part") != "heel":
+            continue
+        j = sk.index[c.joint]
+        frames = slice(c.start, c.end + 1)
+        for mesh, vertices in skinned:
+            main = mesh.joints[np.arange(len(mesh.joints)), np.argmax(mesh.weights, axis=1)]
+            on = main == j
+            if on.any():
+                low = vertices[frames][:, on, 1].min()
+                assert low >= floor - 0.01, (c.name, low - floor)
+                checked += 1
+    assert checked >= 10

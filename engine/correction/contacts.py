@@ -12,7 +12,7 @@ where it planted while the heel rises, with ramps.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -84,11 +84,15 @@ class Ground:
         flat: target ankle -> ``(rotation (4,), toe (3,) or None)``: the ankle's world rotation
             with the foot flat (x, y, z, w; the rest pose's) and the vector [m] from the ankle
             to its toe then (``None`` without a toe).
+        soles: target ankle -> ``(V, 3)`` [m] its foot's mesh vertices in its own frame,
+            for a foot without a toe joint that turns as the performer's (a carried foot:
+            :func:`contact_constraints` keeps them above the floor); empty without a mesh.
     """
 
     floor: float
     heights: dict
     flat: dict
+    soles: dict = field(default_factory=dict)
 
 
 def find_feet(skeleton: Skeleton) -> list[tuple[str, str | None]]:
@@ -479,6 +483,15 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                            (c.end - c.start + 1, 1))
             path[:, 1] = (flat + np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
                           if down else np.maximum(y, np.median(y)))
+            if ankle in ground.soles:
+                # and high enough that no point of its foot goes under the floor: its turn
+                # is the performer's foot's, which the IK does not change (a rigid foot a
+                # metre long, pitched through heel-off, sank its toe 0.2-0.4 m)
+                turn = t_rot[a][frames]
+                pts = ground.soles[ankle]
+                low = qrot(np.repeat(turn, len(pts), axis=0),
+                           np.tile(pts, (len(turn), 1)))[:, 1].reshape(len(turn), -1).min(1)
+                path[:, 1] = np.maximum(path[:, 1], ground.floor - low)
             runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
             continue
         if toe is None:
