@@ -480,12 +480,13 @@ class Scene:
             except MotionComposerError:      # unreadable now: the feet's joints, not its mesh
                 character = None
             feet = self.target_feet(self.foot_pairs())
-            sole = _sole(character, self.target, feet, reference)
-            ground = target_ground(self.target, feet, reference=reference, sole=sole)
+            # skinned once for the sole under the feet and a carried foot's own vertices
+            skinned = _skinned_reference(character, self.target, reference)
+            ground = target_ground(self.target, feet, reference=reference,
+                                   sole=_sole(skinned, self.target, feet))
             carried = {self.target.skeleton.names[j] for j in self.carried}
-            soles = _sole_points(character, self.target, [a for a, t in feet
-                                                           if a in carried and t is None],
-                                 reference)
+            soles = _sole_points(skinned, self.target, [a for a, t in feet
+                                                        if a in carried and t is None])
             return dataclasses.replace(ground, soles=soles) if soles else ground
         return self.derived.get("standing", key, compute)
 
@@ -752,54 +753,60 @@ def _apply_layers(layers, motion: Motion) -> Motion:
     return motion
 
 
-def _sole(character, target: Motion, feet, reference) -> float | None:
-    """[m] The lowest vertex of ``character``'s feet (vertices bound mostly to a foot joint or
-    a joint below it) in ``target``'s reference pose, or None (no mesh, or none on the
-    feet)."""
-    if character is None or not character.meshes or not feet or \
+def _skinned_reference(character, target: Motion, reference):
+    """``(world pose, [(mesh, vertices (V, 3))], main joint per vertex of each mesh)`` of
+    ``character`` skinned in ``target``'s reference pose, or None (no mesh, or a mesh on
+    another skeleton)."""
+    if character is None or not character.meshes or \
             character.skeleton.names != target.skeleton.names:
         return None
     from .conversion.binding import reference_pose
+    from .kinematics import fk_arrays
     from .skinning import skin_character
     sk = target.skeleton
-    joints = {sk.index[n] for foot in feet for n in foot if n}
-    foot = np.array([bool(set(sk.ancestors(j)) & joints) or j in joints
-                     for j in range(sk.num_joints)])
     rot, tra, _ = reference_pose(target, reference)
     pose = Motion._trusted(sk, rot[None], tra[None], target.frame_time, target.name)
-    lowest = []
-    for mesh, vertices in zip(character.meshes, skin_character(character, pose)):
-        main = mesh.joints[np.arange(len(mesh.joints)), np.argmax(mesh.weights, axis=1)]
-        on_feet = foot[main]
-        if on_feet.any():
-            lowest.append(float(vertices[0, on_feet, 1].min()))
+    meshes = [(vertices[0], mesh.joints[np.arange(len(mesh.joints)),
+                                        np.argmax(mesh.weights, axis=1)])
+              for mesh, vertices in zip(character.meshes, skin_character(character, pose))]
+    return fk_arrays(sk, rot[None], tra[None], end_sites=False), meshes
+
+
+def _on_foot(sk, joints) -> np.ndarray:
+    """``(J,)`` the joints that are one of ``joints`` or below one."""
+    joints = set(joints)
+    return np.array([j in joints or bool(set(sk.ancestors(j)) & joints)
+                     for j in range(sk.num_joints)])
+
+
+def _sole(skinned, target: Motion, feet) -> float | None:
+    """[m] The lowest vertex of the character's feet (vertices bound mostly to a foot joint
+    or a joint below it) in its reference pose (``skinned``: :func:`_skinned_reference`),
+    or None (no mesh, or none on the feet)."""
+    if skinned is None or not feet:
+        return None
+    sk = target.skeleton
+    foot = _on_foot(sk, [sk.index[n] for f in feet for n in f if n])
+    lowest = [float(vertices[foot[main], 1].min()) for vertices, main in skinned[1]
+              if foot[main].any()]
     return min(lowest) if lowest else None
 
 
-def _sole_points(character, target: Motion, ankles, reference) -> dict:
-    """Per ankle in ``ankles`` the vertices of ``character``'s mesh bound mostly to it or a
-    joint below it, in the ankle's frame in ``target``'s reference pose (``{}`` without a
-    mesh)."""
-    if character is None or not character.meshes or not ankles or \
-            character.skeleton.names != target.skeleton.names:
+def _sole_points(skinned, target: Motion, ankles) -> dict:
+    """Per ankle in ``ankles`` the character's mesh vertices bound mostly to it or a joint
+    below it, in the ankle's frame in its reference pose (``skinned``:
+    :func:`_skinned_reference`; ``{}`` without a mesh)."""
+    if skinned is None:
         return {}
-    from .conversion.binding import reference_pose
-    from .kinematics import fk_arrays
     from .quaternions import qconj, qrot
-    from .skinning import skin_character
     sk = target.skeleton
-    rot, tra, _ = reference_pose(target, reference)
-    pose = Motion._trusted(sk, rot[None], tra[None], target.frame_time, target.name)
-    world = fk_arrays(sk, rot[None], tra[None], end_sites=False)
-    skinned = list(zip(character.meshes, skin_character(character, pose)))
+    world, meshes = skinned
     out = {}
     for name in ankles:
         a = sk.index[name]
-        foot = np.array([a == j or a in sk.ancestors(j) for j in range(sk.num_joints)])
-        points = [vertices[0, foot[mesh.joints[np.arange(len(mesh.joints)),
-                                               np.argmax(mesh.weights, axis=1)]]]
-                  for mesh, vertices in skinned]
-        points = np.concatenate(points) if points else np.zeros((0, 3))
+        foot = _on_foot(sk, [a])
+        points = np.concatenate([vertices[foot[main]] for vertices, main in meshes] +
+                                [np.zeros((0, 3))])
         if len(points):
             q = np.broadcast_to(qconj(world.rotations[0, a]), (len(points), 4))
             out[name] = qrot(q, points - world.positions[0, a])

@@ -456,7 +456,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     if ground is None:
         ground = converted_ground(composed, feet_t, floor=floor)
     # the character's size, for a carried foot's heel (below)
-    size = _figure_size(composed) if carried else None
+    from ..describe import figure_size
+    size = figure_size(composed) if carried else None
     # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
     runs = []
     for c in used:
@@ -590,11 +591,6 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                                     "performer_joint": floors[joint]}))
     out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
-
-
-def _figure_size(motion: Motion) -> float:
-    from ..describe import figure_size
-    return figure_size(motion)
 
 
 def horizontal_drift(motion: Motion, joint: str, start: int, end: int) -> float:
