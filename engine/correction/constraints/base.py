@@ -221,12 +221,6 @@ class ConstraintKind(ABC):
     def task_goals(self, c, frames: np.ndarray) -> np.ndarray:
         """``(n, goal_size)`` the task goals of ``c`` at its active ``frames``."""
 
-    @abstractmethod
-    def ramp_goal(self, c, pos: np.ndarray, wrot: np.ndarray, u: float) -> np.ndarray:
-        """``(goal_size,)`` the task goal at fraction ``u`` of ``c``'s input ramp, from where
-        the joint was at ``smooth_in`` (world position ``pos``, rotation ``wrot``) to the goal
-        at ``start``."""
-
     def chain(self, skeleton, joint: int) -> list[int]:
         """The joints whose rotation moves the task on ``joint``, sorted: its ancestors."""
         return sorted(skeleton.ancestors(joint))

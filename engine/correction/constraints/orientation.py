@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...quaternions import qconj, qmul, qmul_small, qnormalize, qpow
+from ...quaternions import qconj, qmul_small
 from ..ik import TaskState, quat_to_rotvec
 from .base import ConstraintError, ConstraintKind, GoalField, unit_vector, vector
 
@@ -44,10 +44,6 @@ class OrientationKind(ConstraintKind):
 
     def task_goals(self, c, frames):
         return np.broadcast_to(c.goal["quaternion"], (len(frames), 4)).copy()
-
-    def ramp_goal(self, c, pos, wrot, u):
-        d = qmul(c.goal["quaternion"], qconj(wrot))
-        return qnormalize(qmul(qpow(d, u), wrot))
 
     def chain(self, skeleton, joint):
         return sorted(skeleton.ancestors(joint) + [joint])

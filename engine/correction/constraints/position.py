@@ -42,10 +42,6 @@ class PositionKind(ConstraintKind):
     def task_goals(self, c, frames):
         return self.goal_point(c, np.asarray(frames))
 
-    def ramp_goal(self, c, pos, wrot, u):
-        end = self.goal_point(c, np.array([c.start]))[0]
-        return pos + (end - pos) * u
-
     def error(self, goal: np.ndarray, state: TaskState) -> np.ndarray:
         return goal - state.position
 
