@@ -282,13 +282,16 @@ class Scene:
                 binding, pose, self.performer.frame_time, name=name))
         composed = self._raw("composed")
         layers = tuple((layer.displacement, layer.weight, layer.mute) for layer in p.layers)
-        # the control joints carried with the limbs stand where the changed limbs put them
+        # the control joints carried with the limbs stand where the changed limbs put them;
+        # the animator's layers turn them with their parents (a root turned turns the feet),
+        # the solved layer does not (the IK's small turn of the root is no turn of the feet,
+        # which turn as the performer's)
         if stage == "edited":
             return self.derived.get("edited", (key, layers), lambda: follow(
                 binding.followers, _apply_layers(p.layers, composed)))
         edited = self._raw("edited")
         return self.derived.get("motion", (key, layers, p.displacement), lambda: follow(
-            binding.followers, p.displacement.apply(edited)))
+            binding.followers, p.displacement.apply(edited), edited))
 
     def _value(self, stage: str):
         value = self._raw(stage)
@@ -591,7 +594,7 @@ class Scene:
             # the dense solve as delivered: its carried control joints where its limbs put
             # them (the IK holds their goals through the limbs and leaves them behind)
             correction = dataclasses.replace(correction, motion=follow(
-                self.binding.followers, correction.motion))
+                self.binding.followers, correction.motion, self.edited))
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
@@ -662,9 +665,10 @@ class Scene:
                 self.derived.computed["window solver"] += 1
             motion = solver.preview(constraints, base_constraints, base_motion)
             if motion is not None:
-                return follow(self.binding.followers, motion), "window"
+                return follow(self.binding.followers, motion, composed), "window"
         return follow(self.binding.followers, enforce(
-            composed, constraints, options=options, carried=self.carried).motion), "full"
+            composed, constraints, options=options, carried=self.carried).motion,
+            composed), "full"
 
 
 _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))

@@ -276,26 +276,44 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
     return tuple(out)
 
 
-def follow(followers, motion: Motion) -> Motion:
+def follow(followers, motion: Motion, reference: Motion | None = None) -> Motion:
     """``motion`` with each follower's translation set so that it stands where its anchor
-    carries it (its rotation is left as it is). For a motion whose limbs changed after the
-    conversion placed them: a correction, a displacement layer."""
+    carries it. For a motion whose limbs changed after the conversion placed them: a
+    correction, a displacement layer.
+
+    ``reference``: the motion those changes were made to (the same frames), for a
+    correction: a follower that takes a performer joint's turn keeps the world rotation it
+    has there, with its own rotation's change in ``motion`` on top, so that its parent's
+    change does not turn it (the IK turning the robot's root by a degree or two swung its
+    metre-long feet, which turn as the performer's, and took its soles centimetres into the
+    floor). Without a ``reference`` (an animator's layer: a root turned turns the feet), or
+    for a follower that turns with its anchor, its rotation is left as it is."""
     if not followers:
         return motion
     sk = motion.skeleton
     slot = {int(j): k for k, j in enumerate(sk.translated)}
     joints = sorted({f.anchor for f in followers} | {int(sk.parents[f.joint]) for f in followers})
+    turned = [f for f in followers if f.source >= 0] if reference is not None else []
+    parents = sorted({int(sk.parents[f.joint]) for f in turned})
     translations = motion.translations.copy()
+    rotations = motion.rotations.copy() if turned else motion.rotations
     F = motion.num_frames
     for lo in range(0, F, FK_CHUNK):
         hi = min(F, lo + FK_CHUNK)
         rot, pos = fk_joints(sk, motion.rotations[lo:hi], motion.translations[lo:hi], joints)
         at = {j: n for n, j in enumerate(joints)}
+        if turned:
+            was, _ = fk_joints(sk, reference.rotations[lo:hi], reference.translations[lo:hi],
+                               parents)
         for f in followers:
             a, p = at[f.anchor], at[int(sk.parents[f.joint])]
             world = pos[:, a] + qrot(rot[:, a], np.broadcast_to(f.offset, (hi - lo, 3)))
             translations[lo:hi, slot[f.joint]] = qrot(qconj(rot[:, p]), world - pos[:, p])
-    return motion.replace(translations=translations)
+        for f in turned:
+            p = int(sk.parents[f.joint])
+            rotations[lo:hi, f.joint] = qmul(qmul(qconj(rot[:, at[p]]), was[:, parents.index(p)]),
+                                             motion.rotations[lo:hi, f.joint])
+    return motion.replace(rotations=rotations, translations=translations)
 
 
 def carriers(followers) -> dict:
