@@ -734,20 +734,33 @@ def remap(correspondence: Correspondence, target, performer) -> Correspondence:
 
 
 def _refuse_carried(binding, constraints) -> None:
-    """Raise :class:`ConstraintError` for an enabled orientation constraint on a control joint
-    the binding carries with a limb (:mod:`engine.conversion.followers`): the IK holds a
-    point there through the limb that carries it, but the joint turns as its performer
-    joint (or its anchor), placed after the correction, so no turn of the limb meets an
-    orientation goal on it."""
-    carried = {binding.target.names[f.joint]: binding.target.names[f.anchor]
-               for f in binding.followers}
+    """Raise :class:`ConstraintError` for an enabled constraint the IK cannot hold on a
+    control joint the binding carries with a limb (:mod:`engine.conversion.followers`): an
+    orientation on it (the IK holds a point there through the limb that carries it, but the
+    joint turns as its performer joint, or its anchor, placed after the correction, so no
+    turn of the limb meets an orientation goal on it), or any goal on a joint that hangs
+    from it (Kenney's ``LeftHeelRoll`` under ``LeftFootCtrl``: the IK would turn the control
+    joint and the root above it, and the control joint is placed after the correction)."""
+    sk = binding.target
+    carried = {sk.names[f.joint]: sk.names[f.anchor] for f in binding.followers}
     for c in constraints:
-        if c.enabled and c.joint in carried and c.kind_object.task_kind.angular:
+        if not c.enabled:
+            continue
+        if c.joint in carried and c.kind_object.task_kind.angular:
             raise ConstraintError(
                 f"constraint {c.name or c.joint!r}: {c.joint} is a control joint carried with "
                 f"{carried[c.joint]} (unmapped, turned as the performer's joint after the "
                 f"IK): no turn of the limb holds its orientation; put the orientation goal on "
                 f"{carried[c.joint]} or map {c.joint} to a performer joint")
+        if c.joint in sk.index:
+            control = next((sk.names[a] for a in sk.ancestors(sk.index[c.joint])
+                            if sk.names[a] in carried), None)
+            if control is not None:
+                raise ConstraintError(
+                    f"constraint {c.name or c.joint!r}: {c.joint} hangs from {control}, a "
+                    f"control joint carried with {carried[control]} and placed after the IK, "
+                    f"which cannot move it; put the goal on {control} or on "
+                    f"{carried[control]}")
 
 
 def _apply_layers(layers, motion: Motion) -> Motion:

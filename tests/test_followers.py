@@ -252,6 +252,42 @@ def test_an_orientation_on_a_carried_joint_is_refused_in_one_line(tmp_path, caps
             assert out.exists(), err
 
 
+def test_a_goal_on_a_joint_hanging_from_a_carried_joint_is_refused(tmp_path, capsys):
+    """Kenney's ``LeftHeelRoll`` hangs from ``LeftFootCtrl``, a control joint carried with
+    the left foot and placed after the IK. The IK cannot move it: solved, a goal on it
+    turned the control joint and the root above it, and the control joint was put back. The
+    CLI refuses it in one line naming the control joint and the limb, and writes nothing;
+    ``enforce`` given the carried joints refuses it too."""
+    import json
+    from motion_composer.app.cli import main
+    from motion_composer.engine.conversion.followers import carriers
+    from motion_composer.engine.correction.constraints import ConstraintError
+    from motion_composer.engine.correction.enforcement import enforce
+    walk = shared_path("bandai1_walk_normal_001.bvh")
+    cons = tmp_path / "heel.json"
+    cons.write_text(json.dumps({"constraints": [
+        {"joint": "LeftHeelRoll", "kind": "position", "goal": {"point": [0.1, 0.2, 0.3]},
+         "range": [40, 50, 60, 70], "name": "heel"}]}))
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", str(walk), "--target", str(KENNEY), "-o", str(out),
+                 "--constraints", str(cons)]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert "'heel'" in lines[0] and "LeftHeelRoll hangs from LeftFootCtrl" in lines[0]
+    assert "carried with LeftFoot" in lines[0]
+    assert not out.exists()
+    character = _character(KENNEY)
+    performer = read_motion(walk)
+    scene = Scene(Project(performer=Source(str(walk)), target=Source(str(KENNEY)),
+                          correspondence=automap(character.rest_motion().skeleton,
+                                                 performer.skeleton)),
+                  performer, character.rest_motion())
+    heel = Constraint.from_dict(json.loads(cons.read_text())["constraints"][0])
+    with pytest.raises(ConstraintError, match="LeftHeelRoll hangs from LeftFootCtrl"):
+        enforce(scene.edited, [heel], carried=carriers(scene.binding.followers))
+
+
 @pytest.mark.parametrize("clip", ["bandai1_walk_normal_001.bvh", "bandai1_kick_normal_001.bvh"])
 def test_the_robots_feet_stand_flat_where_the_performers_do(clip):
     """A carried foot turns as the performer's ankle turns from standing flat (the pitch of

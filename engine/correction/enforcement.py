@@ -919,11 +919,17 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     from ..describe import figure_size
 
     cons = _check(constraints, composed, pins)
-    for c in cons:
-        if carried and composed.skeleton.index[c.joint] in carried and \
-                c.kind_object.task_kind.angular:
+    sk = composed.skeleton
+    for c in cons if carried else ():
+        j = sk.index[c.joint]
+        if j in carried and c.kind_object.task_kind.angular:
             raise ConstraintError(f"constraint {c.name or c.joint!r}: {c.joint} is carried with "
                                   "a limb, which holds a point on it, not its orientation")
+        control = next((a for a in sk.ancestors(j) if a in carried), None)
+        if control is not None:
+            raise ConstraintError(f"constraint {c.name or c.joint!r}: {c.joint} hangs from "
+                                  f"{sk.names[control]}, which is carried with a limb and "
+                                  "placed after the IK")
     options = options if options is not None else IKOptions()
     if options.scale is None:
         options = dataclasses.replace(options, scale=figure_size(composed))
