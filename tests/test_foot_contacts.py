@@ -325,13 +325,16 @@ def test_the_joints_below_the_feet_stay_on_or_above_the_floor(solved):
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
-    "jumps-cmumb-holden": "2.07: LeftFoot at frame 977, 443 deg/s over a limit of 214 (ramp "
-                          "965-979; the dense solve's worst is 2.11 at 976, 261 over 124, "
-                          "which lets the keys match it within two frames): the capture jerks for one frame at 975 and 980 (the hips "
-                          "4.3 degrees and back, 517 deg/s, the right thigh 8.5, 1014 deg/s; "
-                          "the feet 5 mm), and the pinned toes turn the feet to absorb it; "
-                          "with those two frames interpolated the worst is 1.09 (LeftLeg at "
-                          "1539, three landing ramps overlapping)",
+    "jumps-cmumb-holden": "1.87: LeftFoot at frame 974, 394 deg/s over a limit of 211 (ramp "
+                          "965-979; the dense solve's worst is 2.11 at 976, 261 over 124): the "
+                          "capture jerks for one frame at 975 and 980 (the hips 4.5 degrees "
+                          "and back, the thighs 5.9 and 8.9, the right foot 4.9; the feet "
+                          "5 mm). With the toes and the right foot held, the solve of frame 975 "
+                          "alone (before any blend) moves the root 9 mm and turns LeftFoot's "
+                          "correction 1.7 degrees from its neighbours', and the keys spread "
+                          "that over frames 972-976; with the capture's one-frame jerks taken "
+                          "out of the attraction the dense worst is 1.09 (LeftLeg at 1539, "
+                          "three landing ramps overlapping)",
 }
 
 
