@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import limits
 from ..ik import TaskState
-from .base import ConstraintError, ConstraintKind, GoalField, numbers, unit_vector, vector
+from .base import ConstraintError, ConstraintKind, GoalField, frame_keys, unit_vector, vector
 
 __all__ = ["PlaneKind", "KIND", "SIDES"]
 
@@ -59,14 +58,7 @@ class PlaneKind(ConstraintKind):
         out = {"point": vector(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
                "normal": unit_vector(normal), "side": side}
         if "lift" in goal:
-            keys = numbers(goal["lift"], "goal.lift", label,
-                           "rows of [frame, metres] numbers, all of one length")
-            if keys.ndim != 2 or keys.shape[1] != 2 or len(keys) < 1 or \
-                    not limits.all_usable(keys) or np.any(np.diff(keys[:, 0]) <= 0):
-                raise ConstraintError(f"{label}: goal.lift must be [[frame, metres], ...] with "
-                                      "increasing frames, finite numbers of magnitude at most "
-                                      f"{limits.MAX_MAGNITUDE:g}", "goal.lift")
-            out["lift"] = keys
+            out["lift"] = frame_keys(goal["lift"], ["metres"], "goal.lift", label)
         return out
 
     def variant(self, goal):
