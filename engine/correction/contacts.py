@@ -19,7 +19,7 @@ import numpy as np
 from .constraints import Constraint
 from ..kinematics import fk_arrays, fk_joints
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qrot, quat_between
+from ..quaternions import qconj, qmul, qrot, quat_between, to_matrix
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
@@ -602,8 +602,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
 def _lowest(turn: np.ndarray, points: np.ndarray) -> np.ndarray:
     """``(F,)`` [m] the lowest height of ``points`` ``(V, 3)`` (in a joint's frame) above the
     joint, turned by ``turn`` ``(F, 4)``: the lowest point of a foot's mesh, per frame."""
-    y = qrot(np.repeat(turn, len(points), axis=0), np.tile(points, (len(turn), 1)))[:, 1]
-    return y.reshape(len(turn), -1).min(1)
+    return (to_matrix(turn)[:, 1, :] @ points.T).min(axis=1)      # the turned heights
 
 
 def _rise(lift: np.ndarray, ankle: np.ndarray) -> np.ndarray:
