@@ -37,7 +37,7 @@ from .conversion.automap import automap
 from .conversion.binding import bind
 from .conversion.composer import compose
 from .conversion.converter import convert
-from .conversion.followers import carriers, follow
+from .conversion.followers import above_floor, carriers, follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, ConstraintError, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
@@ -290,8 +290,36 @@ class Scene:
             return self.derived.get("edited", (key, layers), lambda: follow(
                 binding.followers, _apply_layers(p.layers, composed)))
         edited = self._raw("edited")
-        return self.derived.get("motion", (key, layers, p.displacement), lambda: follow(
-            binding.followers, p.displacement.apply(edited), edited))
+        soles = self._soles(p.constraints)
+        return self.derived.get("motion", (key, layers, p.displacement, soles), lambda: (
+            self._placed(p.displacement.apply(edited), edited, soles)))
+
+    def _soles(self, constraints) -> tuple:
+        """``(floor, names)``: the carried feet whose meshes an enabled floor among
+        ``constraints`` keeps above the character's floor (:meth:`_placed`); ``names`` empty
+        where there are none."""
+        carried = {self.target.skeleton.names[j] for j in self.carried}
+        names = tuple(sorted({c.joint for c in constraints
+                              if c.enabled and c.meta.get("floor") and c.joint in carried}))
+        if not names:
+            return 0.0, ()
+        ground = self.ground()
+        return ground.floor, tuple(n for n in names if n in ground.soles)
+
+    def _placed(self, motion: Motion, reference: Motion, soles: tuple) -> Motion:
+        """The IK's ``motion`` (a correction of ``reference``) as delivered: the control joints
+        carried with the limbs where the limbs put them, turned as their performer joints
+        (:func:`~engine.conversion.followers.follow`), and the carried feet ``soles``
+        (:meth:`_soles`) turned back towards flat where their meshes would go under the
+        floor (:func:`~engine.conversion.followers.above_floor`)."""
+        followers = self.binding.followers
+        motion = follow(followers, motion, reference)
+        floor, names = soles
+        if names:
+            ground, index = self.ground(), self.target.skeleton.index
+            motion = above_floor(followers, motion, floor,
+                                 {index[n]: ground.soles[n] for n in names})
+        return motion
 
     def _value(self, stage: str):
         value = self._raw(stage)
@@ -593,8 +621,8 @@ class Scene:
         if correction is not None and self.binding.followers:
             # the dense solve as delivered: its carried control joints where its limbs put
             # them (the IK holds their goals through the limbs and leaves them behind)
-            correction = dataclasses.replace(correction, motion=follow(
-                self.binding.followers, correction.motion, self.edited))
+            correction = dataclasses.replace(correction, motion=self._placed(
+                correction.motion, self.edited, self._soles(chosen)))
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)
@@ -665,10 +693,10 @@ class Scene:
                 self.derived.computed["window solver"] += 1
             motion = solver.preview(constraints, base_constraints, base_motion)
             if motion is not None:
-                return follow(self.binding.followers, motion, composed), "window"
-        return follow(self.binding.followers, enforce(
-            composed, constraints, options=options, carried=self.carried).motion,
-            composed), "full"
+                return self._placed(motion, composed, self._soles(constraints)), "window"
+        return self._placed(enforce(composed, constraints, options=options,
+                                    carried=self.carried).motion,
+                            composed, self._soles(constraints)), "full"
 
 
 _PROJECT_FIELDS = frozenset(f.name for f in dataclasses.fields(Project))

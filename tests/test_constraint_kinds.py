@@ -5,7 +5,6 @@ its name."""
 from __future__ import annotations
 
 import ast
-import dataclasses
 import json
 from functools import lru_cache
 from pathlib import Path
@@ -194,16 +193,11 @@ def _examples() -> dict:
     ({"side": "beside"}, "goal.side"),
     ({"normal": [0, 0, 0]}, "goal.normal"),
     ({"quaternion": [0, 0, 0, 0]}, "goal.quaternion"),
-    ({"lift": [[3, 0.1], [1, 0.2]]}, "goal.lift"),
-    ({"lift": [[0, 0.1], [1]]}, "goal.lift"),
-    ({"lift": [[0, "up"]]}, "goal.lift"),
-    ({"lift": [[0, 0.1, 0.2]]}, "goal.lift"),
 ])
 def test_a_bad_goal_names_its_field(goal, field):
     kind = field.split(".")[1]
     name = {"point": "position", "points": "trajectory", "keys": "trajectory",
-            "side": "plane", "normal": "plane", "lift": "plane",
-            "quaternion": "orientation"}[kind]
+            "side": "plane", "normal": "plane", "quaternion": "orientation"}[kind]
     with pytest.raises(ConstraintError, match=field.replace(".", r"\.")) as exc:
         Constraint("Hips", name, goal, 0, 0, 5, 5)
     assert exc.value.field == field
@@ -218,35 +212,6 @@ def test_goals_go_to_json_and_back_bit_for_bit(name):
     assert json.dumps(back.to_dict()) == text
     for key, value in c.goal.items():
         assert np.array_equal(back.goal[key], value)
-
-
-def test_a_moving_plane_is_lifted_frame_by_frame_and_kept_through_edits():
-    """A plane with a lift (the floor under a carried foot): its task goals move along the
-    normal as the keys say (linear between them, held beyond), and the lift goes to JSON and
-    back, along with a range's shift, through a change of side and a goal taken from a pose."""
-    c = Constraint("LeftToe", "plane", {"point": [0, 0.5, 0], "normal": [0, 2, 0],
-                                        "side": "above", "lift": [[2, 0.0], [4, 0.2]]},
-                   0, 0, 9, 9)
-    kind = c.kind_object
-    goals = kind.task_goals(c, np.arange(7))
-    np.testing.assert_allclose(goals[:, 1], [0.5, 0.5, 0.5, 0.6, 0.7, 0.7, 0.7], atol=1e-15)
-    np.testing.assert_array_equal(goals[:, [0, 2]], 0.0)
-    np.testing.assert_array_equal(goals[:, 3:], [[0, 1, 0, 1]] * 7)
-    assert kind.describe(c.goal) == "plane above (moving)"
-    back = Constraint.from_dict(json.loads(json.dumps(c.to_dict())))
-    np.testing.assert_array_equal(back.goal["lift"], c.goal["lift"])
-    assert back.same_as(c)
-    shifted = kind.retimed_goal(c, -2)
-    np.testing.assert_array_equal(shifted["lift"][:, 0], [0, 2])
-    assert kind.retimed_goal(c, None) is c.goal
-    below = kind.converted_goal(c, "below", np.zeros(3), np.array([0, 0, 0, 1.0]), 3)
-    assert below["side"] == "below"
-    np.testing.assert_array_equal(below["lift"], c.goal["lift"])
-    # taken from a pose at frame 3 (lifted 0.1): the plane passes through the joint there
-    positions = np.zeros((5, 1, 3))
-    positions[3, 0] = [0.3, 0.9, 0.1]
-    posed = dataclasses.replace(c, goal=kind.goal_from_pose(c, positions, None, 3, 0))
-    assert kind.task_goals(posed, np.array([3]))[0, 1] == pytest.approx(0.9, abs=1e-15)
 
 
 # ---------------------------------------------------------------------- one place

@@ -1011,7 +1011,6 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             self.axes.setData(pos=np.concatenate(axes), color=np.tile(AXES, (len(axes), 1)),
                               mode="lines")
         self.axes.setVisible(bool(axes))
-
     def _draw_point(self, c, shapes, off, f, size) -> None:
         shapes.points.append(to_view(c.goal_point(np.array([f]))[0]) + off)
 
@@ -1023,7 +1022,7 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
             shapes.points.append(path[f - c.start])
 
     def _draw_plane(self, c, shapes, off, f, size) -> None:
-        shapes.quads.append(self._plane_quad(c, off, f, size))
+        shapes.quads.append(self._plane_quad(c, off, size))
 
     def _draw_axes(self, c, shapes, off, f, size) -> None:
         """The goal orientation's x, y, z axes at where the joint is now."""
@@ -1039,18 +1038,17 @@ class Viewport(GLViewMixin, QtOpenGL.QOpenGLWindow):
     #: a kind's drawing (:data:`~engine.correction.constraints.base.DRAWINGS`) -> its drawer
     _DRAW = {"point": _draw_point, "path": _draw_path, "plane": _draw_plane, "axes": _draw_axes}
 
-    def _plane_quad(self, c, off, f, size):
+    def _plane_quad(self, c, off, size):
         """A plane is unbounded: it is drawn as a square pad on it under where its joint is
         now (a floor plane's goal point is anywhere on it, the world's origin for the
-        project's floor), so each foot joint's floor shows under that joint; a plane that
-        moves (a carried foot's floor) where it is at frame ``f``."""
+        project's floor), so each foot joint's floor shows under that joint."""
         n = np.asarray(c.goal["normal"], dtype=float)
         n = n / np.linalg.norm(n)
         helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 0, 1.0])
         u = np.cross(n, helper)
         u /= np.linalg.norm(u)
         w = np.cross(n, u)
-        p = np.asarray(c.goal["point"], dtype=float) + c.kind_object.lift(c.goal, [f])[0] * n
+        p = np.asarray(c.goal["point"], dtype=float)
         data = self.skeleton_points("target")
         if data is not None and c.joint in self.doc.scene.target.skeleton.index:
             x = data[0][self.doc.scene.target.skeleton.index[c.joint]]

@@ -17,9 +17,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constraints import Constraint
+from ..conversion.followers import lowest
 from ..kinematics import fk_arrays, fk_joints
 from ..motion import Motion
-from ..quaternions import qconj, qmul, qrot, quat_between, to_matrix
+from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
@@ -432,9 +433,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
       held too (the converted orientation at the contact's middle frame);
     * on every frame each held foot joint stays at or above its planted height (a one-sided
       plane: the floor rule), and so does each joint below a held foot whose height the
-      ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes). Under a
-      carried foot whose mesh the ``ground`` knows (``Ground.soles``) the plane rises where
-      the foot's turn takes the mesh lower than at rest, so that it stays above the floor.
+      ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes).
 
     ``ground``: where the feet stand (:func:`target_ground`); by default the direct
     conversion's own (:func:`converted_ground`, on ``floor`` where given). ``carried``: the
@@ -460,14 +459,6 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     # the character's size, for a carried foot's heel (below)
     from ..describe import figure_size
     size = figure_size(composed) if carried else None
-    # per frame, how far each carried foot whose mesh the ground knows must rise above its
-    # planted height for no point of its mesh to go under the floor: its turn is the
-    # performer's foot's, which the IK does not change, and a rigid foot a metre long (the
-    # robot's), pitched with the performer's through a swing or a ramp, went 0.2-0.4 m into
-    # the floor; no faster than the foot itself rises and falls (:func:`_rise`)
-    lifts = {ankle: _rise(np.maximum(-_lowest(t_rot[sk.index[ankle]], ground.soles[ankle])
-                                     - ground.heights[ankle], 0.0), t_pos[sk.index[ankle]])
-             for ankle, _ in feet_t if ankle in ground.soles}
     # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
     runs = []
     for c in used:
@@ -494,9 +485,12 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                            (c.end - c.start + 1, 1))
             path[:, 1] = (flat + np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
                           if down else np.maximum(y, np.median(y)))
-            if ankle in lifts:
-                # and high enough that no point of its foot goes under the floor
-                path[:, 1] = np.maximum(path[:, 1], flat + lifts[ankle][frames])
+            if ankle in ground.soles:
+                # and high enough that no point of its foot goes under the floor: its turn
+                # is the performer's foot's, which the IK does not change (a rigid foot a
+                # metre long, pitched through heel-off, sank its toe 0.2-0.4 m)
+                path[:, 1] = np.maximum(path[:, 1], ground.floor - lowest(
+                    t_rot[a][frames], ground.soles[ankle]))
             runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
             continue
         if toe is None:
@@ -586,51 +580,15 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                     floors[name] = pairs.get(name) or pairs[toe if toe in held else ankle]
     for joint in sorted(floors):
         height = ground.floor + ground.heights[joint]
-        goal = {"point": [0.0, height, 0.0], "normal": [0, 1, 0], "side": "above"}
-        if joint in lifts and lifts[joint].any():
-            # a carried foot's floor rises where its turn takes its mesh lower than at rest
-            goal["lift"] = _lift_keys(lifts[joint])
-        out.append(Constraint(joint=joint, kind="plane", goal=goal,
+        out.append(Constraint(joint=joint, kind="plane",
+                              goal={"point": [0.0, height, 0.0], "normal": [0, 1, 0],
+                                    "side": "above"},
                               smooth_in=0, start=0, end=F - 1, smooth_out=F - 1,
                               priority=priority, name=f"floor {joint}", auto=True,
                               meta={"source": "contact", "floor": True,
                                     "performer_joint": floors[joint]}))
     out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
-
-
-def _lowest(turn: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """``(F,)`` [m] the lowest height of ``points`` ``(V, 3)`` (in a joint's frame) above the
-    joint, turned by ``turn`` ``(F, 4)``: the lowest point of a foot's mesh, per frame."""
-    return (to_matrix(turn)[:, 1, :] @ points.T).min(axis=1)      # the turned heights
-
-
-def _rise(lift: np.ndarray, ankle: np.ndarray) -> np.ndarray:
-    """``(F,)`` [m] the least curve at or above ``lift`` ``(F,)`` that changes from frame to
-    frame no faster than the converted ``ankle`` ``(F, 3)`` [m] mostly rises and falls (the
-    90th percentile of its height's change from frame to frame): the ankle is raised over
-    the frames around where its mesh needs it. Raised at the rate the mesh needs (a foot
-    pitched 450 deg/s), the robot's legs and body turned 1.12 times faster than the no-pop
-    rule allows on the Bandai walk; at the 90th percentile no clip onto it breaks the rule
-    (at the 75th the CMU jumps did, 1.09, at the 95th they and the Bandai walk did)."""
-    step = float(np.percentile(np.abs(np.diff(ankle[:, 1])), 90)) if len(ankle) > 1 else 0.0
-    out = lift.copy()
-    if step <= 0.0:
-        return out
-    for t in range(1, len(out)):                        # the cone's two sides
-        out[t] = max(out[t], out[t - 1] - step)
-    for t in range(len(out) - 2, -1, -1):
-        out[t] = max(out[t], out[t + 1] - step)
-    return out
-
-
-def _lift_keys(lift: np.ndarray) -> np.ndarray:
-    """``[frame, metres]`` keys of a plane's ``lift`` ``(F,)`` per frame: its frames above
-    zero and the zeros next to them (linear between keys, the lift is the same on every
-    frame)."""
-    up = lift > 0.0
-    frames = np.flatnonzero(up | np.r_[up[1:], False] | np.r_[False, up[:-1]])
-    return np.column_stack([frames, lift[frames]])
 
 
 def horizontal_drift(motion: Motion, joint: str, start: int, end: int) -> float:

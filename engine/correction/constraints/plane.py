@@ -4,11 +4,6 @@
 is the side the normal points to. ``above`` and ``below`` are one-sided: no pull while
 satisfied. The floor is a plane.
 
-An optional ``"lift": [[frame, metres], ...]`` moves the plane along its normal from frame to
-frame (linear between keys, held beyond the ends; keys at whole frames, increasing): the
-floor under a carried foot that turns as the performer's, raised where its own mesh would
-go under the floor (:func:`~engine.correction.contacts.contact_constraints`).
-
 The IK task has one row, the signed distance to the plane; its task goal packs the plane per
 frame as ``[point (3), normal (3), side (1)]`` with side +1 above, 0 on, -1 below.
 """
@@ -17,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..ik import TaskState
-from .base import ConstraintError, ConstraintKind, GoalField, frame_keys, unit_vector, vector
+from .base import ConstraintError, ConstraintKind, GoalField, unit_vector, vector
 
 __all__ = ["PlaneKind", "KIND", "SIDES"]
 
@@ -55,11 +50,8 @@ class PlaneKind(ConstraintKind):
         if side not in SIDES:
             raise ConstraintError(f"{label}: goal.side must be one of {', '.join(SIDES)}, not "
                                   f"{side!r}", "goal.side")
-        out = {"point": vector(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
-               "normal": unit_vector(normal), "side": side}
-        if "lift" in goal:
-            out["lift"] = frame_keys(goal["lift"], ["metres"], "goal.lift", label)
-        return out
+        return {"point": vector(goal.get("point", [0, 0, 0]), 3, "goal.point", label),
+                "normal": unit_vector(normal), "side": side}
 
     def variant(self, goal):
         return goal["side"]
@@ -68,17 +60,7 @@ class PlaneKind(ConstraintKind):
         return f"{self.label}: {variant}"
 
     def describe(self, goal):
-        return f"{self.name} {goal['side']}" + (" (moving)" if "lift" in goal else "")
-
-    @staticmethod
-    def lift(goal, frames) -> np.ndarray:
-        """``(n,)`` [m] how far the plane of ``goal`` is moved along its normal at ``frames``
-        (zeros without a ``"lift"``)."""
-        frames = np.asarray(frames, dtype=float)
-        if "lift" not in goal:
-            return np.zeros(frames.shape)
-        keys = goal["lift"]
-        return np.interp(frames, keys[:, 0], keys[:, 1])
+        return f"{self.name} {goal['side']}"
 
     def carried_point(self, c, frame):
         return np.array(c.goal["point"], dtype=float)
@@ -86,21 +68,12 @@ class PlaneKind(ConstraintKind):
     def converted_goal(self, c, variant, here, turn, frame):
         point = c.kind_object.carried_point(c, frame)
         point = np.asarray(here, dtype=float) if point is None else point
-        if c.kind_object is self:           # another side: the plane stays where it is
-            return {**c.goal, "side": variant or "above"}
-        return {"point": point, "normal": [0.0, 1.0, 0.0], "side": variant or "above"}
+        normal = c.goal["normal"] if c.kind_object is self else [0.0, 1.0, 0.0]
+        return {"point": point, "normal": normal, "side": variant or "above"}
 
     def goal_from_pose(self, c, positions, rotations, frame, index):
-        # through the joint at that frame: a plane that moves keeps its moves from there
-        point = positions[frame, index] - self.lift(c.goal, [frame])[0] * c.goal["normal"]
-        return {**c.goal, "point": point}
-
-    def retimed_goal(self, c, shift):
-        if shift and "lift" in c.goal:
-            keys = np.array(c.goal["lift"], dtype=float)
-            keys[:, 0] += shift
-            return {**c.goal, "lift": keys}
-        return c.goal
+        return {"point": positions[frame, index].copy(), "normal": c.goal["normal"],
+                "side": c.goal["side"]}
 
     # ------------------------------------------------------------------ IK task
     @staticmethod
@@ -120,10 +93,7 @@ class PlaneKind(ConstraintKind):
         return self.task_goal(c.goal["point"], c.goal["normal"], SIDES[c.goal["side"]])
 
     def task_goals(self, c, frames):
-        goals = np.tile(self._plane(c), (len(frames), 1))
-        if "lift" in c.goal:
-            goals[:, 0:3] += self.lift(c.goal, frames)[:, None] * c.goal["normal"]
-        return goals
+        return np.tile(self._plane(c), (len(frames), 1))
 
     @staticmethod
     def _distance(goal: np.ndarray, state: TaskState) -> np.ndarray:
