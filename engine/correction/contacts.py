@@ -87,7 +87,9 @@ class Ground:
             to its toe then (``None`` without a toe).
         soles: target ankle -> ``(V, 3)`` [m] its foot's mesh vertices in its own frame,
             for a foot without a toe joint that turns as the performer's (a carried foot:
-            :func:`contact_constraints` keeps them above the floor); empty without a mesh.
+            :func:`contact_constraints` keeps them above the floor through its contacts,
+            :func:`~engine.conversion.followers.above_floor` elsewhere); empty without a
+            mesh.
     """
 
     floor: float
