@@ -363,14 +363,13 @@ def _sole_heights(motion, floor):
 def test_the_robots_soles_stay_on_the_floor(clip):
     """The robot's feet have no toe joint and pitch with the performer's feet (its rigid
     foot is 0.95 m long): the direct conversion takes their tips 0.42 and 0.47 m under the
-    floor, and held at the ankle alone, through heel-off and the swings, as deep. Each
-    contact's path lifts the ankle where the foot's pitch needs it, and where nothing holds
-    the ankle the floor constraint turns the foot back towards flat, just as far as its mesh
-    needs, eased over a quarter second: every vertex stays above the floor on every frame,
-    within a millimetre; the feet are turned only within a quarter second of where they
-    would go under; and no joint pops (raising the ankle there instead turned the legs 1.12
-    times the limit, or, eased, floated the planted feet 17 cm). Without a floor the feet
-    turn as converted, bit for bit."""
+    floor, and held at the ankle alone, through heel-off and the swings, as deep. The floor
+    constraint turns each foot back towards flat where its mesh would go under, just as far
+    as it needs, eased over a quarter second: every vertex stays above the floor on every
+    frame, within a millimetre; the feet are turned only within a quarter second of where
+    they would go under; and no joint pops (raising the ankle there instead turned the legs
+    1.12 times the limit, or, eased, floated the planted feet 17 cm). Without a floor the
+    feet turn as converted, bit for bit."""
     scene, solution = _robot_solved(clip)
     sk = scene.target.skeleton
     floor = solution.scene.ground().floor

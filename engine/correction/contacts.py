@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constraints import Constraint
-from ..conversion.followers import lowest
 from ..kinematics import fk_arrays, fk_joints
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot, quat_between
@@ -86,10 +85,9 @@ class Ground:
             with the foot flat (x, y, z, w; the rest pose's) and the vector [m] from the ankle
             to its toe then (``None`` without a toe).
         soles: target ankle -> ``(V, 3)`` [m] its foot's mesh vertices in its own frame,
-            for a foot without a toe joint that turns as the performer's (a carried foot:
-            :func:`contact_constraints` keeps them above the floor through its contacts,
-            :func:`~engine.conversion.followers.above_floor` elsewhere); empty without a
-            mesh.
+            for a foot without a toe joint that turns as the performer's (a carried foot,
+            which :func:`~engine.conversion.followers.above_floor` turns back towards flat
+            where they would go under the floor); empty without a mesh.
     """
 
     floor: float
@@ -487,12 +485,6 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                            (c.end - c.start + 1, 1))
             path[:, 1] = (flat + np.maximum(y - y[np.array(down) - c.start].min(), 0.0)
                           if down else np.maximum(y, np.median(y)))
-            if ankle in ground.soles:
-                # and high enough that no point of its foot goes under the floor: its turn
-                # is the performer's foot's, which the IK does not change (a rigid foot a
-                # metre long, pitched through heel-off, sank its toe 0.2-0.4 m)
-                path[:, 1] = np.maximum(path[:, 1], ground.floor - lowest(
-                    t_rot[a][frames], ground.soles[ankle]))
             runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
             continue
         if toe is None:
