@@ -79,19 +79,6 @@ def numbers(value, field: str, label: str, what: str) -> np.ndarray:
                               field) from None
 
 
-def frame_keys(value, columns: list[str], field: str, label: str) -> np.ndarray:
-    """``value`` as keys ``[[frame, *columns], ...]`` (at least one, frames increasing, finite
-    numbers); a :class:`ConstraintError` on ``field`` otherwise."""
-    row = f"[frame, {', '.join(columns)}]"
-    keys = numbers(value, field, label, f"rows of {row} numbers, all of one length")
-    if keys.ndim != 2 or keys.shape[1] != 1 + len(columns) or len(keys) < 1 or \
-            not limits.all_usable(keys) or np.any(np.diff(keys[:, 0]) <= 0):
-        raise ConstraintError(f"{label}: {field} must be [{row}, ...] with increasing frames, "
-                              f"finite numbers of magnitude at most {limits.MAX_MAGNITUDE:g}",
-                              field)
-    return keys
-
-
 def vector(value, n: int, field: str, label: str) -> np.ndarray:
     """``value`` as ``n`` finite floats; a :class:`ConstraintError` on ``field`` otherwise."""
     arr = numbers(value, field, label, f"{n} numbers").reshape(-1)

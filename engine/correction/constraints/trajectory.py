@@ -10,7 +10,7 @@ import numpy as np
 
 from ... import limits
 from . import position
-from .base import ConstraintError, GoalField, frame_keys, numbers
+from .base import ConstraintError, GoalField, numbers
 from .position import PositionKind
 
 __all__ = ["TrajectoryKind", "KIND"]
@@ -45,7 +45,14 @@ class TrajectoryKind(PositionKind):
                                       f"shape {pts.shape}", "goal.points")
             return {"points": pts}
         if "keys" in goal:
-            return {"keys": frame_keys(goal["keys"], ["x", "y", "z"], "goal.keys", label)}
+            keys = numbers(goal["keys"], "goal.keys", label,
+                           "rows of [frame, x, y, z] numbers, all of one length")
+            if keys.ndim != 2 or keys.shape[1] != 4 or len(keys) < 1 or \
+                    not limits.all_usable(keys) or np.any(np.diff(keys[:, 0]) <= 0):
+                raise ConstraintError(f"{label}: goal.keys must be [[frame, x, y, z], ...] "
+                                      "with increasing frames, finite numbers of magnitude "
+                                      f"at most {limits.MAX_MAGNITUDE:g}", "goal.keys")
+            return {"keys": keys}
         raise ConstraintError(f"{label}: a trajectory goal needs 'points' (one per "
                               "frame) or 'keys' ([frame, x, y, z] ...)", "goal")
 
