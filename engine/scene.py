@@ -299,6 +299,8 @@ class Scene:
         ``constraints`` keeps above the character's floor (:meth:`_placed`); ``names`` empty
         where there are none."""
         carried = {self.target.skeleton.names[j] for j in self.carried}
+        if not carried:              # most characters: nothing to look for (asked per frame)
+            return 0.0, ()
         names = tuple(sorted({c.joint for c in constraints
                               if c.enabled and c.meta.get("floor") and c.joint in carried}))
         if not names:
