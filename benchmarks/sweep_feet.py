@@ -22,6 +22,10 @@ same readers, automatic map, project and :meth:`Scene.solve`), and one row is pr
   above its own rest height (rule 2); ``-`` where the character has none;
 * ``pop``: the worst angular-speed ratio of ``quality()["pops"]`` with its joint and frame
   (rule 3; allowed 1);
+* ``steady``: the delivered keys' worst turn on any frame over 1.5 times the conversion's or
+  the dense solve's fastest turn of that joint within two frames (at least 30 deg/s;
+  test_foot_contacts' ``keyed_steadiness``; allowed 1); ``keys``: ``tasks`` where the keys
+  were fitted to the constraints' tasks, ``dense`` where to the dense curves;
 * ``res``: the largest residual of a metric constraint [mm] (rule 4; allowed 1 mm) and of an
   orientation one [deg];
 * ``s``: solve seconds; ``notes``: warnings (the CLI's one-line ones), anything else written
@@ -201,6 +205,11 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
                                     " deg/s")
             else:
                 row["pop"], row["pop_where"] = None, ""
+            if solution.correction is not None:
+                row["steady"], row["steady_where"] = tfc.keyed_steadiness(scene, solution)
+            else:
+                row["steady"], row["steady_where"] = None, ""
+            row["keys"] = (solution.report.get("keys") or {}).get("fitted_to")
             metric = [c for c in q["constraints"] if c["residual_unit"] == "m"
                       and c["max_residual"] is not None]
             angular = [c for c in q["constraints"] if c["residual_unit"] == "rad"
@@ -237,7 +246,7 @@ def _fmt(x, spec, empty="-"):
 
 HEADER = (f"{'clip':40s} {'target':38s} {'frames':>6s} {'cont':>4s} {'cover':>6s} "
           f"{'heel%':>7s} {'toe%':>7s} {'floor':>7s} {'tip':>6s} {'pop':>6s} {'pop at':32s} "
-          f"{'res mm':>7s} {'res deg':>7s} {'s':>6s}  notes")
+          f"{'steady':>6s} {'keys':>5s} {'res mm':>7s} {'res deg':>7s} {'s':>6s}  notes")
 
 
 def format_row(row: dict) -> str:
@@ -258,6 +267,8 @@ def format_row(row: dict) -> str:
         flags.append("R3")
     if (row.get("res_mm") or 0) > 1.0:
         flags.append("R4")
+    if (row.get("steady") or 0) > 1.0:
+        flags.append("steady " + row["steady_where"])
     if row.get("cover") is not None and row["cover"] < 0.9:
         flags.append("cover")
     if row.get("error"):
@@ -269,7 +280,8 @@ def format_row(row: dict) -> str:
             f"{_fmt(None if row.get('toe') is None else 100 * row['toe'], '7.3f')} "
             f"{_fmt(row.get('floor_mm'), '7.1f')} {_fmt(row.get('tip_mm'), '6.1f')} "
             f"{_fmt(row.get('pop'), '6.2f')} "
-            f"{row.get('pop_where', ''):32s} {_fmt(row.get('res_mm'), '7.2f')} "
+            f"{row.get('pop_where', ''):32s} {_fmt(row.get('steady'), '6.2f')} "
+            f"{row.get('keys') or '-':>5s} {_fmt(row.get('res_mm'), '7.2f')} "
             f"{_fmt(row.get('res_deg'), '7.2f')} {_fmt(row.get('seconds'), '6.1f')}  {notes}")
 
 

@@ -403,6 +403,55 @@ def test_no_joint_pops_around_a_ramp(solved, request):
                                 f"{np.degrees(limit[k, j]):.0f}")
 
 
+
+
+def keyed_steadiness(scene, solution) -> tuple[float, str]:
+    """The delivered motion's (the solved keys') worst turn over its steady limit, on every
+    frame: 1.5 times the fastest turn of that joint in the direct conversion or the dense IK
+    result within two frames, and at least 30 deg/s; with the joint, frame and speeds. The
+    control joints carried with the limbs (placed after the keys) are not judged."""
+    from scipy.ndimage import maximum_filter1d
+    direct, keyed = scene.composed, solution.motion
+    dense = solution.correction.motion
+    fps = direct.fps
+    fastest = np.maximum(angular_speed(direct.rotations, fps),
+                         angular_speed(dense.rotations, fps))
+    limit = np.maximum(1.5 * maximum_filter1d(fastest, 5, axis=0, mode="nearest"),
+                       np.radians(30.0))
+    speed = angular_speed(keyed.rotations, fps)
+    ratio = speed / limit
+    ratio[:, list(scene.carried)] = 0.0
+    k, j = np.unravel_index(np.argmax(ratio), ratio.shape)
+    return float(ratio[k, j]), (f"{keyed.skeleton.names[j]}@{k} {np.degrees(speed[k, j]):.0f}/"
+                                f"{np.degrees(limit[k, j]):.0f} deg/s")
+
+
+#: pairs whose keys still turn a joint faster than that, and why
+STEADY_OPEN = {
+    "dance-rokoko-cmutpose": "4.67: RightFoot at frame 974 (140 deg/s where the capture and "
+                             "the dense solve hold it still, after a ramp that ended at 968). "
+                             "Costlier speed where the keys wobble moves the wobble along the "
+                             "clip round after round (frames 39, 87, 190, 340, 570, 640), and "
+                             "costlier speed of the whole joint makes the root lurch; either "
+                             "way pops and lurches come back, and the keys from before are "
+                             "kept",
+}
+
+
+def test_the_keys_turn_no_joint_faster_than_the_conversion_or_the_dense_solve(solved, request):
+    """On every frame, not only around the ramps, the delivered motion (the solved keys) turns
+    no joint more than 1.5 times as fast as the direct conversion or the dense IK result does
+    within two frames (:func:`keyed_steadiness`): between the tasks, a chain's keys could
+    trade turns that hold a planted foot (before: the CMU jumps onto the CMU T-pose turned a
+    held right ankle 236 deg/s at frame 122, the conversion 16, the dense solve 18; 9 of
+    these 12 pairs went 1.2 to 5 times over)."""
+    case = request.node.callspec.id
+    if case in STEADY_OPEN:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="open: " + STEADY_OPEN[case]))
+    scene, solution, _ = solved
+    ratio, where = keyed_steadiness(scene, solution)
+    assert ratio <= 1.0, f"{ratio:.2f}: {where}"
+
 def _offsets(direct: np.ndarray, corrected: np.ndarray) -> np.ndarray:
     """The corrections ``corrected * direct^-1`` (x, y, z, w)."""
     x1, y1, z1, w1 = np.moveaxis(corrected, -1, 0)

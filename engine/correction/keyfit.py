@@ -192,6 +192,16 @@ CALMING = 16
 ROOT_MARGIN = 1.5
 ROOT_REACH = 3
 ROOT_FLOOR = 0.1
+#: on every frame, not only around the ramps, the keys may turn a joint at most this many
+#: times as fast as the conversion or the dense solve does within :data:`POP_REACH` frames,
+#: and always ``STEADY_FLOOR`` [rad/s]: between the tasks a chain's staggered keys were free
+#: to trade turns that hold a planted foot (the CMU jumps onto the CMU T-pose: a held right
+#: foot's ankle at 236 deg/s on frame 122 where the conversion turns it 16 and the dense
+#: solve 18; 174 of 2,752 frames had a joint past 1.5 times 1.2 times that, 71 past twice)
+STEADY_MARGIN = 1.5
+STEADY_FLOOR = np.radians(30.0)
+#: rounds of a costlier speed where the keys turn a joint past that, at most
+STEADYING = 16
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
 EMPHASIS = 10
@@ -476,10 +486,14 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     _linearised(tasks, _keyed(edited, layout, dense), layout, dense, tolerance)  # the floor
     x = _least_squares(layout.basis, dense)
     reg_pull = sparse.diags(scale)
-    allowed = _pop_allowance(edited, _keyed(edited, layout, dense), cons, 1.0)
+    dense_motion = _keyed(edited, layout, dense)
+    allowed = _pop_allowance(edited, dense_motion, cons, 1.0)
     allowed_root = _root_allowance(edited, root)
+    steady = _steady_limit(edited, dense_motion)
     boost = {}                    # (joint index, frame) -> how much more its speed costs
-    total = rounds = calming = emphasised = stalls = 0
+    total = rounds = calming = emphasised = stalls = steadied = 0
+    # (joints, x, worst, pops and lurches) before the keys were steadied
+    before, popping = None, set()
     best, adding, largest = np.inf, True, []
     # the best keys that held every task within TASK_LIMIT: more rounds can lose them (keys
     # added for a miss under the limit, or a stall, move others off), and then they are kept
@@ -529,21 +543,34 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         keyed = _keyed(edited, layout, layout.values(x))
         popping = _popping(edited, keyed, cons, allowed) | _lurching(edited, keyed,
                                                                      allowed_root)
+        # then (once the keys keep those rules, or their rounds are spent) where they turn a
+        # joint faster than the conversion and the dense solve do nearby
+        # (:func:`_steady_limit`), its speed costs more too, and pops and lurches that
+        # brings are calmed with it; if more are left than before, the keys before are kept
+        steadying = steadied > 0 or not popping or calming >= CALMING
+        if steadying and before is None:
+            before = (copy.deepcopy(joints), x.copy(), worst, len(popping))
+        wobbling = _wobbling(keyed, steady) if steadying else set()
         emphasise = bool(misses) and emphasised < EMPHASIS and \
             tasks.emphasise(sizes, tolerance)
-        calm = bool(popping) and calming < CALMING
-        if not emphasise and not calm:
+        calm = bool(popping) and not steadying
+        steady_more = bool(popping or wobbling) and steadying and steadied < STEADYING
+        if not emphasise and not calm and not steady_more:
             break
         emphasised += emphasise
         calming += calm
-        for key in popping if calm else ():
+        steadied += steady_more
+        for key in popping | wobbling if calm or steady_more else ():
             boost[key] = boost.get(key, 1.0) * 4.0
+    if before is not None and len(popping) > before[3]:
+        joints, x, worst = before[:3]
+        layout = _Layout(joints, F)
     result = _as_map(sk, layout, x)
     if worst > limit and kept is not None and kept_worst < worst:
         result, worst = _as_map(sk, _Layout(kept[0], F), kept[1]), kept_worst
     if stats is not None:
         stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
-                      "calming": calming, "emphasised": emphasised,
+                      "calming": calming, "steadied": steadied, "emphasised": emphasised,
                       "stalled": stalls >= STALLS, "adding_misses_m": largest})
     return result
 
@@ -643,6 +670,26 @@ def _pop_allowance(direct: Motion, dense: Motion, constraints, margin: float) ->
     ratios = _pop_ratios(direct, dense, constraints)
     near = maximum_filter1d(ratios, 2 * POP_REACH + 1, axis=0, mode="nearest")
     return np.maximum(1.0, margin * near)
+
+
+def _steady_limit(edited: Motion, dense: Motion) -> np.ndarray:
+    """``(F, J)`` [rad/s] how fast the keys may turn each joint into each frame, on every
+    frame (not only around the ramps): :data:`STEADY_MARGIN` times the fastest turn of the
+    joint in ``edited`` (the motion the IK started from) or ``dense`` (the dense solve)
+    within :data:`POP_REACH` frames, and at least :data:`STEADY_FLOOR`."""
+    from scipy.ndimage import maximum_filter1d
+    from .quality import angular_speed
+    fastest = np.maximum(angular_speed(edited), angular_speed(dense))
+    near = maximum_filter1d(fastest, 2 * POP_REACH + 1, axis=0, mode="nearest")
+    return np.maximum(STEADY_MARGIN * near, STEADY_FLOOR)
+
+
+def _wobbling(keyed: Motion, limit: np.ndarray) -> set:
+    """``(joint index, frame)`` where ``keyed`` turns a joint faster than ``limit (F, J)``
+    (:func:`_steady_limit`)."""
+    from .quality import angular_speed
+    f, j = np.nonzero(angular_speed(keyed) > limit)
+    return set(zip(j.tolist(), f.tolist()))
 
 
 def _root_steps(edited: Motion, keyed: Motion) -> np.ndarray:
