@@ -200,8 +200,10 @@ ROOT_FLOOR = 0.1
 #: solve 18; 174 of 2,752 frames had a joint past 1.5 times 1.2 times that, 71 past twice)
 STEADY_MARGIN = 1.5
 STEADY_FLOOR = np.radians(30.0)
-#: rounds of a costlier speed where the keys turn a joint past that, at most
+#: rounds of a costlier speed where the keys turn a joint past that, at most, and without
+#: steadier keys
 STEADYING = 16
+PATIENCE = 4
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
 EMPHASIS = 10
@@ -492,8 +494,10 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     steady = _steady_limit(edited, dense_motion)
     boost = {}                    # (joint index, frame) -> how much more its speed costs
     total = rounds = calming = emphasised = stalls = steadied = 0
-    # (joints, x, worst, pops and lurches) before the keys were steadied
-    before, popping = None, set()
+    # (joints, x, worst, pops and lurches, wobbles) before the keys were steadied, and the
+    # steadiest since; steadying rounds since the steadiest
+    before = steadiest = None
+    popping, waited = set(), 0
     best, adding, largest = np.inf, True, []
     # the best keys that held every task within TASK_LIMIT: more rounds can lose them (keys
     # added for a miss under the limit, or a stall, move others off), and then they are kept
@@ -545,25 +549,32 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
                                                                      allowed_root)
         # then (once the keys keep those rules, or their rounds are spent) where they turn a
         # joint faster than the conversion and the dense solve do nearby
-        # (:func:`_steady_limit`), its speed costs more too, and pops and lurches that
-        # brings are calmed with it; if more are left than before, the keys before are kept
+        # (:func:`_steady_limit`), its speed costs more too, and pops and lurches that brings
+        # are calmed with it; the steadiest keys with no more pops and lurches than before
+        # (and their tasks held as well) are kept
         steadying = steadied > 0 or not popping or calming >= CALMING
-        if steadying and before is None:
-            before = (copy.deepcopy(joints), x.copy(), worst, len(popping))
         wobbling = _wobbling(keyed, steady) if steadying else set()
+        if steadying and (before is None or (
+                len(popping) <= before[3] and len(wobbling) < steadiest[4]
+                and worst <= max(limit, before[2]))):
+            steadiest = (copy.deepcopy(joints), x.copy(), worst, len(popping), len(wobbling))
+            before = before or steadiest
+            waited = 0
         emphasise = bool(misses) and emphasised < EMPHASIS and \
             tasks.emphasise(sizes, tolerance)
         calm = bool(popping) and not steadying
-        steady_more = bool(popping or wobbling) and steadying and steadied < STEADYING
+        steady_more = steadying and steadied < STEADYING and waited < PATIENCE and \
+            bool(wobbling or len(popping) > before[3])
         if not emphasise and not calm and not steady_more:
             break
         emphasised += emphasise
         calming += calm
         steadied += steady_more
+        waited += steadying
         for key in popping | wobbling if calm or steady_more else ():
             boost[key] = boost.get(key, 1.0) * 4.0
-    if before is not None and len(popping) > before[3]:
-        joints, x, worst = before[:3]
+    if steadiest is not None:
+        joints, x, worst = steadiest[:3]
         layout = _Layout(joints, F)
     result = _as_map(sk, layout, x)
     if worst > limit and kept is not None and kept_worst < worst:
