@@ -200,10 +200,8 @@ ROOT_FLOOR = 0.1
 #: solve 18; 174 of 2,752 frames had a joint past 1.5 times 1.2 times that, 71 past twice)
 STEADY_MARGIN = 1.5
 STEADY_FLOOR = np.radians(30.0)
-#: rounds of a costlier speed where the keys turn a joint past that, at most, and without
-#: steadier keys
+#: rounds of a costlier speed where the keys turn a joint past that, at most
 STEADYING = 16
-PATIENCE = 4
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
 EMPHASIS = 10
@@ -495,9 +493,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     boost = {}                    # (joint index, frame) -> how much more its speed costs
     total = rounds = calming = emphasised = stalls = steadied = 0
     # (joints, x, worst, pops and lurches, wobbles) before the keys were steadied, and the
-    # steadiest since; steadying rounds since the steadiest
+    # steadiest since
     before = steadiest = None
-    popping, waited = set(), 0
+    popping = set()
     best, adding, largest = np.inf, True, []
     # the best keys that held every task within TASK_LIMIT: more rounds can lose them (keys
     # added for a miss under the limit, or a stall, move others off), and then they are kept
@@ -559,18 +557,16 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
                 and worst <= max(limit, before[2]))):
             steadiest = (copy.deepcopy(joints), x.copy(), worst, len(popping), len(wobbling))
             before = before or steadiest
-            waited = 0
         emphasise = bool(misses) and emphasised < EMPHASIS and \
             tasks.emphasise(sizes, tolerance)
         calm = bool(popping) and not steadying
-        steady_more = steadying and steadied < STEADYING and waited < PATIENCE and \
+        steady_more = steadying and steadied < STEADYING and \
             bool(wobbling or len(popping) > before[3])
         if not emphasise and not calm and not steady_more:
             break
         emphasised += emphasise
         calming += calm
         steadied += steady_more
-        waited += steadying
         for key in popping | wobbling if calm or steady_more else ():
             boost[key] = boost.get(key, 1.0) * 4.0
     if steadiest is not None:
