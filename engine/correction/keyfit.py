@@ -549,12 +549,13 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         # joint faster than the conversion and the dense solve do nearby
         # (:func:`_steady_limit`), its speed costs more too, and pops and lurches that brings
         # are calmed with it; the steadiest keys with no more pops and lurches than before
-        # (and their tasks held as well) are kept
+        # (and their tasks held as well; of those as steady, the ones nearest the tasks)
+        # are kept
         steadying = steadied > 0 or not popping or calming >= CALMING
         wobbling = _wobbling(keyed, steady) if steadying else set()
         if steadying and (before is None or (
-                len(popping) <= before[3] and len(wobbling) < steadiest[4]
-                and worst <= max(limit, before[2]))):
+                len(popping) <= before[3] and worst <= max(limit, before[2])
+                and (len(wobbling), worst) < (steadiest[4], steadiest[2]))):
             steadiest = (copy.deepcopy(joints), x.copy(), worst, len(popping), len(wobbling))
             before = before or steadiest
         emphasise = bool(misses) and emphasised < EMPHASIS and \
