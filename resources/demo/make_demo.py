@@ -1,4 +1,5 @@
-"""Builds resources/demo/demo.mcp, the bundled demo project (run again after format changes).
+"""Builds resources/demo/demo.mcp, the bundled demo project (run again after format changes, and
+after any engine change that changes its solve: tests/test_demo_project.py says when).
 
 A freely licensed capture (CMU 131_01, an adult's styled walk, from resources/clips) retargeted
 onto a differently built character (the FAIR1 child skeleton from AnimatedDrawings: four spine
