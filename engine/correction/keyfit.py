@@ -557,23 +557,21 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         # then (once the keys keep those rules, or their rounds are spent) where they turn a
         # joint faster than the conversion and the dense solve do nearby
         # (:func:`_steady_limit`), its speed costs more too, and pops and lurches that brings
-        # are calmed with it, with emphasis rounds of its own (the boosts pull keys off the
-        # tasks). Kept: of the keys with no more pops and lurches than before and their
-        # tasks held as well, the ones whose worst wobble is the least over its limit (of
-        # those as steady, the ones nearest the tasks)
+        # are calmed with it. Kept: of the keys with no more pops and lurches than before
+        # and their tasks held as well, the ones whose worst wobble is the least over its
+        # limit (of those as steady, the ones nearest the tasks)
         steadying = steadied > 0 or not popping or calming >= CALMING
         wobbling = set()
         if steadying:
             ratios = _steady_ratios(keyed, steady)
             f, j = np.nonzero(ratios > 1.0)
             wobbling = set(zip(j.tolist(), f.tolist()))
-            now = _Snapshot(copy.deepcopy(joints), x.copy(), worst, len(popping),
-                            max(1.0, float(ratios.max())))
+            now = _Snapshot(joints, x, worst, len(popping), max(1.0, float(ratios.max())))
             if before is None or (now.pops <= before.pops and
                                   now.worst <= max(limit, before.worst) and
                                   (now.over, now.worst) < (steadiest.over, steadiest.worst)):
-                steadiest = now
-            before = before or now
+                steadiest = now._replace(joints=copy.deepcopy(joints), x=x.copy())
+            before = before or steadiest
         emphasise = bool(misses) and emphasised < EMPHASIS and \
             tasks.emphasise(sizes, tolerance)
         calm = bool(popping) and not steadying
