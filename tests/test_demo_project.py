@@ -21,10 +21,6 @@ def _build():
     return module.build()
 
 
-def _curves(project):
-    return {key: curve for key, curve in project.displacement.curves.items()}
-
-
 def test_the_bundled_demo_is_what_make_demo_builds_with_this_engine():
     stored, built = load_project(DEMO / "demo.mcp"), _build()
     hint = "rebuild it: python resources/demo/make_demo.py"
@@ -43,7 +39,7 @@ def test_the_bundled_demo_is_what_make_demo_builds_with_this_engine():
                                        np.asarray(b.goal[field], dtype=float),
                                        rtol=0, atol=1e-6, err_msg=f"{a.name} {field}: {hint}")
     # the solved layer: the same channels, key frames, values, slopes and tangents
-    a, b = _curves(stored), _curves(built)
+    a, b = dict(stored.displacement.curves), dict(built.displacement.curves)
     assert a and sorted(a) == sorted(b), hint
     for key in a:
         ca, cb = a[key], b[key]

@@ -452,6 +452,7 @@ def test_the_keys_turn_no_joint_faster_than_the_conversion_or_the_dense_solve(so
     ratio, where = keyed_steadiness(scene, solution)
     assert ratio <= 1.0, f"{ratio:.2f}: {where}"
 
+
 def test_the_steadying_keeps_the_round_least_over_the_steady_limit(monkeypatch):
     """Where no round of the key fit's steadying gets every joint within its steady limit
     (the Rokoko dance onto the Mixamo FBX character), the keys kept are those of the round
