@@ -220,7 +220,7 @@ STEADYING = 16
 #: the steadier (:func:`solved_keys`): which keys a fit adds, emphasises and calms is decided
 #: round by round, and a fit that ends with a wobble can end without one from keys shifted
 #: by half a spacing (benchmarks/sweep_feet.py, the 8 distinct pairs over the limit: 3 went
-#: within it, 4 nearer, none further)
+#: within it, 5 nearer, none further)
 RESTAGGER = 0.5
 #: rounds of emphasis on the frames where a task still misses, at most, and how much more
 #: such a frame counts per round at most
