@@ -101,10 +101,11 @@ The unknowns are numbered in key order, so the normal equations are banded in ti
 factorised in that order (no fill outside the band): each iteration is linear in the frames
 (the linear rows' part of the normal matrix is built once per fit), and the rounds are
 bounded. Measured (``benchmarks/bench_keys.py``, the demo tiled 1 and 4 times, one thread on
-a loaded machine): 6.4 s and 27.9 s CPU (4.3; 5.7 s and 21.3 s, 3.7, timed alone). Per
-evaluation the cost is linear (the sparse LU in time order: 62 ms at 3,765 unknowns, 185 ms
-at 14,976; a dense banded Cholesky at their width, about 300, took 302 and 613 ms); what
-still grows is the count: 45 evaluations in 6 rounds of keys at 1x, 52 in 7 at 4x, because a
+a quiet machine, round 42): 7.6 s and 32.5 s (4.2 to 4.3). Per evaluation the cost is
+linear (70 ms at 1x, 283 ms at 4x, all of a fit's time over its evaluations; the sparse LU
+in time order: 62 ms at 3,765 unknowns, 185 ms at 14,976, where a dense banded Cholesky at
+their width, about 300, took 302 and 613 ms); what can still grow is the count: 109
+evaluations at 1x, 115 at 4x (6 and 10 rounds of emphasis, 5 and 7 of steadying), because a
 round and a step's acceptance are global (one stretch that still misses refits the clip).
 A trial step needs the tasks' errors only: their Jacobian in the unknowns (half of an
 evaluation's own work, and a sparse product) is assembled only where a step is taken from.
