@@ -478,6 +478,8 @@ def cmd_retarget(args) -> int:
                 f"{_residual_text(largest_residuals(result.report['constraints']), 2)}), "
                 f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
                 f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)")
+        if keys.get("why_dense_curves"):
+            note += f" because {keys['why_dense_curves']}"
         floor = result.report["floor"]
         if floor["lift_m"]:
             note += (f", standing on the floor at {floor['height_m']:.3f} m (the conversion "

@@ -617,8 +617,9 @@ class Scene:
         # the solved layer: keys fitted to the tasks where they hold them and pop no more
         # than the dense solve, else keys fitted to the dense curves
         t0 = time.perf_counter()
+        why: dict = {}
         keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel,
-                           carried=self.carried)
+                           carried=self.carried, why=why)
         timings["keys_s"] = time.perf_counter() - t0
         if correction is not None and self.binding.followers:
             # the dense solve as delivered: its carried control joints where its limbs put
@@ -632,7 +633,7 @@ class Scene:
         report["quality"] = quality(self.performer, composed, scene.motion, chosen,
                                     correction.residual if correction is not None else None,
                                     self.binding)
-        report["keys"] = _keys_report(scene, correction, keys is not None)
+        report["keys"] = _keys_report(scene, correction, keys is not None, why.get("reason"))
         # the floor the character stands on: the project's, with the conversion moved onto
         # it (``lift_m``), else the one under its feet in its reference pose
         report["floor"] = {"height_m": self.ground().floor, "lift_m": self.lift()}
@@ -860,9 +861,10 @@ def _sole_points(skinned, target: Motion, ankles) -> dict:
     return out
 
 
-def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
+def _keys_report(scene: "Scene", correction, fitted: bool, why: str | None = None) -> dict:
     """The solved layer's keys: fitted to the tasks (``"tasks"``) or to the dense curves
-    (``"dense curves"``; ``None`` without a correction), how many, and how far the delivered
+    (``"dense curves"``, with why the keys fitted to the tasks were not kept in
+    ``"why_dense_curves"``; ``None`` without a correction), how many, and how far the delivered
     motion puts any joint from the path the dense solve takes it along
     (``largest_distance_from_dense_m``, with the joint and frame; from the nearest of that
     path's positions on the frame and either side: :func:`~.correction.keyfit.parting`):
@@ -871,7 +873,8 @@ def _keys_report(scene: "Scene", correction, fitted: bool) -> dict:
     keys = scene.displacement
     out = {"fitted_to": None if correction is None else "tasks" if fitted else "dense curves",
            "count": sum(len(c) for c in keys.curves.values()),
-           "largest_distance_from_dense_m": 0.0, "joint": None, "frame": None}
+           "largest_distance_from_dense_m": 0.0, "joint": None, "frame": None,
+           "why_dense_curves": None if fitted or correction is None else why}
     if correction is None:                   # nothing solved: no keys (``fitted_to`` None)
         return out
     apart, f, j = parting(scene.motion, correction.motion)

@@ -560,6 +560,7 @@ def test_keys_left_unsteady_are_fitted_again_staggered_and_the_steadier_kept(mon
     monkeypatch.setattr(keyfit, "fit_to_tasks", fit)
     solution = scene.solve(regenerate=True)
     assert solution.report["keys"]["fitted_to"] == "tasks"
+    assert solution.report["keys"]["why_dense_curves"] is None
     (first, unsteady, _), (again, steadier, kept) = fits[-2:]
     assert (first, again) == (0.0, keyfit.RESTAGGER)
     assert unsteady > 1.2 and steadier < unsteady
@@ -594,10 +595,16 @@ def test_keys_still_unsteady_after_the_second_fit_are_not_kept(monkeypatch):
     monkeypatch.setattr(keyfit, "fit_to_tasks", fit)
     solution = scene.solve(regenerate=True)
     assert [stagger for stagger, _ in fits] == [0.0, keyfit.RESTAGGER]
+    ratios = []
     for _, keys in fits:
         ratio, where = keyed_steadiness(scene, solution, keys.apply(solution.scene.edited))
         assert ratio > 1.0, where
+        ratios.append(ratio)
     assert solution.report["keys"]["fitted_to"] == "dense curves"
+    # the report says why, of the steadier keys
+    why = solution.report["keys"]["why_dense_curves"]
+    assert why.startswith("the keys fitted to the tasks turned ") and \
+        f" {min(ratios):.2f} times past the steady limit at frame " in why, why
     ratio, where = keyed_steadiness(scene, solution)
     assert ratio <= 1.0, f"{ratio:.2f}: {where}"
 

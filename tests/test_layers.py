@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 
 import numpy as np
 import pytest
@@ -269,6 +270,10 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     assert report["fitted_to"] == "dense curves"
     assert report["count"] == sum(len(c) for c in fallback.values())
     assert report["largest_distance_from_dense_m"] < 1e-3
+    # and why: the firmer pull's keys (the last judged) part from the dense solve
+    assert re.fullmatch(r"the keys fitted to the tasks took \S+ [\d.]+ % of the figure's size "
+                        r"from the dense solve at frame \d+ \(at most 10 %\)",
+                        report["why_dense_curves"]), report["why_dense_curves"]
 
 
 def test_keys_that_part_from_the_dense_solve_are_not_kept(monkeypatch):
@@ -284,8 +289,9 @@ def test_keys_that_part_from_the_dense_solve_are_not_kept(monkeypatch):
     parting = solution.report["keys"]["largest_distance_from_dense_m"] / figure_size(edited)
     assert 0.002 < parting < keyfit.FIDELITY
 
-    def fit():
-        return keyfit.solved_keys(composed, edited, solution.constraints, solution.correction)
+    def fit(why=None):
+        return keyfit.solved_keys(composed, edited, solution.constraints, solution.correction,
+                                  why=why)
 
     monkeypatch.setattr(keyfit, "FIDELITY", parting * 1.01)
     keys = fit()
@@ -293,7 +299,17 @@ def test_keys_that_part_from_the_dense_solve_are_not_kept(monkeypatch):
     assert keyfit.parting(keys.apply(edited), solution.correction.motion)[0] == pytest.approx(
         parting * figure_size(edited), rel=1e-9)               # the same fit
     monkeypatch.setattr(keyfit, "FIDELITY", parting * 0.99)
-    assert fit() is None
+    why: dict = {}
+    assert fit(why) is None
+    # the reason: the last keys judged (the lighter pull's) part further than the bound
+    found = re.fullmatch(r"the keys fitted to the tasks took (\S+) ([\d.]+) % of the figure's "
+                         r"size from the dense solve at frame (\d+) \(at most ([\d.]+) %\)",
+                         why["reason"])
+    assert found, why["reason"]
+    joint, share, frame, bound = found.groups()
+    assert joint in edited.skeleton.names and 0 <= int(frame) < edited.num_frames
+    assert float(bound) == pytest.approx(100 * parting * 0.99, rel=1e-2)
+    assert float(share) >= float(bound)
 
 
 def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch):

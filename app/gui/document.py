@@ -49,11 +49,14 @@ _FIELD_SIGNALS = {
 
 def keys_note(keys: dict) -> str:
     """The status line of a solve's stored keys (``report["keys"]``): how many, fitted to what,
-    and how far they put any joint from the dense solve (where: joint and frame)."""
+    how far they put any joint from the dense solve (where: joint and frame), and why keys
+    fitted to the tasks were not kept where they were not."""
     where = (f" ({keys['joint']}, frame {keys['frame']})" if keys.get("joint") is not None
              else "")
+    why = f", because {keys['why_dense_curves']}" if keys.get("why_dense_curves") else ""
     return (f"Solved: {keys['count']} keys fitted to the {keys['fitted_to']}, at most "
-            f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve{where}")
+            f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense "
+            f"solve{where}{why}")
 
 
 class Document(QtCore.QObject):

@@ -1048,7 +1048,7 @@ def _parting(here: np.ndarray, path: np.ndarray) -> tuple[float, int, int]:
 
 
 def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, cancel=None,
-                carried=None):
+                carried=None, why: dict | None = None):
     """The solved layer's keys fitted to the tasks (:func:`fit_to_tasks`), pulled towards
     the dense correction with :data:`FAITHFUL_PULL` or, where those are not kept, with
     :data:`PULL`; or None when neither is kept, that is when the keys
@@ -1064,8 +1064,13 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
     limit; the weaker pull is not tried: it is what holds tasks the faithful one misses, and
     pulls the keys less towards the dense solve, not more). ``cancel()``
     returning True stops the fit (:class:`~engine.errors.MotionComposerError`).
-    ``carried``: :func:`fit_to_tasks`'s."""
-    if correction is None or edited.num_frames < 3:
+    ``carried``: :func:`fit_to_tasks`'s. ``why``, when given and the keys are not kept,
+    receives ``"reason"``: what the last fit's keys broke, in words."""
+    why = {} if why is None else why
+    if correction is None:
+        return None
+    if edited.num_frames < 3:
+        why["reason"] = "a clip of fewer than 3 frames is not fitted to the tasks"
         return None
     judge = _Judge(direct, edited, constraints, correction)
     for pull in (FAITHFUL_PULL, PULL):
@@ -1084,7 +1089,11 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
                 keys, over = other, judge.unsteady(other)
         # keys that still wobble a joint past the steady limit are not the solve's: the
         # keys fitted to the dense curves follow the dense solve, which sets that limit
-        return keys if over <= 1.0 else None
+        if over <= 1.0:
+            return keys
+        why["reason"] = judge.wobble(keys)
+        return None
+    why["reason"] = judge.reason
     return None
 
 
@@ -1097,6 +1106,8 @@ class _Judge:
         self.direct, self.edited, self.correction = direct, edited, correction
         self.cons = [c for c in constraints if c.enabled]
         self.size = figure_size(edited)
+        #: why the last keys judged were not kept, in words (None: they were)
+        self.reason = None
 
     @functools.cached_property
     def path(self) -> np.ndarray:
@@ -1120,16 +1131,43 @@ class _Judge:
                                              self.steady_limit).max()))
 
     def keeps(self, keys: DisplacementMap, stats: dict) -> bool:
-        """Whether the keys (fitted with ``stats``) are kept."""
-        if stats.get("worst_task_m", 0.0) > TASK_LIMIT * length_share(self.size):
+        """Whether the keys (fitted with ``stats``) are kept; where not, :attr:`reason` says
+        why, in words."""
+        names = self.edited.skeleton.names
+        worst, limit = stats.get("worst_task_m", 0.0), TASK_LIMIT * length_share(self.size)
+        if worst > limit:
+            self.reason = (f"the keys fitted to the tasks missed one by {worst * 1e3:.2f} mm "
+                           f"(at most {limit * 1e3:.2f} mm beyond the dense solve)")
             return False
         keyed = keys.apply(self.edited)
         # the keys stay near the dense solve
-        if _parting(_positions(keyed), self.path)[0] > FIDELITY * self.size:
+        apart, f, j = _parting(_positions(keyed), self.path)
+        if apart > FIDELITY * self.size:
+            self.reason = (f"the keys fitted to the tasks took {names[j]} "
+                           f"{100 * apart / self.size:.1f} % of the figure's size from the "
+                           f"dense solve at frame {f} (at most {100 * FIDELITY:.3g} %)")
             return False
         # the keys keep the no-pop rule where the dense solve keeps it, and break it no
         # further where it does not
-        if np.any(_pop_ratios(self.direct, keyed, self.cons) > self.pops_allowed):
+        ratios = _pop_ratios(self.direct, keyed, self.cons)
+        if np.any(ratios > self.pops_allowed):
+            f, j = np.unravel_index(int(np.argmax(ratios / self.pops_allowed)), ratios.shape)
+            self.reason = (f"the keys fitted to the tasks turned {names[j]} {ratios[f, j]:.2f} "
+                           f"times the no-pop limit at frame {f} (the dense solve: at most "
+                           f"{self.pops_allowed[f, j]:.2f})")
             return False
         # nor move the root in lurches the dense solve does not make
-        return not _lurching(self.edited, keyed, self.root_allowed)
+        lurches = _lurching(self.edited, keyed, self.root_allowed)
+        if lurches:
+            self.reason = (f"the keys fitted to the tasks moved the root in a lurch into frame "
+                           f"{min(f for _, f in lurches)} that the dense solve does not make")
+            return False
+        return True
+
+    def wobble(self, keys: DisplacementMap) -> str:
+        """Where the keys turn a joint furthest past the steady limit, in words."""
+        ratios = _steady_ratios(keys.apply(self.edited), self.steady_limit)
+        f, j = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
+        return (f"the keys fitted to the tasks turned {self.edited.skeleton.names[j]} "
+                f"{ratios[f, j]:.2f} times past the steady limit at frame {f} ({STEADY_MARGIN:g} times "
+                f"the conversion's or the dense solve's turn nearby)")
