@@ -114,8 +114,8 @@ evaluation's own work, and a sparse product) is assembled only where a step is t
 when they hold every task within :data:`TASK_LIMIT` (beyond the dense solve's own miss) and
 pop no more than the dense solve, frame by frame and joint by joint (:data:`POP_MARGIN`,
 :func:`_pop_allowance`), and (restaggered where they need it) turn no joint past the steady
-limit, else ``None``: the solve keeps the keys fitted to the dense curves (:func:`~.displacement.fit_keys`), so a solve
-never holds its constraints worse than before.
+limit, else ``None``: the solve keeps the keys fitted to the dense curves
+(:func:`~.displacement.fit_keys`), so a solve never holds its constraints worse than before.
 
 Measured (``tests/test_layers.py``; keys per window frame per channel, median and worst; the
 largest distance of a joint from the dense solve's path, :func:`parting`, in % of the figure's
@@ -911,10 +911,10 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
                 tolerance: float):
     """The held tasks' weighted errors ``(R,)``, a function assembling their Jacobian in the
     keyed frames' rows (sparse ``(R, m)``; times ``layout.basis``, the Jacobian in the
-    unknowns; only where a step is taken from: most trial steps are not), the largest metric task error [m] and the misses: per task missing its goal
-    by more than ``tolerance`` somewhere, ``(its chain's joints (layout indices), frames,
-    errors there)``; and per metric task (item) its error beyond the dense solve's per
-    frame."""
+    unknowns; only where a step is taken from: most trial steps are not), the largest metric
+    task error [m] and the misses: per task missing its goal by more than ``tolerance``
+    somewhere, ``(its chain's joints (layout indices), frames, errors there)``; and per metric
+    task (item) its error beyond the dense solve's per frame."""
     import scipy.sparse as sparse
     sk = motion.skeleton
     group = {jt.index: g for g, jt in enumerate(layout.joints)}
@@ -1169,5 +1169,5 @@ class _Judge:
         ratios = _steady_ratios(keys.apply(self.edited), self.steady_limit)
         f, j = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
         return (f"the keys fitted to the tasks turned {self.edited.skeleton.names[j]} "
-                f"{ratios[f, j]:.2f} times past the steady limit at frame {f} ({STEADY_MARGIN:g} times "
-                f"the conversion's or the dense solve's turn nearby)")
+                f"{ratios[f, j]:.2f} times past the steady limit at frame {f} "
+                f"({STEADY_MARGIN:g} times the conversion's or the dense solve's turn nearby)")
