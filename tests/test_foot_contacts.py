@@ -473,6 +473,17 @@ def test_where_the_dense_correction_rests_the_keys_leave_the_conversion_alone(so
         pytest.skip("the dense solve rests no joint for a key interval between corrections")
 
 
+def _auto_scene(clip: str, target: str) -> Scene:
+    """A scene of ../shared/data's ``clip`` onto its character ``target``, auto-mapped, with
+    automatic contacts (as ``retarget --auto-contacts``)."""
+    clip_file, target_file = shared_path(clip), shared_path(target)
+    performer = read_motion(clip_file)
+    character = read_character(target_file).rest_motion()
+    return Scene(Project(performer=Source(str(clip_file)), target=Source(str(target_file)),
+                         correspondence=automap(character.skeleton, performer.skeleton),
+                         auto_contacts=True), performer, character)
+
+
 def test_the_steadying_keeps_the_round_least_over_the_steady_limit(monkeypatch):
     """Where no round of the key fit's steadying gets every joint within its steady limit
     (the Rokoko dance onto the Mixamo mannequin, glTF), the keys kept are those of the round
@@ -482,13 +493,7 @@ def test_the_steadying_keeps_the_round_least_over_the_steady_limit(monkeypatch):
     from motion_composer.engine.correction import keyfit
     from motion_composer.engine.correction.ik import length_share
     from motion_composer.engine.describe import figure_size
-    performer = read_motion(shared_path("rokoko_mixamo_jesse_dance.bvh"))
-    target_file = shared_path("target_mixamo_mannequin.glb")
-    target = read_character(target_file).rest_motion()
-    scene = Scene(Project(performer=Source(str(shared_path("rokoko_mixamo_jesse_dance.bvh"))),
-                          target=Source(str(target_file)),
-                          correspondence=automap(target.skeleton, performer.skeleton),
-                          auto_contacts=True), performer, target)
+    scene = _auto_scene("rokoko_mixamo_jesse_dance.bvh", "target_mixamo_mannequin.glb")
     steady_ratios = keyfit._steady_ratios
     fits = []
 
@@ -542,12 +547,7 @@ def test_keys_left_unsteady_are_fitted_again_staggered_and_the_steadier_kept(mon
     bundled demo's keys, saved before this second fit, are what make_demo.py gives within
     1e-6: test_demo_project.py)."""
     from motion_composer.engine.correction import keyfit
-    clip = shared_path("cc3_cmu_02_06_pickup.bvh")
-    target_file = shared_path("fbx/Samba_Dancing.fbx")
-    performer, target = read_motion(clip), read_character(target_file).rest_motion()
-    scene = Scene(Project(performer=Source(str(clip)), target=Source(str(target_file)),
-                          correspondence=automap(target.skeleton, performer.skeleton),
-                          auto_contacts=True), performer, target)
+    scene = _auto_scene("cc3_cmu_02_06_pickup.bvh", "fbx/Samba_Dancing.fbx")
     real_fit = keyfit.fit_to_tasks
     fits = []
 
@@ -578,12 +578,7 @@ def test_keys_still_unsteady_after_the_second_fit_are_not_kept(monkeypatch):
     delivered on the keys fitted to the dense curves, within the limit (the test's own
     measure, :func:`keyed_steadiness`)."""
     from motion_composer.engine.correction import keyfit
-    dance = shared_path("rokoko_mixamo_jesse_dance.bvh")
-    target_file = shared_path("target_mixamo_mannequin.glb")
-    performer, target = read_motion(dance), read_character(target_file).rest_motion()
-    scene = Scene(Project(performer=Source(str(dance)), target=Source(str(target_file)),
-                          correspondence=automap(target.skeleton, performer.skeleton),
-                          auto_contacts=True), performer, target)
+    scene = _auto_scene("rokoko_mixamo_jesse_dance.bvh", "target_mixamo_mannequin.glb")
     real_fit = keyfit.fit_to_tasks
     fits = []
 
