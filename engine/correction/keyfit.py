@@ -1169,5 +1169,4 @@ class _Judge:
         ratios = _steady_ratios(keys.apply(self.edited), self.steady_limit)
         f, j = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
         return (f"the keys fitted to the tasks turned {self.edited.skeleton.names[j]} "
-                f"{ratios[f, j]:.2f} times past the steady limit at frame {f} "
-                f"({STEADY_MARGIN:g} times the conversion's or the dense solve's turn nearby)")
+                f"{ratios[f, j]:.2f} times past the steady limit at frame {f}")
