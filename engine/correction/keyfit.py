@@ -1085,8 +1085,10 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
             other = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root,
                                  pull=pull, stagger=RESTAGGER, stats=again, cancel=cancel,
                                  carried=carried)
-            if judge.keeps(other, again) and judge.unsteady(other) < over:
-                keys, over = other, judge.unsteady(other)
+            if judge.keeps(other, again):
+                steadier = judge.unsteady(other)
+                if steadier < over:
+                    keys, over = other, steadier
         # keys that still wobble a joint past the steady limit are not the solve's: the
         # keys fitted to the dense curves follow the dense solve, which sets that limit
         if over <= 1.0:
