@@ -28,23 +28,24 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   between them, the chain's task sees a new piece of curve every few frames (the direct
   conversion's foot wobbles by about a millimetre from frame to frame within a contact, which
   one cubic per contact and channel cannot follow; keys shared by all channels could not).
-* **Keys at the ramps' ends, where the even keys are not kept.** A last fit
-  (``at_ramps``, :func:`solved_keys`) gives every channel of a joint a key wherever a ramp
-  of a constraint on that joint begins or ends too (:func:`_ramp_ends`; the evenly spaced
-  keys within a third of a spacing of one are left out): the dense solve eases a correction
-  in and out with a smoothstep between those frames, which one Hermite segment between two
-  keys makes exactly. With even keys only, a correction that starts after a rest rises from
-  its pinned zero key to a free key up to a spacing away, and a contact let go for a few
-  frames is crossed by one cubic: the Rokoko dance onto the Mixamo FBX character, whose toe
-  is held, let go for four frames and held again, turned a foot 2.18 times the no-pop
-  limit where the dense solve keeps 1.00, and the solve kept 1,820 keys fitted to the dense
-  curves; with keys at the ramps' ends, 977 keys fitted to the tasks, within the no-pop and
-  steady limits. Not the first fit: on the CMU jumps onto the CMU T-pose (2,752 frames,
-  landings every second) such keys were refused where the even ones are kept (the first
-  fit; a minute a solve), after three fits taking 9.5 minutes on a busy machine. Only the constraints on the joint itself give it such keys
-  (its ancestors' would take every contact's ramps: the hips' keys went over the budget).
-  Where the ramps end more often than the budget allows, the evenly spaced keys go first,
-  then ramps' ends where they are nearest each other (:func:`_thinned`).
+* **Keys at the ramps' ends, where the even keys are not kept.** A last fit (``at_ramps``,
+  :func:`solved_keys`) gives every channel of a joint a key wherever a ramp of a constraint
+  on that joint begins or ends too (:func:`_ramp_ends`; the evenly spaced keys within a
+  third of a spacing of one are left out): the dense solve eases a correction in and out
+  with a smoothstep between those frames, which one Hermite segment between two keys makes
+  exactly. With even keys only, a correction that starts after a rest rises from its pinned
+  zero key to a free key up to a spacing away, and a contact let go for a few frames is
+  crossed by one cubic: the Rokoko dance onto the Mixamo FBX character, whose toe is held,
+  let go for four frames and held again, turned a foot 2.18 times the no-pop limit where the
+  dense solve keeps 1.00, and the solve kept 1,820 keys fitted to the dense curves; with
+  keys at the ramps' ends, 977 keys fitted to the tasks, within the no-pop and steady
+  limits. Not the first fit: on the CMU jumps onto the CMU T-pose (2,752 frames, landings
+  every second) such keys were refused where the even ones are kept (the first fit, a minute
+  a solve), after three fits taking 9.5 minutes on a busy machine. Only the constraints on
+  the joint itself give it such keys (its ancestors' would take every contact's ramps: a
+  channel of the demo's went to 12.1 % of its window frames, over the budget of 10 %). Where
+  the ramps end more often than the budget allows, the evenly spaced keys go first, then
+  ramps' ends where they are nearest each other (:func:`_thinned`).
 * **Values and slopes by damped Gauss-Newton.** Each key has a value and an in and an out
   slope (a ``broken`` tangent where they differ). The curves are linear in them (cubic
   Hermite basis, :func:`~.displacement.hermite_basis`), so a step minimises, over every held
@@ -524,9 +525,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     steady limit, at least 1, or ``None`` where it was not measured); ``stagger`` shifts
     every channel's first keys by that fraction of the key spacing; ``at_ramps`` keys each
     joint at the ends of the ramps of the constraints on it too (:func:`_ramp_ends`);
-    ``cancel()``
-    returning True stops it (:class:`~engine.errors.MotionComposerError`). ``carried``:
-    the control joints carried with limbs, held through them (:func:`~.ik.effector`).
+    ``cancel()`` returning True stops it (:class:`~engine.errors.MotionComposerError`).
+    ``carried``: the control joints carried with limbs, held through them
+    (:func:`~.ik.effector`).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
     metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
