@@ -489,12 +489,12 @@ def _auto_scene(clip: str, target: str, frames: slice = slice(None)) -> Scene:
 
 def test_the_steadying_keeps_the_round_least_over_the_steady_limit(monkeypatch):
     """Of the rounds of the key fit's steadying (the Rokoko dance onto the Mixamo mannequin,
-    glTF, whose first keys turn a joint well past the steady limit), the keys kept are those
-    of the round whose worst turn is least over it (at least 1), among the rounds that pop
-    and lurch no more than before the steadying and hold the tasks as well (before: the
-    round with the fewest frames over; the dance onto the Mixamo FBX character was kept 1.72
-    times over where a round was 1.68). Each fit's rounds are watched through the fit's own
-    measures."""
+    glTF, whose keys before their steadying turn a joint well past the steady limit), the
+    keys kept are those of the round whose worst turn is least over it (at least 1), among
+    the rounds that pop and lurch no more than before the steadying and hold the tasks as
+    well (before: the round with the fewest frames over; the dance onto the Mixamo FBX
+    character was kept 1.72 times over where a round was 1.68). Each fit's rounds are
+    watched through the fit's own measures."""
     from motion_composer.engine.correction import keyfit
     from motion_composer.engine.correction.ik import length_share
     from motion_composer.engine.describe import figure_size
