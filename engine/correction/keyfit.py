@@ -1133,8 +1133,7 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
         return None
     judge = _Judge(direct, edited, constraints, correction)
     fits = [(FAITHFUL_PULL, False), (PULL, False), (FAITHFUL_PULL, True)]
-    if not any(_ramp_ends(judge.cons, edited.skeleton, j, carried)
-               for j in range(edited.skeleton.num_joints)):
+    if not any(c.start - c.smooth_in >= 2 or c.smooth_out - c.end >= 2 for c in judge.cons):
         fits.pop()                      # no ramps: keys at their ends are the same keys
     wobbled = False
     for pull, at_ramps in fits:
