@@ -575,7 +575,8 @@ class Scene:
         return detect_contacts(self.performer, feet, self.project.contact_options)
 
     def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,
-              progress=None, cancel=None, warm_start: bool = False) -> Solution:
+              progress=None, cancel=None, warm_start: bool = False,
+              on_dense=None) -> Solution:
         """Run the IK's two passes and store the correction as displacement keys.
 
         ``constraints``: the list to enforce (default: the scene's own). With
@@ -584,8 +585,11 @@ class Scene:
         from :attr:`edited` (the composed motion with the animator's layers) and its
         correction, as fitted keys, replaces the solved layer only: the animator's layers are
         kept bit for bit. The chains' IK blends add their reach goals (made again on every
-        solve, :meth:`reach_constraints`). ``ik_options`` overrides the project's. Raises
-        :class:`~engine.errors.MotionComposerError` (``cancel()`` returning True stops it).
+        solve, :meth:`reach_constraints`). ``ik_options`` overrides the project's.
+        ``on_dense(motion)`` is called once the IK has run, with the dense corrected motion as
+        delivered, before its keys are fitted (most of a long solve: the window shows it
+        meanwhile). Raises :class:`~engine.errors.MotionComposerError` (``cancel()``
+        returning True stops it).
         """
         timings = {}
         t0 = time.perf_counter()
@@ -614,6 +618,14 @@ class Scene:
             timings["ik_s"] = time.perf_counter() - t0
             timings.update({f"ik_{k.replace(' ', '_')}_s": v
                             for k, v in correction.seconds.items()})
+        delivered = correction
+        if correction is not None and self.binding.followers:
+            # the dense solve as delivered: its carried control joints where its limbs put
+            # them (the IK holds their goals through the limbs and leaves them behind)
+            delivered = dataclasses.replace(correction, motion=self._placed(
+                correction.motion, self.edited, self._soles(chosen)))
+        if delivered is not None and on_dense is not None:
+            on_dense(delivered.motion)
         # the solved layer: keys fitted to the tasks where they hold them and pop no more
         # than the dense solve, else keys fitted to the dense curves
         t0 = time.perf_counter()
@@ -621,11 +633,7 @@ class Scene:
         keys = solved_keys(composed, self.edited, chosen, correction, cancel=cancel,
                            carried=self.carried, why=why)
         timings["keys_s"] = time.perf_counter() - t0
-        if correction is not None and self.binding.followers:
-            # the dense solve as delivered: its carried control joints where its limbs put
-            # them (the IK holds their goals through the limbs and leaves them behind)
-            correction = dataclasses.replace(correction, motion=self._placed(
-                correction.motion, self.edited, self._soles(chosen)))
+        correction = delivered
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))
         report = _report(composed, correction, chosen, len(self.correspondence), timings)

@@ -17,7 +17,7 @@ from motion_composer.engine.correction.constraints import Constraint
 from motion_composer.engine.correction.displacement import Curve, DisplacementMap, Layer
 from motion_composer.engine.describe import stature
 from motion_composer.engine.formats import read_character, read_motion, read_performer
-from motion_composer.engine.kinematics import fk_arrays
+from motion_composer.engine.kinematics import fk_arrays, forward_kinematics
 from motion_composer.engine.project import Project, Source
 from motion_composer.engine.quaternions import qconj, qmul, qrot
 from motion_composer.engine.scene import Scene
@@ -207,9 +207,15 @@ def test_a_goal_on_a_carried_joint_is_held_through_its_limb():
     foot = sk.index["FootL"]
     # the foot 25 cm higher and 15 cm to the side over the hold, where it strides
     goal = pos0[120, foot] + np.array([0.15, 0.25, 0.0])
+    shown = []
     solution = scene.replace(constraints=(Constraint(
         joint="FootL", kind="position", goal={"point": goal.tolist()}, smooth_in=100,
-        start=110, end=130, smooth_out=140, name="step"),)).solve()
+        start=110, end=130, smooth_out=140, name="step"),)).solve(on_dense=shown.append)
+    # what the window shows while the keys are fitted: the dense solve as delivered, its
+    # carried foot placed on the goal with its shin
+    assert len(shown) == 1 and shown[0] is solution.correction.motion
+    dense = forward_kinematics(shown[0]).positions
+    assert np.linalg.norm(dense[110:131, foot] - goal, axis=1).max() < 1e-3
     after, pos1 = _feet_on_shins(solution.scene)
     assert np.linalg.norm(pos1[110:131, foot] - goal, axis=1).max() < 1e-3
     assert solution.report["constraints"][0]["max_residual"] < 1e-3

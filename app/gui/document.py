@@ -86,6 +86,11 @@ class Document(QtCore.QObject):
     noted = QtCore.Signal(str)
     #: a pending solve landed (the scene now carries its correction)
     solved = QtCore.Signal()
+    #: a running solve's IK has run: its dense correction is shown (as a preview) while its
+    #: keys are fitted, the longer part of a solve
+    keysFitting = QtCore.Signal()
+    #: (scene, motion) from the solving thread: the dense correction of ``scene``'s solve
+    _denseSolved = QtCore.Signal(object, object)
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -93,6 +98,7 @@ class Document(QtCore.QObject):
         self.undo_stack.cleanChanged.connect(self._stack_changed)
         self.undo_stack.indexChanged.connect(self._stack_changed)
         self.jobs = JobRunner(self)
+        self._denseSolved.connect(self._dense_solved, QtCore.Qt.ConnectionType.QueuedConnection)
         self.path: Path | None = None
         self.selection: tuple[str, str] = ("", "")
         self._scene = Scene.empty()
@@ -255,12 +261,20 @@ class Document(QtCore.QObject):
 
         def work(progress, cancel):
             t0 = time.perf_counter()
-            solution = scene.solve(progress=progress, cancel=cancel, **kwargs)
+            solution = scene.solve(progress=progress, cancel=cancel,
+                                   on_dense=lambda motion: self._denseSolved.emit(scene, motion),
+                                   **kwargs)
             return (solution.scene, time.perf_counter() - t0, solution.report["warnings"],
                     solution.report["quality"], solution.report.get("keys"))
 
         self.jobs.run("Solving", work, lambda result: self._solved(scene, result),
                       on_end=lambda outcome: self._solve_ended(scene, outcome))
+
+    def _dense_solved(self, scene: Scene, motion: Motion) -> None:
+        """Show the dense correction of the solve still running for the current scene."""
+        if self._solving is scene and self._scene is scene:
+            self.show_preview(motion)
+            self.keysFitting.emit()
 
     def _solved(self, scene: Scene, outcome: tuple) -> None:
         result, self.solve_seconds, warnings, quality, keys = outcome

@@ -22,6 +22,8 @@ _LAZY_PANELS = {"curve_editor": "curves", "binding_panel": "binding", "ik_panel"
 _FIRST_SHOWN = ("correspondence_panel",)
 
 MAX_RECENT = 8
+#: the status line while a solve's keys are fitted (its dense correction shown meanwhile)
+FITTING_KEYS = "The IK's correction is shown while its keys are fitted"
 #: [ms] how often a modified project is autosaved (a window's ``autosave_timer`` interval):
 #: a crash loses at most this much work
 AUTOSAVE_MS = 60_000
@@ -60,6 +62,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.doc.noted.connect(lambda text: self.statusBar().showMessage(text, 5000))
         self.doc.jobs.started.connect(self._job_started)
         self.doc.jobs.progressed.connect(lambda f: self.progress.setValue(int(f * 1000)))
+        self.doc.keysFitting.connect(self._keys_fitting)
         self.doc.jobs.failed.connect(self.show_error)
         self.doc.jobs.finished.connect(self._job_done)
         self.autosave_timer = QtCore.QTimer(self)
@@ -717,16 +720,26 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # ------------------------------------------------------------------ long work
     def _job_started(self, label: str) -> None:
+        self.progress.setRange(0, 1000)
         self.progress.setValue(0)
         self.progress.setFormat(f"{label} %p%")
         self.progress.setVisible(True)
         self.cancel_button.setVisible(True)
+
+    def _keys_fitting(self) -> None:
+        """The IK has run and its dense correction is shown: the keys' fit has no measure of
+        its own progress, so the bar turns busy."""
+        self.progress.setRange(0, 0)
+        self.progress.setFormat("Fitting keys")
+        self.statusBar().showMessage(FITTING_KEYS)
 
     def _job_done(self) -> None:
         if self.doc.jobs.busy:
             return
         self.progress.setVisible(False)
         self.cancel_button.setVisible(False)
+        if self.statusBar().currentMessage() == FITTING_KEYS:
+            self.statusBar().clearMessage()
         if self.doc.jobs.last_outcome == "cancelled":
             self.statusBar().showMessage("Cancelled", 5000)
 
