@@ -70,7 +70,9 @@ def _add_reader_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("reading (detected when not given)")
     group.add_argument("--units", choices=sorted(UNITS), help="the file's length unit")
     group.add_argument("--scale", type=float, help="metres per file unit (overrides --units)")
-    group.add_argument("--up-axis", choices=AXES, help="the file's up axis")
+    group.add_argument("--up-axis", choices=AXES,
+                       help="the file's up axis (a glTF or FBX file's: the axis its figure "
+                            "stands along, where the file says another)")
     group.add_argument("--position-mode", choices=("absolute", "relative"),
                        help="position channels replace the OFFSET (absolute) or add to it "
                             "(relative)")
@@ -81,7 +83,8 @@ def _add_reader_options(parser: argparse.ArgumentParser) -> None:
 SIDE_OPTIONS = (
     ("units", sorted(UNITS), "length unit"),
     ("scale", float, "metres per file unit (overrides the units)"),
-    ("up_axis", AXES, "up axis"),
+    ("up_axis", AXES, "up axis (also of a glTF or FBX file written with another axis up "
+                      "than it says: the axis its figure stands along)"),
     ("position_mode", ("absolute", "relative"),
      "position channels: replace the OFFSET (absolute) or add to it (relative)"),
 )
@@ -89,9 +92,11 @@ SIDES = ("performer", "target")
 
 
 def _add_side_options(parser: argparse.ArgumentParser, when: str) -> None:
-    """``--performer-units``, ``--target-up-axis`` ... (BVH only; glTF is metres, +Y up)."""
+    """``--performer-units``, ``--target-up-axis`` ... (BVH; of glTF and FBX files the up
+    axis only: glTF is metres, FBX states its units)."""
     for side in SIDES:
-        group = parser.add_argument_group(f"reading the {side} (BVH; {when})")
+        group = parser.add_argument_group(f"reading the {side} (BVH; the up axis of any "
+                                          f"file; {when})")
         for option, kind, text in SIDE_OPTIONS:
             flag = f"--{side}-{option.replace('_', '-')}"
             if kind is float:
@@ -183,12 +188,11 @@ def _gltf_info(args, character, fmt):
     """The motion ``info`` shows of a glTF or FBX ``character`` (``fmt`` its format) and the
     extra figures."""
     given = [flag for flag, value in (("--units", args.units), ("--scale", args.scale),
-                                      ("--up-axis", args.up_axis),
                                       ("--position-mode", args.position_mode))
              if value is not None]
     if given:
-        convention = ("glTF is metres and +Y up by definition" if fmt.read_take is None else
-                      f"an {fmt.name} file states its units and axes")
+        convention = ("glTF is metres by definition" if fmt.read_take is None else
+                      f"an {fmt.name} file states its units")
         raise MotionComposerError(f"{args.file}: {', '.join(given)} apply to BVH files only; "
                                   f"{convention}")
     if args.take is not None and fmt.read_take is not None:
@@ -216,7 +220,7 @@ def _gltf_info(args, character, fmt):
 
 def cmd_info(args) -> int:
     from motion_composer.engine.formats import read_character, read_motion, sniff
-    character = read_character(args.file)
+    character = read_character(args.file, up_axis=args.up_axis)
     if character is not None:
         motion, extra = _gltf_info(args, character, sniff(args.file))
         _warn(motion, args.file, "--")
@@ -240,6 +244,8 @@ def cmd_info(args) -> int:
     if extra is not None:
         unit_note = up_note = ("the glTF convention" if extra["format"] in ("glTF", "GLB") else
                                "converted from the file's GlobalSettings")
+        if args.up_axis:
+            up_note = "given"
     lines = [
         f"file:        {args.file}",
         f"frames:      {info['frames']}",
@@ -415,11 +421,14 @@ def cmd_retarget(args) -> int:
     _warn(performer, args.performer, "--performer-")
     if args.frames:
         performer.excerpt(*args.frames)              # a range outside the clip fails first
-    character = read_character(args.target)     # a glTF's or FBX's bind pose is the target
-    if character is not None and target_options:
-        raise MotionComposerError(f"{args.target}: {_side_flags(target_options, 'target')} "
-                                  "apply to BVH files only; glTF is metres and +Y up by "
-                                  "definition, FBX states its units and axes")
+    # a glTF's or FBX's bind pose is the target (its up axis may be given: a file written
+    # with another axis up than it says)
+    character = read_character(args.target, up_axis=target_options.get("up_axis"))
+    other = {k: v for k, v in target_options.items() if k != "up_axis"}
+    if character is not None and other:
+        raise MotionComposerError(f"{args.target}: {_side_flags(other, 'target')} apply to "
+                                  "BVH files only; glTF is metres by definition, FBX states "
+                                  "its units")
     target = (character.rest_motion() if character is not None else
               read_motion(args.target, **target_options))
     _warn(target, args.target, "--target-")

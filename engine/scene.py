@@ -408,8 +408,9 @@ class Scene:
             return None
         from .formats import read_character
         stat = os.stat(path)
-        return self.derived.get("character", (path, stat.st_size, stat.st_mtime_ns),
-                                lambda: read_character(path))
+        up_axis = self.project.target.up_axis
+        return self.derived.get("character", (path, stat.st_size, stat.st_mtime_ns, up_axis),
+                                lambda: read_character(path, up_axis=up_axis))
 
     # ------------------------------------------------------------------ correction
     def automatic_constraints(self) -> list[Constraint]:

@@ -481,3 +481,33 @@ def test_global_settings_axes_and_units_become_metres_y_up(tmp_path, axes, to_en
         np.testing.assert_allclose(pb, 0.01 * pa @ R.T, atol=1e-9)
     np.testing.assert_allclose(turned.meshes[0].positions,
                                0.01 * original.meshes[0].positions @ R.T, atol=1e-12)
+
+
+def test_an_fbx_whose_axis_settings_lie_is_read_up_with_the_axis_the_doubt_names(tmp_path):
+    """Mixamo's character (+Y up) in a file whose GlobalSettings say Blender's Z up, front -Y
+    (an exporter that writes settings which say nothing true): read as the file says it lies
+    along -Z, and the doubt names the up axis to read it with; read with that axis
+    (``up_axis``, ``--target-up-axis``, a project's target) it is the original: the rest pose,
+    every take's joints and the mesh within 1e-9 m."""
+    path = shared_path("fbx/mixamo.fbx")
+    original = read_fbx(path)
+    tree = _with_settings(parse_binary(path.read_bytes()), UpAxis=2, UpAxisSign=1,
+                          FrontAxis=1, FrontAxisSign=-1, CoordAxis=0, CoordAxisSign=1)
+    lying = tmp_path / "lying.fbx"
+    lying.write_bytes(ascii_fbx(tree))
+    source = read_character(lying).skeleton.source
+    assert source.doubt.startswith("the figure stands along -Z, not +Y, in its rest pose")
+    assert source.overrides == (("up_axis", "-Z"),)
+    stood = read_character(lying, up_axis="-Z")
+    assert stood.skeleton.source.doubt == "" and stood.skeleton.source.up_axis == "-Z"
+    np.testing.assert_allclose(stood.bind_positions, original.bind_positions, atol=1e-9)
+    assert len(original.motions) == len(stood.motions) > 0
+    for a, b in zip(original.motions, stood.motions):
+        np.testing.assert_allclose(forward_kinematics(b, end_sites=False).positions,
+                                   forward_kinematics(a, end_sites=False).positions, atol=1e-9)
+    assert len(original.meshes) == len(stood.meshes) > 0
+    for a, b in zip(original.meshes, stood.meshes):
+        np.testing.assert_allclose(b.positions, a.positions, atol=1e-9)
+    # the performer's take through the same option
+    np.testing.assert_allclose(read_performer(lying, up_axis="-Z").translations,
+                               original.motions[0].translations, atol=1e-9)

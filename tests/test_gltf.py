@@ -1108,15 +1108,47 @@ def test_a_gltf_written_z_up_is_said_to_lie_in_one_line(tmp_path, capsys):
     """A glTF written with +Z up (against the format's definition, as Blender's exporter does
     with "+Y Up" unticked): Ely's armature turned a further 90 degrees about x. It is read as
     the file says (lying), and ``info``, ``retarget`` and the reader's source say so in one
-    line that names the file and the axis it stands along."""
+    line that names the file, the axis it stands along and the flag that reads it up."""
     from motion_composer.app.cli import main
     from motion_composer.engine.formats import read_character
     lying = z_up_ely(tmp_path)
-    doubt = read_character(lying).skeleton.source.doubt
-    assert doubt.startswith("the figure stands along +Z, not +Y, in its bind pose")
+    source = read_character(lying).skeleton.source
+    assert source.doubt.startswith("the figure stands along +Z, not +Y, in its bind pose")
+    assert source.overrides == (("up_axis", "+Z"),)
+    said = f"motion-composer: warning: {lying}: {source.doubt}; if that is wrong, give "
     code, _, err = _info(capsys, lying)
-    assert code == 0 and err == f"motion-composer: warning: {lying}: {doubt}\n"
+    assert code == 0 and err == said + "--up-axis +Z\n"
     code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(lying),
                  "-o", str(tmp_path / "out.bvh"), "--frames", "0:20"])
     err = capsys.readouterr().err
-    assert code == 0 and err == f"motion-composer: warning: {lying}: {doubt}\n"
+    assert code == 0 and err == said + "--target-up-axis +Z\n"
+
+
+def test_a_gltf_written_z_up_read_with_its_up_axis_is_the_file_written_y_up(tmp_path, capsys):
+    """The same file read with the up axis the warning names (``up_axis="+Z"``,
+    ``--target-up-axis +Z``, a project's target ``up_axis``) is Ely as written +Y up: every
+    joint, bind axis and vertex within 1e-9; no doubt; and what is written on it stands up.
+    Read with a wrong axis it still lies, and the doubt names the right one."""
+    from motion_composer.app.cli import main
+    from motion_composer.engine.formats import read_character, read_motion
+    lying = z_up_ely(tmp_path)
+    ely = read_character(shared_path("target_mixamo_ely.glb"))
+    stood = read_character(lying, up_axis="+Z")
+    assert stood.skeleton.source.doubt == "" and stood.skeleton.source.up_axis == "+Z"
+    np.testing.assert_allclose(stood.bind_positions, ely.bind_positions, atol=1e-9)
+    np.testing.assert_allclose(stood.skeleton.offsets, ely.skeleton.offsets, atol=1e-9)
+    np.testing.assert_allclose(stood.bind_rotations, ely.bind_rotations, atol=1e-9)
+    assert len(stood.meshes) == len(ely.meshes) > 0
+    for a, b in zip(stood.meshes, ely.meshes):
+        np.testing.assert_allclose(a.positions, b.positions, atol=1e-9)
+    np.testing.assert_allclose(read_motion(lying, up_axis="+Z").translations,
+                               ely.rest_motion().translations, atol=1e-9)
+    wrong = read_character(lying, up_axis="-Z").skeleton.source
+    assert "stands along -Y" in wrong.doubt and wrong.overrides == (("up_axis", "+Z"),)
+    code, out, err = _info(capsys, lying, "--up-axis", "+Z")
+    assert code == 0 and err == "" and "up axis:     +Z (given)" in out
+    written = tmp_path / "walk_on_ely.glb"
+    code = main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(lying),
+                 "--target-up-axis", "+Z", "-o", str(written), "--frames", "0:20"])
+    assert code == 0 and capsys.readouterr().err == ""
+    assert read_character(written).skeleton.source.doubt == ""

@@ -70,12 +70,14 @@ def test_an_export_to_an_unknown_suffix_is_refused(window, tmp_path):
 
 
 def test_a_lying_gltf_target_is_said_in_the_status_bar(window, tmp_path):
-    """A glTF written +Z up: the status bar says so, without the BVH doubt's hint to set an
-    override on import again (a glTF has none: the file is to be written +Y up)."""
+    """A glTF written +Z up, imported without its up axis (dropped on the window, or the
+    import dialog's "as the file says"): the status bar says so, with the hint to set the up
+    axis on import again."""
     from test_gltf import z_up_ely
     lying = z_up_ely(tmp_path)
     window.import_file("performer", WALK)
     assert window.import_file("target", lying)
     doubt = read_character(lying).skeleton.source.doubt
-    assert doubt and window.statusBar().currentMessage() == f"{lying.name}: {doubt}"
+    assert doubt and window.statusBar().currentMessage() == (
+        f"{lying.name}: {doubt}; if that is wrong, import it again and set it in the options")
     assert window.errors == []

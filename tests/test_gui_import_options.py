@@ -135,3 +135,43 @@ def test_a_gltf_character_is_imported_without_the_dialog(window, monkeypatch):
         "target_robot_expressive.glb"))
     window.import_dialog("target")
     assert shown == [] and window.doc.scene.target is not None and not window.errors
+
+
+def test_a_gltf_written_z_up_is_offered_its_up_axis_and_stands(window, monkeypatch, tmp_path):
+    """Ely written +Z up (Blender's exporter with "+Y Up" unticked): the dialog asks its up
+    axis alone, says why, and offers the axis its figure stands along; accepted, the project
+    keeps it, the target and its skinned mesh stand along +Y (as Ely written +Y up), and a
+    re-import starts from it."""
+    import numpy as np
+    from motion_composer.engine.formats import read_character
+    from test_gltf import z_up_ely
+    lying = z_up_ely(tmp_path)
+    shown = []
+
+    def steps(dialog):
+        assert "stands along +Z" in dialog.doubt.text() and dialog.doubt.isVisibleTo(dialog)
+        assert dialog.up_axis.currentData() == "+Z"
+        assert not dialog.units.isVisibleTo(dialog) and not dialog.scale.isVisibleTo(dialog)
+        dialog.accept()
+        return dialog.result()
+    _drive(monkeypatch, steps, shown)
+    window.ask_open_path = lambda caption, filters: str(lying)
+    window.import_dialog("target")
+    assert len(shown) == 1 and not window.errors
+    scene = window.doc.scene
+    assert scene.project.target.up_axis == "+Z"
+    assert scene.target.skeleton.source.doubt == ""
+    ely = read_character(shared_path("target_mixamo_ely.glb"))
+    np.testing.assert_allclose(scene.target.translations, ely.rest_motion().translations,
+                               atol=1e-9)
+    assert len(scene.character.meshes) == len(ely.meshes)
+    for drawn, written_up in zip(scene.character.meshes, ely.meshes):
+        np.testing.assert_allclose(drawn.positions, written_up.positions, atol=1e-9)
+
+    def again(dialog):
+        assert dialog.up_axis.currentData() == "+Z"
+        dialog.reject()
+        return dialog.result()
+    _drive(monkeypatch, again, shown)
+    window.import_dialog("target")
+    assert len(shown) == 2 and window.doc.scene is scene

@@ -502,20 +502,26 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def ask_import_options(self, side: str, path) -> dict | None:
         """How to read ``path``: for a BVH file, the options dialog (:mod:`.import_options`,
-        showing what detection found); ``{}`` for a glTF character (metres, +Y up by
-        definition) and for a file that cannot be read (:meth:`import_file` says why);
-        ``None`` when the user cancels."""
+        showing what detection found); for a glTF or FBX character, the dialog with its up
+        axis alone where its figure does not stand along +Y as the file says (or the project
+        gave it one), else ``{}`` (the file states its units and axes); ``{}`` for a file
+        that cannot be read (:meth:`import_file` says why); ``None`` when the user
+        cancels."""
         from motion_composer.app.gui.import_options import ImportOptionsDialog
-        from motion_composer.engine.formats import read_motion, sniff
-        try:
-            if sniff(path).mesh:
-                return {}
-            detected = read_motion(path)
-        except MotionComposerError:
-            return {}
+        from motion_composer.engine.formats import read_motion, read_performer, sniff
         given = getattr(self.doc.scene.project, side).reader_options() if \
             getattr(self.doc.scene, f"{side}_path") == Path(path).resolve() else {}
-        dialog = ImportOptionsDialog(self, side, path, detected, given)
+        try:
+            character = sniff(path).mesh
+            detected = (read_performer if character and side == "performer" else
+                        read_motion)(path)
+        except MotionComposerError:
+            return {}
+        if character:
+            given = {k: v for k, v in given.items() if k == "up_axis"}
+            if not detected.skeleton.source.doubt and "up_axis" not in given:
+                return {}
+        dialog = ImportOptionsDialog(self, side, path, detected, given, character=character)
         if dialog.exec() != QtWidgets.QDialog.DialogCode.Accepted:
             return None
         return dialog.options()
@@ -523,8 +529,9 @@ class MainWindow(QtWidgets.QMainWindow):
     def import_file(self, side: str, path, **options) -> bool:
         """Import a performer or a target: one command, which also redoes the map (pairs set
         by hand that still fit are kept, the rest auto-mapped). ``options`` (``units``,
-        ``scale``, ``up_axis``, ``position_mode``) override detection for a BVH file and are
-        kept in the project; a doubt about what was detected is shown in the status bar."""
+        ``scale``, ``up_axis``, ``position_mode``) override detection for a BVH file (the up
+        axis alone what a glTF or FBX file says) and are kept in the project; a doubt about
+        what was detected is shown in the status bar."""
         from motion_composer.engine.formats import read_motion, read_performer
         from motion_composer.engine.project import Source
 
@@ -538,7 +545,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.viewport.frame_all()
             source = motion.skeleton.source
             if source.doubt:
-                # an override settles a BVH file's doubt; a glTF or FBX file is written again
+                # an override settles the doubt (a BVH file's units or up axis, a glTF or
+                # FBX file's up axis); else the file is to be written again
                 hint = ("; if that is wrong, import it again and set it in the options"
                         if source.overrides else "")
                 self.statusBar().showMessage(f"{Path(path).name}: {source.doubt}{hint}", 0)

@@ -68,8 +68,8 @@ class Format:
         sniff: ``sniff(head)`` whether a file whose first bytes are ``head`` (at most
             :data:`HEAD_BYTES`) is in this format.
         read_motion: ``read_motion(path, **bvh_overrides) -> Motion``.
-        read_character: ``read_character(path) -> Character``, or ``None`` for a format that
-            holds no mesh.
+        read_character: ``read_character(path, up_axis=None) -> Character``, or ``None`` for
+            a format that holds no mesh.
         write: ``write(motion, path, character, channels)``; ``character`` (may be ``None``)
             gives the mesh and skin of a format that holds them and is ignored by one that
             does not; ``channels`` is :func:`~engine.formats.bvh.format_bvh`'s (``"all"`` or
@@ -88,7 +88,7 @@ class Format:
     other_suffixes: tuple[str, ...]
     sniff: Callable[[bytes], bool]
     read_motion: Callable[..., Motion]
-    read_character: Callable[[str], Character] | None
+    read_character: Callable[..., Character] | None
     write: Callable[[Motion, str, Character | None, str], None] | None
     motion: bool
     mesh: bool
@@ -125,23 +125,24 @@ def _is_fbx(head: bytes) -> bool:
 
 
 # --------------------------------------------------------------------------- readers, writers
-def _read_gltf(path) -> Character:
+def _read_gltf(path, up_axis: str | None = None) -> Character:
     from .gltf import read_gltf
-    return read_gltf(path)
+    return read_gltf(path, up_axis=up_axis)
 
 
-def _read_fbx(path) -> Character:
+def _read_fbx(path, up_axis: str | None = None) -> Character:
     from .fbx.scene import read_fbx
-    return read_fbx(path)
+    return read_fbx(path, up_axis=up_axis)
 
 
-def _gltf_rest_motion(path, **bvh_overrides) -> Motion:
-    """A glTF character's bind pose as a one-frame motion (glTF is metres and +Y up by
-    definition, so the BVH reader's overrides do not apply)."""
+def _gltf_rest_motion(path, up_axis: str | None = None, **bvh_overrides) -> Motion:
+    """A glTF character's bind pose as a one-frame motion (glTF is metres, so the BVH
+    reader's other overrides do not apply; the up axis of a file written with another
+    one may be given)."""
     if bvh_overrides:
         raise GLTFError(f"{', '.join(sorted(bvh_overrides))} apply to BVH files only; glTF is "
-                        "metres and +Y up by definition", path)
-    return _read_gltf(path).rest_motion()
+                        "metres by definition (its up axis may be given)", path)
+    return _read_gltf(path, up_axis).rest_motion()
 
 
 def _write_bvh(motion: Motion, path, character: Character | None, channels: str) -> None:
@@ -167,24 +168,27 @@ def _write_fbx(motion: Motion, path, character: Character | None, channels: str)
 def _fbx_options(path, bvh_overrides: dict) -> None:
     if bvh_overrides:
         raise FBXError(f"{', '.join(sorted(bvh_overrides))} apply to BVH files only; an FBX "
-                       "file states its units and axes (GlobalSettings)", path)
+                       "file states its units (GlobalSettings; its up axis may be given)",
+                       path)
 
 
-def _fbx_rest_motion(path, take: str | None = None, **bvh_overrides) -> Motion:
+def _fbx_rest_motion(path, take: str | None = None, up_axis: str | None = None,
+                     **bvh_overrides) -> Motion:
     """An FBX character's bind pose (one frame), or its take ``take`` when named."""
     _fbx_options(path, bvh_overrides)
-    character = _read_fbx(path)
+    character = _read_fbx(path, up_axis)
     if take is None:
         return character.rest_motion()
     from .fbx.scene import take_motion
     return take_motion(character, take)
 
 
-def _fbx_take(path, take: str | None = None, **bvh_overrides) -> Motion:
+def _fbx_take(path, take: str | None = None, up_axis: str | None = None,
+              **bvh_overrides) -> Motion:
     """An FBX file's take ``take`` (by default its first), a performer clip."""
     _fbx_options(path, bvh_overrides)
     from .fbx.scene import take_motion
-    return take_motion(_read_fbx(path), take)
+    return take_motion(_read_fbx(path, up_axis), take)
 
 
 BVH = Format("BVH", "BVH motion", (".bvh",), (), _is_bvh, read_bvh, None, _write_bvh,
@@ -277,7 +281,8 @@ def read_motion(path: str | os.PathLike, **bvh_overrides) -> Motion:
 
     ``bvh_overrides`` (``units``, ``scale``, ``up_axis``, ``position_mode``) go to
     :func:`~engine.formats.bvh.read_bvh`; given for a glTF or FBX file they raise its format
-    error.
+    error, but ``up_axis`` (the axis its figure stands along, for a file written with
+    another axis up than it says).
     """
     fmt = sniff(path)
     if fmt.read_take is None:
@@ -304,11 +309,16 @@ def read_performer(path: str | os.PathLike, **bvh_overrides) -> Motion:
     return fmt.read_motion(path, **bvh_overrides)
 
 
-def read_character(path: str | os.PathLike) -> Character | None:
+def read_character(path: str | os.PathLike, up_axis: str | None = None) -> Character | None:
     """The glTF or FBX character (skeleton, meshes, skins, animations or takes) a file holds,
-    or ``None`` for a format that holds no mesh (BVH)."""
+    or ``None`` for a format that holds no mesh (BVH). ``up_axis``: the axis its figure
+    stands along, for a file written with another axis up than it says (see
+    :func:`~engine.formats.gltf.read_gltf`); by default what the file says."""
     fmt = sniff(path)
-    return fmt.read_character(path) if fmt.mesh else None
+    if not fmt.mesh:
+        return None
+    return fmt.read_character(path, up_axis) if up_axis is not None else \
+        fmt.read_character(path)
 
 
 # --------------------------------------------------------------------------- writing

@@ -3,8 +3,8 @@
 A BVH file's up axis is detected from the body (:mod:`.bvh`); glTF and FBX state theirs, and a
 figure that still does not stand along +Y once read (a glTF written Z-up, against the format's
 definition; an FBX whose axis settings say nothing true) is a doubt the reader records on its
-:class:`~engine.units.SourceFrame` (:func:`lying_doubt`), which the command line and the window
-show as one warning line.
+:class:`~engine.units.SourceFrame` (:func:`lying_doubt`), with the up axis to read it with,
+which the command line and the window show as one warning line naming that override.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 
 from ..kinematics import fk_arrays
 from ..skeleton import Skeleton
-from ..units import nearest_axis
+from ..units import nearest_axis, up_axis_rotation
 
 __all__ = ["body_roles", "body_vertical", "lying_doubt", "UP_AXIS_TOLERANCE"]
 
@@ -69,27 +69,30 @@ def body_vertical(roles, skeleton: Skeleton, pose) -> np.ndarray:
     return vertical
 
 
-def lying_doubt(skeleton: Skeleton, what: str) -> str:
-    """``""`` where the skeleton's zero pose (``what``: ``"bind pose"``, ``"rest pose"``)
-    stands along +Y, or is no humanoid to tell by; else one sentence saying along which axis
-    it stands: its legs, from their ends to the hips, more than :data:`UP_AXIS_TOLERANCE`
-    off +Y. (The legs, not the feet-to-head vertical that tells a BVH file's up axis: a
-    quadruped read as a humanoid, the glTF fox, stands on its hind legs' line but carries its
-    head 59 degrees forward of it.)"""
+def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y") -> tuple[str, str]:
+    """``("", "")`` where the skeleton's zero pose (``what``: ``"bind pose"``, ``"rest
+    pose"``) stands along +Y, or is no humanoid to tell by; else one sentence saying along
+    which axis it stands, and the up axis to read the file with (``read_with``: the one it
+    was read with): its legs, from their ends to the hips, more than
+    :data:`UP_AXIS_TOLERANCE` off +Y. (The legs, not the
+    feet-to-head vertical that tells a BVH file's up axis: a quadruped read as a humanoid,
+    the glTF fox, stands on its hind legs' line but carries its head 59 degrees forward of
+    it.)"""
     J = skeleton.num_joints
     rest = np.zeros((1, J, 4))
     rest[..., 3] = 1.0
     pose = fk_arrays(skeleton, rest, skeleton.offsets[skeleton.translated][None])
     roles = body_roles(skeleton, pose.positions[0])
     if roles is None:
-        return ""
+        return "", ""
     v = pose.positions[0, skeleton.index[roles["hips"]]] - _feet(roles, skeleton, pose)[0]
     norm = float(np.linalg.norm(v))
     if not norm > 0.0:
-        return ""
+        return "", ""
     angle = math.degrees(math.acos(min(1.0, max(-1.0, v[1] / norm))))
     if angle <= UP_AXIS_TOLERANCE:
-        return ""
+        return "", ""
+    # read with ``read_with`` up, the file's vectors were turned by its rotation
+    axis = nearest_axis(up_axis_rotation(read_with).T @ v)
     return (f"the figure stands along {nearest_axis(v)}, not +Y, in its {what} ({angle:.0f} "
-            "degrees off): the file was probably written with another axis up; export it with "
-            "+Y up")
+            "degrees off): the file was probably written with another axis up"), axis

@@ -71,7 +71,7 @@ from ..fileio import atomic_write, reading
 from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot, to_matrix
 from ..skeleton import EndSite, Skeleton
-from ..units import SourceFrame
+from ..units import SourceFrame, up_axis_rotation
 from .figure import lying_doubt
 
 __all__ = ["Mesh", "Character", "read_gltf", "write_gltf", "format_gltf", "DEFAULT_FPS",
@@ -889,7 +889,7 @@ class _Pose:
 
 
 def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
-              fps: float | None = None) -> Character:
+              fps: float | None = None, up_axis: str | None = None) -> Character:
     """Read a glTF 2.0 character (``.glb`` or ``.gltf``).
 
     Args:
@@ -897,6 +897,10 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
             joined into one skeleton.
         fps: the rate animations are resampled at; by default the rate a file written by
             :func:`write_gltf` records, else :data:`DEFAULT_FPS`.
+        up_axis: the axis the file's figure stands along (one of :data:`engine.units.AXES`),
+            for a file written with another axis up against the format's +Y (Blender's
+            exporter with "+Y Up" unticked writes +Z): the whole scene is turned onto +Y
+            (skeleton, meshes, animations). By default the format's +Y.
 
     Raises:
         GLTFError: for a malformed file or one this reader cannot use (no skin, a bind
@@ -906,10 +910,34 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
     js, binary = _parse_container(_read_bytes(path), path)
     doc = _Doc(path, js, binary)
     doc.check_references()
-    return _build(doc, skin=skin, fps=fps)
+    source = GLTF_SOURCE
+    if up_axis is not None and up_axis != GLTF_SOURCE.up_axis:
+        try:
+            turn = up_axis_rotation(up_axis)
+        except ValueError as exc:
+            raise GLTFError(str(exc), path) from None
+        _stand_up(doc, turn)
+        source = dataclasses.replace(GLTF_SOURCE, up_axis=up_axis, reason=(
+            f"glTF: metres; read with {up_axis} up as given (the format's own is +Y)"))
+    return _build(doc, skin=skin, fps=fps, source=source)
 
 
-def _build(doc: _Doc, *, skin, fps) -> Character:
+def _stand_up(doc: _Doc, turn: np.ndarray) -> None:
+    """Turn the whole scene by ``turn`` (3x3): one node of its own, parent of every node
+    that has none, so that animated roots and every world transform below them turn too."""
+    nodes = doc.array("nodes")
+    children = {c for node in nodes if isinstance(node, dict)
+                for c in (node.get("children") if isinstance(node.get("children"), list)
+                          else [])}
+    roots = [i for i in range(len(nodes)) if i not in children]
+    nodes.append({"name": "up axis", "rotation": _matrix_to_quat(turn).tolist(),
+                  "children": roots})
+    for scene in doc.js.get("scenes", []) if isinstance(doc.js.get("scenes"), list) else []:
+        if isinstance(scene, dict) and isinstance(scene.get("nodes"), list):
+            scene["nodes"] = [len(nodes) - 1]
+
+
+def _build(doc: _Doc, *, skin, fps, source: SourceFrame = GLTF_SOURCE) -> Character:
     """The :class:`Character` of a parsed file: its joints, bind pose, poses and meshes."""
     notes: list[str] = []
     nodes = doc.array("nodes")
@@ -939,11 +967,11 @@ def _build(doc: _Doc, *, skin, fps) -> Character:
     default, poses = _poses(doc, g, joints, rot, fps, notes)
     channels = _channels(joints, offsets, size, [default] + poses, hint)
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
-                        channels=channels, end_sites=end_sites, source=GLTF_SOURCE)
-    doubt = lying_doubt(skeleton, "bind pose")
+                        channels=channels, end_sites=end_sites, source=source)
+    doubt, axis = lying_doubt(skeleton, "bind pose", source.up_axis)
     if doubt:
-        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(GLTF_SOURCE,
-                                                                            doubt=doubt))
+        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(
+            source, doubt=doubt, overrides=(("up_axis", axis),)))
     stem = Path(doc.path).stem if doc.path else "character"
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(default, skeleton, joints.parents, 1.0 / fps)

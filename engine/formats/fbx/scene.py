@@ -58,7 +58,7 @@ from ...errors import FBXError
 from ...fileio import reading
 from ...motion import Motion
 from ...skeleton import Skeleton
-from ...units import SourceFrame
+from ...units import SourceFrame, up_axis_rotation
 from ..figure import lying_doubt
 from ..gltf import (POSITION_LAYOUT, ROTATION_LAYOUT, Character, Mesh, _frozen, _local_translations,
                     _matrix_to_quat, _plural, _polar, _pose_from_world, _pose_motion)
@@ -1029,8 +1029,16 @@ def _channels(parents: np.ndarray, offsets: np.ndarray, size: float, poses) -> t
     return tuple(POSITION_LAYOUT + ROTATION_LAYOUT if m else ROTATION_LAYOUT for m in moving)
 
 
-def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Character:
+def _build(doc: _Doc, name: str, fps: float | None, notes: list[str],
+           up_axis: str | None = None) -> Character:
     A, s, reason = _axis_frame(doc)
+    if up_axis is not None and up_axis != "+Y":
+        # the figure stands along ``up_axis`` once the file's axis settings are applied
+        try:
+            A = up_axis_rotation(up_axis) @ A
+        except ValueError as exc:
+            raise FBXError(str(exc), doc.path) from None
+        reason += f"; read with {up_axis} up as given (turned onto +Y)"
     fps = _frame_rate(doc) if fps is None else fps
     skins = _clusters(doc)
     links: dict[int, np.ndarray] = {}
@@ -1071,13 +1079,15 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Charact
         poses.append(pose)
     if rest is None:
         raise doc.error("the rest pose scales a joint non-uniformly (not supported)")
-    source = SourceFrame(units="m", scale=1.0, up_axis="+Y", detected=False, reason=reason)
+    source = SourceFrame(units="m", scale=1.0, up_axis=up_axis or "+Y", detected=False,
+                         reason=reason)
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=_channels(joints.parents, offsets, size, [rest] + poses),
                         source=source)
-    doubt = lying_doubt(skeleton, "rest pose")
+    doubt, axis = lying_doubt(skeleton, "rest pose", source.up_axis)
     if doubt:
-        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(source, doubt=doubt))
+        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(
+            source, doubt=doubt, overrides=(("up_axis", axis),)))
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(rest, skeleton, joints.parents, 1.0 / fps).replace(
         name=f"{name} (rest pose)")
@@ -1112,12 +1122,17 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str]) -> Charact
         fps=float(fps), path=doc.path, notes=tuple(notes))
 
 
-def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
+def read_fbx(path: str | os.PathLike, *, fps: float | None = None,
+             up_axis: str | None = None) -> Character:
     """Read an FBX 7.x character (binary or ASCII) with every take, or the skeleton of an
     ASCII FBX 6.x file (see the module notes and :mod:`.legacy`).
 
     Args:
         fps: the rate takes are sampled at; by default the file's own (``TimeMode``).
+        up_axis: the axis the figure stands along once the file's axis settings are
+            applied (one of :data:`engine.units.AXES`), for a file whose settings say
+            nothing true: the whole scene is turned onto +Y. By default +Y (the settings
+            are trusted).
 
     Raises:
         FBXError: for a malformed file, binary FBX 6 and FBX 5 and older, or a file that
@@ -1132,7 +1147,7 @@ def read_fbx(path: str | os.PathLike, *, fps: float | None = None) -> Character:
     if int(root.props[0]) < 7000:
         root, notes = from_fbx6(root)
     doc = _Doc(root, path, ascii_form=not is_binary_fbx(data[:32]))
-    return _build(doc, Path(path).stem, fps, notes)
+    return _build(doc, Path(path).stem, fps, notes, up_axis)
 
 
 def take_motion(character: Character, take: str | None = None) -> Motion:
