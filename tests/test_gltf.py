@@ -1152,3 +1152,42 @@ def test_a_gltf_written_z_up_read_with_its_up_axis_is_the_file_written_y_up(tmp_
                  "--target-up-axis", "+Z", "-o", str(written), "--frames", "0:20"])
     assert code == 0 and capsys.readouterr().err == ""
     assert read_character(written).skeleton.source.doubt == ""
+
+
+_BLENDER_Z_UP = '''
+import json, sys
+import bpy, numpy
+if not hasattr(numpy, "bool"):
+    numpy.bool = bool   # Blender 3.4's glTF importer names numpy.bool (gone in 1.24 to 1.26)
+job = json.load(open(sys.argv[sys.argv.index("--") + 1]))
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.gltf(filepath=job["source"])
+for name, yup in (("z_up.glb", False), ("y_up.glb", True)):
+    bpy.ops.export_scene.gltf(filepath=job["folder"] + "/" + name, export_format="GLB",
+                              export_yup=yup)
+json.dump({"ok": True}, open(job["out"], "w"))
+'''
+
+
+@pytest.mark.blender
+def test_blenders_gltf_written_z_up_read_with_its_up_axis_is_its_y_up_export(tmp_path):
+    """Blender's own glTF exporter with "+Y Up" unticked (a Z-up file, as artists write by
+    mistake) and ticked, both of Ely: the Z-up file's doubt names +Z, and read with it every
+    joint of the bind pose and of the animation and every vertex is the Y-up file's within
+    a micrometre (float32 data)."""
+    from blender_util import run_blender
+    from motion_composer.engine.formats import read_character
+    run_blender(_BLENDER_Z_UP, "z_up.py", {"source": str(shared_path(
+        "target_mixamo_ely.glb")), "folder": str(tmp_path)}, tmp_path)
+    source = read_character(tmp_path / "z_up.glb").skeleton.source
+    assert "stands along +Z" in source.doubt and source.overrides == (("up_axis", "+Z"),)
+    stood = read_character(tmp_path / "z_up.glb", up_axis="+Z")
+    written_up = read_character(tmp_path / "y_up.glb")
+    assert stood.skeleton.source.doubt == "" and stood.skeleton.names == written_up.skeleton.names
+    np.testing.assert_allclose(stood.bind_positions, written_up.bind_positions, atol=1e-6)
+    assert len(stood.motions) == len(written_up.motions) > 0
+    for a, b in zip(stood.motions, written_up.motions):
+        np.testing.assert_allclose(forward_kinematics(a).positions,
+                                   forward_kinematics(b).positions, atol=1e-6)
+    for a, b in zip(stood.meshes, written_up.meshes):
+        np.testing.assert_allclose(a.positions, b.positions, atol=1e-6)
