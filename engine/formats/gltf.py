@@ -924,7 +924,9 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
 
 def _stand_up(doc: _Doc, turn: np.ndarray) -> None:
     """Turn the whole scene by ``turn`` (3x3): one node of its own, parent of every node
-    that has none, so that animated roots and every world transform below them turn too."""
+    that has none, so that animated roots and every world transform below them turn too
+    (the reader takes every node's world transform from the node tree, not from
+    ``scenes``)."""
     nodes = doc.array("nodes")
     children = {c for node in nodes if isinstance(node, dict)
                 for c in (node.get("children") if isinstance(node.get("children"), list)
@@ -932,9 +934,6 @@ def _stand_up(doc: _Doc, turn: np.ndarray) -> None:
     roots = [i for i in range(len(nodes)) if i not in children]
     nodes.append({"name": "up axis", "rotation": _matrix_to_quat(turn).tolist(),
                   "children": roots})
-    for scene in doc.js.get("scenes", []) if isinstance(doc.js.get("scenes"), list) else []:
-        if isinstance(scene, dict) and isinstance(scene.get("nodes"), list):
-            scene["nodes"] = [len(nodes) - 1]
 
 
 def _build(doc: _Doc, *, skin, fps, source: SourceFrame = GLTF_SOURCE) -> Character:
