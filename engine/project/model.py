@@ -138,7 +138,9 @@ class Source:
         embedded: the clip's BVH text, when embedded in the project (it then wins over
             ``path``).
         units, scale, up_axis, position_mode: the reader overrides used (``None``: detected);
-            see :func:`engine.formats.bvh.record_to_motion`.
+            see :func:`engine.formats.bvh.record_to_motion`. ``up_axis`` is also a glTF or
+            FBX file's: the axis its figure stands along where the file says another (see
+            :func:`engine.formats.read_character`).
         take: the take of an FBX file (``None``: its first take for a performer, its bind
             pose for a target); a file with one motion (BVH, glTF) has none to choose.
     """
