@@ -1191,3 +1191,23 @@ def test_blenders_gltf_written_z_up_read_with_its_up_axis_is_its_y_up_export(tmp
                                    forward_kinematics(b).positions, atol=1e-6)
     for a, b in zip(stood.meshes, written_up.meshes):
         np.testing.assert_allclose(a.positions, b.positions, atol=1e-6)
+
+
+@pytest.mark.parametrize("break_it", [
+    lambda js: js["nodes"][0].setdefault("children", []).append([1]),
+    lambda js: js["nodes"][1].setdefault("children", []).append(0),
+    lambda js: js["nodes"].append(3)], ids=["a child that is no index", "two parents",
+                                             "a node that is no object"])
+def test_a_malformed_node_tree_read_with_an_up_axis_is_refused_as_without(tmp_path, break_it):
+    """The up axis turns the scene under a node of its own, added once the node tree as
+    written is checked: a malformed tree gets the same one-line error, naming the same node,
+    as without the option."""
+    js, binary = unpack_glb(shared_path("target_mixamo_ely.glb").read_bytes())
+    break_it(js)
+    path = tmp_path / "broken.glb"
+    path.write_bytes(pack_glb(js, binary))
+    with pytest.raises(GLTFError) as plain:
+        read_gltf(path)
+    with pytest.raises(GLTFError) as turned:
+        read_gltf(path, up_axis="+Z")
+    assert str(turned.value) == str(plain.value) and "nodes[" in str(plain.value)

@@ -916,6 +916,7 @@ def read_gltf(path: str | os.PathLike, *, skin: int | str | None = None,
             turn = up_axis_rotation(up_axis)
         except ValueError as exc:
             raise GLTFError(str(exc), path) from None
+        _graph(doc)                 # the node tree as written is checked first
         _stand_up(doc, turn)
         source = dataclasses.replace(GLTF_SOURCE, up_axis=up_axis, reason=(
             f"glTF: metres; read with {up_axis} up as given (the format's own is +Y)"))
@@ -928,9 +929,7 @@ def _stand_up(doc: _Doc, turn: np.ndarray) -> None:
     (the reader takes every node's world transform from the node tree, not from
     ``scenes``)."""
     nodes = doc.array("nodes")
-    children = {c for node in nodes if isinstance(node, dict)
-                for c in (node.get("children") if isinstance(node.get("children"), list)
-                          else [])}
+    children = {c for node in nodes for c in node.get("children", [])}
     roots = [i for i in range(len(nodes)) if i not in children]
     nodes.append({"name": "up axis", "rotation": _matrix_to_quat(turn).tolist(),
                   "children": roots})
