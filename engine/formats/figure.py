@@ -8,6 +8,7 @@ which the command line and the window show as one warning line naming that overr
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,8 @@ from ..kinematics import fk_arrays
 from ..skeleton import Skeleton
 from ..units import nearest_axis, up_axis_rotation
 
-__all__ = ["body_roles", "body_vertical", "lying_doubt", "UP_AXIS_TOLERANCE"]
+__all__ = ["body_roles", "body_vertical", "lying_doubt", "with_lying_doubt",
+           "UP_AXIS_TOLERANCE"]
 
 #: an up axis is trusted when the body's vertical lies within this angle of it [deg] (at 45
 #: degrees two axes are as near; a runner's median lean stays under 40)
@@ -74,10 +76,9 @@ def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y") -> tuple[s
     pose"``) stands along +Y, or is no humanoid to tell by; else one sentence saying along
     which axis it stands, and the up axis to read the file with (``read_with``: the one it
     was read with): its legs, from their ends to the hips, more than
-    :data:`UP_AXIS_TOLERANCE` off +Y. (The legs, not the
-    feet-to-head vertical that tells a BVH file's up axis: a quadruped read as a humanoid,
-    the glTF fox, stands on its hind legs' line but carries its head 59 degrees forward of
-    it.)"""
+    :data:`UP_AXIS_TOLERANCE` off +Y. (The legs, not the feet-to-head vertical that tells a
+    BVH file's up axis: a quadruped read as a humanoid, the glTF fox, stands on its hind
+    legs' line but carries its head 59 degrees forward of it.)"""
     J = skeleton.num_joints
     rest = np.zeros((1, J, 4))
     rest[..., 3] = 1.0
@@ -96,3 +97,15 @@ def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y") -> tuple[s
     axis = nearest_axis(up_axis_rotation(read_with).T @ v)
     return (f"the figure stands along {nearest_axis(v)}, not +Y, in its {what} ({angle:.0f} "
             "degrees off): the file was probably written with another axis up"), axis
+
+
+def with_lying_doubt(skeleton: Skeleton, what: str) -> Skeleton:
+    """``skeleton`` read from a glTF or FBX file, with the doubt of :func:`lying_doubt` (read
+    with its source's up axis) on its source and the up axis to read it with as the
+    override; itself where it stands."""
+    source = skeleton.source
+    doubt, axis = lying_doubt(skeleton, what, source.up_axis)
+    if not doubt:
+        return skeleton
+    return dataclasses.replace(skeleton, source=dataclasses.replace(
+        source, doubt=doubt, overrides=(("up_axis", axis),)))

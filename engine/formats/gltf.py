@@ -72,7 +72,7 @@ from ..motion import Motion
 from ..quaternions import qconj, qmul, qrot, to_matrix
 from ..skeleton import EndSite, Skeleton
 from ..units import SourceFrame, up_axis_rotation
-from .figure import lying_doubt
+from .figure import with_lying_doubt
 
 __all__ = ["Mesh", "Character", "read_gltf", "write_gltf", "format_gltf", "DEFAULT_FPS",
            "GLTF_SOURCE", "ROTATION_LAYOUT", "POSITION_LAYOUT"]
@@ -966,10 +966,7 @@ def _build(doc: _Doc, *, skin, fps, source: SourceFrame = GLTF_SOURCE) -> Charac
     channels = _channels(joints, offsets, size, [default] + poses, hint)
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=channels, end_sites=end_sites, source=source)
-    doubt, axis = lying_doubt(skeleton, "bind pose", source.up_axis)
-    if doubt:
-        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(
-            source, doubt=doubt, overrides=(("up_axis", axis),)))
+    skeleton = with_lying_doubt(skeleton, "bind pose")
     stem = Path(doc.path).stem if doc.path else "character"
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(default, skeleton, joints.parents, 1.0 / fps)

@@ -45,7 +45,6 @@ A file with no joints raises :class:`~engine.errors.FBXError` saying what the fi
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections import Counter
 from dataclasses import dataclass
@@ -59,7 +58,7 @@ from ...fileio import reading
 from ...motion import Motion
 from ...skeleton import Skeleton
 from ...units import SourceFrame, up_axis_rotation
-from ..figure import lying_doubt
+from ..figure import with_lying_doubt
 from ..gltf import (POSITION_LAYOUT, ROTATION_LAYOUT, Character, Mesh, _frozen, _local_translations,
                     _matrix_to_quat, _plural, _polar, _pose_from_world, _pose_motion)
 from .ascii import is_ascii_fbx, parse_ascii
@@ -1084,10 +1083,7 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str],
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=_channels(joints.parents, offsets, size, [rest] + poses),
                         source=source)
-    doubt, axis = lying_doubt(skeleton, "rest pose", source.up_axis)
-    if doubt:
-        skeleton = dataclasses.replace(skeleton, source=dataclasses.replace(
-            source, doubt=doubt, overrides=(("up_axis", axis),)))
+    skeleton = with_lying_doubt(skeleton, "rest pose")
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(rest, skeleton, joints.parents, 1.0 / fps).replace(
         name=f"{name} (rest pose)")
