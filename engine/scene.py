@@ -442,6 +442,16 @@ class Scene:
                                                     p.floor + ground.heights[joint]))
         return out
 
+    def regenerated(self) -> "Scene":
+        """This scene with its automatic constraints made again from the project's settings
+        beside the user's (:meth:`automatic_constraints`): the constraints a solve with
+        ``regenerate`` enforces, before it runs (the window's timeline shows them at once).
+        The scene itself where it has no direct conversion to find them in."""
+        if self.composed is None:
+            return self
+        return self.replace(constraints=tuple(c for c in self.constraints if not c.auto)
+                            + tuple(self.automatic_constraints()))
+
     def ground(self):
         """Where the target's feet stand (:class:`~engine.correction.contacts.Ground`): the
         target's feet in its reference pose on the floor under them (the lowest mesh vertex

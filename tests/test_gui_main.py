@@ -188,6 +188,55 @@ def test_the_ik_correction_is_shown_while_its_keys_are_fitted(window, qtbot, mon
     assert window.statusBar().currentMessage() != FITTING_KEYS
 
 
+def test_added_foot_contacts_are_on_the_timeline_while_they_are_solved(window, qtbot,
+                                                                          monkeypatch):
+    """Tools > Add Foot Contacts and Solve puts the contacts it finds on the timeline at
+    once, while the IK and the key fit run (they used to appear when the keys landed); the
+    solve enforces those same contacts, and one undo takes them and the correction away.
+    (The IK is held here until the test has looked.)"""
+    import threading
+    from motion_composer.engine import scene as scene_module
+    window.open_project(DEMO)
+    doc = window.doc
+    timeline = window.timeline
+    hand = tuple(c for c in doc.scene.constraints if not c.auto)
+    doc.load_scene(doc.scene.replace(auto_contacts=False, constraints=hand))
+    assert [r.constraint for r in timeline.rows] == list(hand)
+    release, seen = threading.Event(), {}
+    real = scene_module.enforce
+
+    def held(edited, constraints, **kw):
+        seen["enforced"] = list(constraints)
+        release.wait(SOLVE_WAIT_MS / 1000)
+        return real(edited, constraints, **kw)
+
+    monkeypatch.setattr(scene_module, "enforce", held)
+    before = doc.scene
+    action = next(a for m in window.menuBar().actions() for a in m.menu().actions()
+                  if a.text() == "Add &Foot Contacts and Solve")
+    try:
+        action.trigger()
+        qtbot.waitUntil(lambda: "enforced" in seen, timeout=SOLVE_WAIT_MS)
+        assert doc.jobs.busy and doc.pending
+        shown = [r.constraint for r in timeline.rows]
+        contacts = [c for c in shown if c.auto]
+        assert len(contacts) >= 8 and {c.meta.get("source") for c in contacts} == {"contact"}
+        assert shown[:len(hand)] == list(hand) and len(shown) == len(doc.scene.constraints)
+        assert doc.scene.displacement is before.displacement       # not solved yet
+    finally:
+        release.set()
+    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=SOLVE_WAIT_MS)
+    assert not window.errors and not doc.pending
+    # what was shown is what was solved and what the scene keeps
+    assert len(seen["enforced"]) == len(shown)
+    assert all(a.same_as(b) for a, b in zip(seen["enforced"], shown))
+    assert all(a.same_as(b) for a, b in zip(doc.scene.constraints, shown))
+    assert doc.scene.displacement is not before.displacement
+    window.undo_action.trigger()
+    assert [r.constraint for r in timeline.rows] == list(hand)
+    assert doc.scene.displacement is before.displacement
+
+
 def test_autosave_is_offered_at_the_next_start(window, qtbot, tmp_path):
     from motion_composer.app.gui.commands import push_pair
     from motion_composer.app.gui.main_window import MainWindow

@@ -228,6 +228,17 @@ def test_regenerate_replaces_only_automatic_constraints(tmp_path):
     assert [c.name for c in again.constraints if not c.auto] == ["hand on the rail"]
     assert len([c for c in again.constraints if c.auto]) == \
         len([c for c in project.constraints if c.auto])
+    # made before a solve (the window's timeline shows them while it runs): the constraints
+    # the solve enforces, the user's kept as they are
+    from motion_composer.engine.scene import Scene
+    full = Scene.from_project(edited)
+    made = full.regenerated().project.constraints
+    assert len(made) == len(again.constraints)
+    assert all(a.same_as(b) for a, b in zip(made, again.constraints))
+    assert [c for c in made if not c.auto] == [c for c in edited.constraints if not c.auto]
+    # nothing to find them in without both sources: the scene as it is
+    alone = Scene(full.project, full.performer, None)
+    assert alone.regenerated() is alone
 
 
 # --------------------------------------------------------------------------- sources

@@ -222,6 +222,14 @@ class Document(QtCore.QObject):
         if not solve and all(_same(getattr(current.project, k), v) for k, v in changes.items()):
             return False
         after = current.replace(**changes)
+        if solve and regenerate:
+            # the automatic constraints made at once, so that the timeline shows them while
+            # the solve runs (it makes the same again); one that cannot be made is reported
+            # by the solve, as its error
+            try:
+                after = after.regenerated()
+            except MotionComposerError:
+                pass
         if solve:
             self._pending[after] = {"regenerate": regenerate}
         push_scene(self, text, current, after, merge=merge, fields=tuple(changes),
