@@ -115,6 +115,41 @@ def test_a_tiny_characters_keys_hold_its_tasks_as_closely():
     assert worst[TINY] == pytest.approx(worst[HALF], rel=0.2)
 
 
+#: twice Bandai's size (3.4 m, a figure over GIANT) against 16 times (27 m: the Khronos fox,
+#: 61 m as written, is of that kind)
+BIG, GIANT_K = 2.0, 16.0
+
+
+def test_a_giant_characters_keys_hold_its_tasks_as_closely_and_are_kept():
+    """Over :data:`~engine.correction.keyfit.GIANT` the key fit's lengths grow with the
+    figure: the keys miss the tasks by the same share of the size at 3.4 m and at 27 m, are
+    as many, and the solve keeps them (before, the giant's tasks were held to the absolute
+    millimetre, a 27,000th of it: the fit ran every round, missed by centimetres and was
+    refused, and the solve kept keys on every frame)."""
+    from motion_composer.engine.correction.keyfit import GIANT, fit_share
+    worst, count = {}, {}
+    for k in (BIG, GIANT_K):
+        p, composed, _, cons, dense = _solve(k)
+        assert figure_size(composed) > GIANT
+        stats = {}
+        keys = fit_to_tasks(composed, cons, dense.rotvecs, dense.root, stats=stats)
+        worst[k] = stats["worst_task_m"] / figure_size(composed)
+        count[k] = sum(len(c.frames) for c in keys.curves.values())
+        assert stats["worst_task_m"] <= TASK_LIMIT * fit_share(figure_size(composed))
+        assert solved_keys(composed, composed, cons, dense) is not None
+    assert worst[GIANT_K] == pytest.approx(worst[BIG], rel=0.2)
+    assert count[GIANT_K] == pytest.approx(count[BIG], rel=0.1)
+    assert count[BIG] < 0.2 * FRAMES * len(keys.curves)
+
+
+def test_the_key_fits_lengths_grow_over_giant_only():
+    """Continuous at GIANT; human sizes keep the fit's settings to the bit."""
+    from motion_composer.engine.correction.keyfit import GIANT, fit_share
+    assert fit_share(1.7) == fit_share(GIANT) == 1.0
+    assert fit_share(0.25 * FULL_SIZE) == 0.25
+    assert fit_share(30 * GIANT) == pytest.approx(30.0)
+
+
 def test_the_solvers_lengths_shrink_below_full_size_only():
     """``length_share`` is 1 from FULL_SIZE up: human sizes keep the settings to the bit."""
     assert length_share(1.7) == length_share(FULL_SIZE) == 1.0

@@ -164,8 +164,8 @@ from .displacement import (ROOT, ROTATION_CHANNELS, TRANSLATION_CHANNELS, Curve,
 from .ik import (Task, _Structure, effector, effector_chain, length_share, rotvec_to_quat,
                  task_error_and_jacobian)
 
-__all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "KEYS_PER_SECOND",
-           "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY"]
+__all__ = ["fit_to_tasks", "solved_keys", "parting", "key_budget", "fit_share",
+           "KEYS_PER_SECOND", "TASK_TOLERANCE", "TASK_LIMIT", "FIDELITY", "GIANT"]
 
 # scipy (sparse) is imported where a fit needs it: opening a project stays off scipy, which
 # costs about half a second to import
@@ -188,6 +188,28 @@ def key_budget(fps: float) -> float:
     are stored to about 7 digits (0.0083333 s is 120.0005 fps), which should not cost a
     key."""
     return min(round(KEYS_PER_SECOND / fps, 4), MOST_PER_FRAME)
+
+#: [m] the figure size (:func:`~engine.describe.figure_size`) up to which the fit's lengths
+#: in metres (:data:`TASK_TOLERANCE`, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`,
+#: :data:`LEVER_FLOOR`) hold as they are (on a figure smaller than
+#: :data:`~engine.correction.ik.FULL_SIZE` they shrink with it); on a bigger one they grow
+#: with it (:func:`fit_share`), as the IK's tolerance does from the same size
+#: (:data:`~engine.correction.ik.MIN_TOLERANCE`); a floor plane stays held to its
+#: tolerance in metres (the foot rule is absolute). Held to a millimetre, the Khronos fox
+#: (61 m as written) was held to a sixty-thousandth of its size: its key fits ran every
+#: round and were refused (the CMU jumps: 9 minutes, fits missing by 2.7-3.4 m after
+#: their calming rounds), as on the Kenney character (3.7 m) and the robot (4.2 m): 9 of
+#: the 12 sweep pairs that kept dense-following keys in round 43
+GIANT = 2.0
+
+
+def fit_share(size: float) -> float:
+    """The share of the key fit's lengths in metres that holds on a figure of ``size`` [m]:
+    :func:`~engine.correction.ik.length_share` up to :data:`GIANT`, ``size / GIANT``
+    beyond, so that a figure bigger than that is fitted as the same figure scaled down to
+    it."""
+    return length_share(size) if size <= GIANT else size / GIANT
+
 
 #: [m] a held task missing its goal by more than this gets keys where it misses
 TASK_TOLERANCE = 0.5e-3
@@ -472,21 +494,29 @@ class _Tasks:
     """The held tasks, the constraints of one task kind, joint, priority and weight in one
     batch: per batch its frames, goals, row weight and IK structure."""
 
-    def __init__(self, constraints, skeleton, locked, share: float = 1.0, carried=None):
+    def __init__(self, constraints, skeleton, locked, share: float = 1.0, carried=None,
+                 strict: float = 1.0):
         batches: dict = {}
         for c in constraints:
             kind = c.kind_object.task_kind
             frames = np.arange(c.start, c.end + 1)
             key = (kind.name, c.joint, c.priority, c.weight)
-            entry = batches.setdefault(key, (kind, c, [], []))
+            entry = batches.setdefault(key, (kind, c, [], [], []))
             entry[2].append(frames)
             entry[3].append(c.kind_object.task_goals(c, frames))
+            entry[4].append(np.full(len(frames), strict if c.kind_object.one_sided(c.goal)
+                                    else 1.0))
         self.items = []
         #: per item, its metric error [m] per frame in the dense solve (None: not known yet)
         self.floor = None
         #: per item, how much more each of its frames counts (see :meth:`emphasise`)
         self.emphasis = []
-        for kind, c, frames, goals in batches.values():
+        #: per item and frame, how many times its metric error counts against the tolerance
+        #: and the limit: ``strict`` for a one-sided plane (a floor: the feet stay above it
+        #: within the tolerance in metres whatever the figure's size), else 1
+        self.strict = []
+        for kind, c, frames, goals, strict_of in batches.values():
+            self.strict.append(np.concatenate(strict_of))
             frames = np.concatenate(frames)
             joint, point = effector(skeleton.index[c.joint], carried)
             task = Task(kind, joint, np.concatenate(goals), np.ones(len(frames)), c.priority,
@@ -530,13 +560,14 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     (:func:`~.ik.effector`).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
-    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it
-    (:func:`~engine.correction.ik.length_share`): its keys are those of the character
-    scaled up to that size."""
+    metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it, and on
+    one bigger than :data:`GIANT` they grow with it (:func:`fit_share`): its keys are those
+    of the character scaled to that size."""
     import scipy.sparse as sparse
     sk = edited.skeleton
     F = edited.num_frames
-    share = length_share(figure_size(edited))
+    size = figure_size(edited)
+    share = fit_share(size)
     tolerance = tolerance * share
     limit = TASK_LIMIT * share
     cons = [c for c in constraints if c.enabled]
@@ -567,7 +598,9 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
     lever[:-1] = np.maximum(lever[:-1], LEVER_FLOOR * share)
     locked = frozenset(range(sk.num_joints)) - {jt.index for jt in joints}
-    tasks = _Tasks(cons, sk, locked, share, carried)
+    # a floor is held to its tolerance in metres on a figure bigger than GIANT too (the foot
+    # rule is absolute: at most 1 mm under a joint's rest height)
+    tasks = _Tasks(cons, sk, locked, share, carried, strict=share / length_share(size))
     layout = _Layout(joints, F)
     # the rows (joint, keyed frame, channel) depend on the keyed frames only, not the keys
     dense = _stacked(layout, rotvecs, root)
@@ -851,8 +884,7 @@ def _gauss_newton(tasks, edited: Motion, layout: _Layout, x: np.ndarray, reg, ta
     steps on the held tasks' errors plus the linear rows ``reg x = target`` (the pull and
     the speed); returns ``x``, the largest metric task error beyond the dense solve's, the
     misses, the metric errors (as :func:`_linearised`) and the evaluations used. ``share``:
-    :func:`~engine.correction.ik.length_share` (the normal equations are in squared
-    lengths)."""
+    :func:`fit_share` (the normal equations are in squared lengths)."""
     import scipy.sparse as sparse
     def state(x):
         values = layout.values(x)
@@ -1000,7 +1032,7 @@ def _linearised(tasks: _Tasks, motion: Motion, layout: _Layout, values: np.ndarr
             # unreachable goal) the task is
             size = np.linalg.norm(err, axis=1)
             if tasks.floor is not None:
-                size = size - tasks.floor[item]
+                size = (size - tasks.floor[item]) * tasks.strict[item]
             else:
                 floors[item] = size
             worst = max(worst, float(size.max(initial=0.0)))
@@ -1202,7 +1234,7 @@ class _Judge:
         """Whether the keys (fitted with ``stats``) are kept; where not, :attr:`reason` says
         why, in words."""
         names = self.edited.skeleton.names
-        worst, limit = stats.get("worst_task_m", 0.0), TASK_LIMIT * length_share(self.size)
+        worst, limit = stats.get("worst_task_m", 0.0), TASK_LIMIT * fit_share(self.size)
         if worst > limit:
             self.reason = (f"the keys fitted to the tasks missed one by {worst * 1e3:.2f} mm "
                            f"(at most {limit * 1e3:.2f} mm beyond the dense solve)")
