@@ -191,9 +191,10 @@ def test_the_ik_correction_is_shown_while_its_keys_are_fitted(window, qtbot, mon
 def test_added_foot_contacts_are_on_the_timeline_while_they_are_solved(window, qtbot,
                                                                           monkeypatch):
     """Tools > Add Foot Contacts and Solve puts the contacts it finds on the timeline at
-    once, while the IK and the key fit run (they used to appear when the keys landed); the
-    solve enforces those same contacts, and one undo takes them and the correction away.
-    (The IK is held here until the test has looked.)"""
+    once, while the IK and the key fit run (they used to appear when the keys landed); an
+    edit meanwhile (the hand's constraint disabled) keeps them, the solve enforces those same
+    contacts, and undo takes the edit, then them and the correction away. (The IK is held
+    here until the test has looked.)"""
     import threading
     from motion_composer.engine import scene as scene_module
     window.open_project(DEMO)
@@ -223,16 +224,26 @@ def test_added_foot_contacts_are_on_the_timeline_while_they_are_solved(window, q
         assert len(contacts) >= 8 and {c.meta.get("source") for c in contacts} == {"contact"}
         assert shown[:len(hand)] == list(hand) and len(shown) == len(doc.scene.constraints)
         assert doc.scene.displacement is before.displacement       # not solved yet
+        # the hand's constraint disabled meanwhile (the edit restarts the solve): the
+        # contacts stay, and are what the new solve enforces
+        timeline.select(0)
+        timeline.toggle_selected()
+        assert not doc.scene.constraints[0].enabled
+        assert list(doc.scene.constraints[len(hand):]) == shown[len(hand):]
     finally:
         release.set()
-    qtbot.waitUntil(lambda: not doc.jobs.busy, timeout=SOLVE_WAIT_MS)
-    assert not window.errors and not doc.pending
+    qtbot.waitUntil(lambda: not doc.jobs.busy and not doc.pending, timeout=SOLVE_WAIT_MS)
+    assert not window.errors
     # what was shown is what was solved and what the scene keeps
     assert len(seen["enforced"]) == len(shown)
-    assert all(a.same_as(b) for a, b in zip(seen["enforced"], shown))
-    assert all(a.same_as(b) for a, b in zip(doc.scene.constraints, shown))
+    assert all(a.same_as(b) for a, b in zip(seen["enforced"][len(hand):], shown[len(hand):]))
+    assert all(a.same_as(b) for a, b in zip(doc.scene.constraints[len(hand):],
+                                            shown[len(hand):]))
+    assert not doc.scene.constraints[0].enabled
     assert doc.scene.displacement is not before.displacement
-    window.undo_action.trigger()
+    window.undo_action.trigger()                       # the hand enabled again, contacts kept
+    assert doc.scene.constraints[0].enabled and len(timeline.rows) == len(shown)
+    window.undo_action.trigger()                       # the contacts gone
     assert [r.constraint for r in timeline.rows] == list(hand)
     assert doc.scene.displacement is before.displacement
 
