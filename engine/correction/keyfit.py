@@ -1238,6 +1238,11 @@ class _Judge:
         if worst > limit:
             self.reason = (f"the keys fitted to the tasks missed one by {worst * 1e3:.2f} mm "
                            f"(at most {limit * 1e3:.2f} mm beyond the dense solve)")
+            strict = fit_share(self.size) / length_share(self.size)
+            if strict > 1.0:
+                # a floor's metres count more there (_Tasks.strict): say so, not a giant miss
+                self.reason += (f"; on this figure of {self.size:.3g} m a floor's millimetre "
+                                f"counts {strict:.3g}")
             return False
         keyed = keys.apply(self.edited)
         # the keys stay near the dense solve
