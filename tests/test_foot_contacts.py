@@ -223,6 +223,15 @@ def test_a_giant_keeps_keys_fitted_to_the_tasks():
     test_planted_heels_drift_no_more_than_the_performers(solved)
     test_planted_toes_drift_no_more_than_the_performers(solved)
     test_planted_feet_stay_on_or_above_the_floor(solved)
+    # the floors stay held to the millimetre: a floor's miss counts as many times more as
+    # the lengths grew, and a refusal for a miss says so
+    from motion_composer.engine.correction.keyfit import GIANT, TASK_LIMIT, _Judge
+    from motion_composer.engine.describe import figure_size
+    size = figure_size(scene.edited)
+    judge = _Judge(scene.composed, scene.edited, solution.constraints, solution.correction)
+    assert not judge.keeps(None, {"worst_task_m": TASK_LIMIT * size})
+    assert judge.reason.endswith(f"; on this figure of {size:.3g} m a floor's millimetre "
+                                 f"counts {size / GIANT:.3g}")
 
 
 def test_the_detector_covers_the_planted_frames(solved):
@@ -603,13 +612,15 @@ def _watched_fits(monkeypatch) -> list:
 def test_keys_left_unsteady_are_fitted_again_staggered_and_the_steadier_kept(monkeypatch):
     """A solve whose kept keys still turn a joint past the steady limit fits them once more
     with every channel's keys staggered by half a key spacing (keyfit.RESTAGGER) and keeps
-    the steadier. The Bandai walk onto Quaternius' robot: its first keys are steady and are
-    fitted once; with the judge's limit made just stricter than they are (99 % of their
-    worst turn over it), the keys are fitted again staggered, and the restaggered keys,
-    steadier, are the ones delivered. (Real pairs that need it take minutes: the CMU jumps
-    onto the Mixamo mannequin, 4.34 times past the limit, restaggered 1.00; the sweep.)"""
+    the steadier. The Bandai run onto Ely: its first keys are steady and are fitted once;
+    with the judge's limit made just stricter than they are (99 % of their worst turn over
+    it), the keys are fitted again staggered, and the restaggered keys, steadier, are the
+    ones delivered. (Real pairs that need it take minutes: the CMU jumps onto the Mixamo
+    mannequin, 4.34 times past the limit, restaggered 1.00; the sweep. The Bandai walk onto
+    the robot served here until the robot's fit, a figure of 4.2 m, grew its lengths with
+    it: its restaggered keys are no steadier now.)"""
     from motion_composer.engine.correction import keyfit
-    scene = _auto_scene("bandai1_walk_normal_001.bvh", "target_robot_expressive.glb")
+    scene = _auto_scene("bandai1_run_active_001.bvh", "target_mixamo_ely.glb")
     fits = _watched_fits(monkeypatch)
     solution = scene.solve(regenerate=True)
     assert solution.report["keys"]["fitted_to"] == "tasks"
