@@ -7,8 +7,9 @@ from motion_composer.app.gui.qt import (QtGui,  # noqa: F401  (sets Qt up before
                                         QtWidgets)
 
 #: the longest a GUI test waits for a condition, a signal or a window, in ms: generous, since
-#: a loaded CI machine may be many times slower (a wait that is met returns at once)
-WAIT_MS = 30_000
+#: a loaded CI machine may be many times slower, and the suite runs a test file per core
+#: (a wait that is met returns at once)
+WAIT_MS = 60_000
 #: the longest a GUI test waits for a whole solve of the demo to land (about 10 s on a quiet
 #: machine: the IK and the key fit of its contacts and hand): with two other processes on
 #: each of two cores a solve took over 30 s
