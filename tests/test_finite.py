@@ -263,7 +263,7 @@ def test_retarget_onto_every_glb_prints_no_warning_and_a_strict_report(capsys, t
                                                                        target):
     """In-process, so a RuntimeWarning anywhere in reading, converting, IK (automatic contacts
     and a floor), key fitting or writing fails the test (the Bandai walk, 195 frames: the CMU
-    walk's refused fits onto the fox are test_flat_feet's)."""
+    walk's refused fits onto the fox are test_foot_contacts')."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         code, out, err = run(capsys, "retarget", shared_path("bandai1_walk_normal_001.bvh"),

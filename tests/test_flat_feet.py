@@ -14,10 +14,8 @@ joint positions: over every flat the corrected foot points where the converted f
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from conftest import REPO
-from test_foot_contacts import CASES, IDS, solve_case
 from motion_composer.engine.correction.contacts import find_feet
 from motion_composer.engine.kinematics import fk_arrays
 from motion_composer.engine.scene import Scene
@@ -44,20 +42,10 @@ def _flats(constraints, ankle: str) -> list[tuple[int, int]]:
             if c.kind == "orientation" and c.joint == ankle and c.meta.get("source") == "contact"]
 
 
-@pytest.fixture(scope="module", params=["demo"] + CASES, ids=["demo"] + IDS)
-def solved(request):
-    if request.param == "demo":
-        scene = Scene.open(DEMO)
-        return scene, scene.solve(regenerate=True)
-    scene, solution, _ = solve_case(request.param)        # test_foot_contacts.py's solves
-    return scene, solution
-
-
-def test_a_flat_foot_is_held_at_the_converted_foots_heading(solved):
-    scene, solution = solved
-    if not any(toe for _, toe in scene.target_feet()):
-        pytest.skip("the character's feet have no toe: its ankles are pinned, and turn as "
-                    "the performer's (the robot's feet, carried with its shins)")
+def held_at_converted_headings(scene, solution) -> int:
+    """Asserts that over every flat of ``solution`` (of ``scene``) the corrected foot points
+    where the converted foot points within :data:`HEADING`; returns how many flats it
+    checked."""
     checked = 0
     for ankle, toe in find_feet(scene.target.skeleton):
         flats = _flats(solution.constraints, ankle)
@@ -71,7 +59,15 @@ def test_a_flat_foot_is_held_at_the_converted_foots_heading(solved):
             f"{ankle} flat {flats[worst]}: held at {held[worst]:.1f} deg, converted "
             f"{converted[worst]:.1f} deg")
         checked += len(flats)
-    assert checked, "the clip has flat feet"
+    return checked
+
+
+def test_the_demos_flat_feet_are_held_at_the_converted_feets_headings():
+    """The rule on the bundled demo; test_foot_contacts.py checks it on each of its pairs,
+    on the solves it makes (one solve per pair in one process)."""
+    scene = Scene.open(DEMO)
+    assert held_at_converted_headings(scene, scene.solve(regenerate=True)), \
+        "the clip has flat feet"
 
 
 def test_the_demo_foot_pivots_between_flats_and_is_held_at_each_heading():
@@ -91,18 +87,3 @@ def test_the_demo_foot_pivots_between_flats_and_is_held_at_each_heading():
     a, b = close[int(np.argmax(turns))]
     between = 2 * np.degrees(np.arccos(min(1.0, abs(float(goals[flats[a]] @ goals[flats[b]])))))
     assert between > 30.0
-
-
-def test_a_giant_holds_its_flat_feet():
-    """The glTF fox is 61 m tall (its file's metres): the solver's 0.1 mm tolerance is a
-    millionth of it, its stretched legs converge towards that so slowly that the lower
-    priority holding a flat foot's orientation was gated off, and the right foot rolled 7.9
-    degrees on the floor at frame 798 of the CMU walk. The tolerance grows with a giant
-    (ik.MIN_TOLERANCE): every flat is held within a degree."""
-    case = CASES[IDS.index("walk-cmumax-fox")]
-    scene, solution, _ = solve_case(case)
-    flats = [c for c in solution.report["quality"]["constraints"]
-             if c["kind"] == "orientation" and c["name"].startswith("foot flat")]
-    assert len(flats) >= 10
-    worst = max(flats, key=lambda c: c["max_residual"])
-    assert np.degrees(worst["max_residual"]) < 1.0, worst
