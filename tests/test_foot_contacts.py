@@ -381,6 +381,33 @@ def test_a_giant_holds_its_flat_feet():
     assert np.degrees(worst["max_residual"]) < 1.0, worst
 
 
+def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
+    """The CMU 131 walk onto the fox, the firm pull's fit: its rounds of added keys end 20
+    times over the task limit, none within it, and its first rounds of emphasis and calming
+    after them miss by 29 and 39 times the limit. It stops there (keyfit.RUNAWAY): run to
+    the end, 26 more rounds (20 s on this machine) end it 5 times over the limit, refused
+    all the same. The solve keeps the keys that follow the dense curves."""
+    from motion_composer.engine.correction import keyfit
+    from motion_composer.engine.describe import figure_size
+    scene, solution, _ = solve_case(CASES[IDS.index("walk-cmumax-fox")])
+    edited = solution.scene.edited
+    limit = keyfit.TASK_LIMIT * keyfit.fit_share(figure_size(edited))
+    args = (edited, solution.constraints, solution.correction.rotvecs,
+            solution.correction.root)
+    stopped: dict = {}
+    keyfit.fit_to_tasks(*args, pull=keyfit.FAITHFUL_PULL, stats=stopped)
+    assert stopped["ran_away"] and not stopped["stalled"]
+    assert min(stopped["adding_misses_m"]) > limit
+    monkeypatch.setattr(keyfit, "RUNAWAY", np.inf)
+    unstopped: dict = {}
+    keyfit.fit_to_tasks(*args, pull=keyfit.FAITHFUL_PULL, stats=unstopped)
+    assert not unstopped["ran_away"]
+    assert unstopped["adding_misses_m"] == stopped["adding_misses_m"]     # the same fit
+    assert unstopped["worst_task_m"] > limit                    # not kept either
+    assert unstopped["iterations"] > 2 * stopped["iterations"]
+    assert solution.report["keys"]["fitted_to"] == "dense curves"
+
+
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
