@@ -264,11 +264,14 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     solve keeps such keys where they pop, lurch and part from the dense solve no more than
     allowed; these take a joint 30 cm from the dense solve's path (FIDELITY; the capture
     walks 0.9 m under that floor, and few keys hold the feet in a body far from the dense
-    one), and so do the firmer pull's (31 cm), so it keeps the dense-following keys, which
-    hold the goals too. (Until round 32 this window's floor planes were given twice, the
-    contacts' and the project's, and frames 750-949 played this part with keys that moved
-    the root's correction 94 mm into frame 1 where the dense one moves 3 mm; until round 36
-    a contact the window's edge cut short was dropped, and frames 500-699 played it.)"""
+    one), and so do the firmer pull's (31 cm) and the firmer pull's with keys at the ramps'
+    ends too (their added keys stall at 2.0 mm; emphasised from there they hold the tasks
+    within 0.61 mm, 21.6 % of the figure's size from the dense path), so it keeps the
+    dense-following keys, which hold the goals too. (Until round 32 this window's floor
+    planes were given twice, the contacts' and the project's, and frames 750-949 played
+    this part with keys that moved the root's correction 94 mm into frame 1 where the dense
+    one moves 3 mm; until round 36 a contact the window's edge cut short was dropped, and
+    frames 500-699 played it.)"""
     from motion_composer.engine.correction import keyfit
     from motion_composer.engine.describe import figure_size
     from ik_fixtures import walk_window_on_tpose
@@ -298,9 +301,9 @@ def test_a_fit_that_loses_its_hold_returns_its_best_keys_within_the_limit():
     assert report["count"] == sum(len(c) for c in fallback.values())
     assert report["largest_distance_from_dense_m"] < 1e-3
     # and why: the last keys judged (the firm pull's with keys at the ramps' ends, tried
-    # where neither pull's evenly spaced keys is kept) miss a task
-    assert re.fullmatch(r"the keys fitted to the tasks missed one by [\d.]+ mm \(at most "
-                        r"1\.00 mm beyond the dense solve\)",
+    # where neither pull's evenly spaced keys is kept) part from the dense solve
+    assert re.fullmatch(r"the keys fitted to the tasks took \S+ [\d.]+ % of the figure's "
+                        r"size from the dense solve at frame \d+ \(at most 10 %\)",
                         report["why_dense_curves"]), report["why_dense_curves"]
 
 
@@ -340,15 +343,18 @@ def test_keys_that_part_from_the_dense_solve_are_not_kept(monkeypatch):
     assert float(share) >= float(bound)
 
 
-def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch):
+def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops_adding(monkeypatch):
     """The bundled walk (frames 300-499) onto the bundled T-pose, automatic contacts, the
     floor at 0: rounds of added keys leave the largest miss at 5-17 mm, never within
-    TASK_LIMIT. The fit stops after STALLS such rounds in a row instead of running every
-    round to the end, which takes more than twice the evaluations; the solve then keeps the
-    keys that follow the dense curves, and they hold the goals. (A stall is a bet on time:
-    run to the end, this fit gets within the limit at its last rounds, 0.56 mm, as do frames
-    700-899 of this walk. Frames 100-299 played this part until round 32, when their floor
-    planes were given twice.)"""
+    TASK_LIMIT. The fit stops adding keys after STALLS such rounds in a row, goes back to
+    the keys of its least miss and emphasises the frames that still miss, as any fit whose
+    keys are all added (that brought the CC3 pickup onto Kenney's FBX character within the
+    limit: benchmarks/sweep_feet_r47.txt); when the emphasis is spent and no round has held
+    the tasks, it stops (calming and steadying would not bring them within the limit). The
+    solve then keeps the keys that follow the dense curves, and they hold the goals. Run to
+    the end adding keys, it misses by 4.3 mm after 8 rounds and runs away (keyfit.RUNAWAY);
+    with neither stop, it ends 1.7 mm off after 333 evaluations (269 with the stops). (Frames
+    100-299 played this part until round 32, when their floor planes were given twice.)"""
     from motion_composer.engine.correction import keyfit
     from ik_fixtures import walk_window_on_tpose
     solution = walk_window_on_tpose(300, 500)
@@ -356,10 +362,10 @@ def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch
             solution.correction.root)
     stopped: dict = {}
     keyfit.fit_to_tasks(*args, stats=stopped)
-    assert stopped["stalled"]
+    assert stopped["stalled"] and stopped["spent"] and not stopped["ran_away"]
     largest = stopped["adding_misses_m"]
     k = keyfit.STALLS
-    assert len(largest) > k
+    assert len(largest) > k and stopped["rounds"] == len(largest) - 1
     # the last STALLS rounds: over the limit and no lower than the best before them
     assert min(largest[-k:]) > keyfit.TASK_LIMIT
     assert min(largest[-k:]) >= min(largest[:-k])
@@ -369,14 +375,15 @@ def test_a_fit_whose_added_keys_stop_lowering_its_largest_miss_stops(monkeypatch
         run = run + 1 if keyfit.TASK_LIMIT < worst >= best else 0
         best = min(best, worst)
         assert run < k
-    # run to the end, the fit costs more than twice as much (here it then gets within the
-    # limit, 0.56 mm: the stop is a bet on time, and it loses this one)
+    # then every emphasis round, from the least miss's keys, lower still, not steadied
+    assert stopped["emphasised"] == keyfit.EMPHASIS and stopped["steadied"] == 0
+    assert keyfit.TASK_LIMIT < stopped["worst_task_m"] < min(largest)
+    # run to the end adding keys, it does not hold the tasks either
     monkeypatch.setattr(keyfit, "STALLS", 10 ** 6)
     unstopped: dict = {}
     keyfit.fit_to_tasks(*args, stats=unstopped)
-    assert not unstopped["stalled"]
-    assert unstopped["iterations"] > 2 * stopped["iterations"]
-    assert stopped["worst_task_m"] > keyfit.TASK_LIMIT
+    assert not unstopped["stalled"] and unstopped["ran_away"]
+    assert unstopped["worst_task_m"] > keyfit.TASK_LIMIT
     # the solve kept keys that follow the dense curves: every goal within 1 mm
     errors = _goal_errors(solution.motion, solution.constraints)
     assert errors and max(errors) < 1e-3
