@@ -383,10 +383,11 @@ def test_a_giant_holds_its_flat_feet():
 
 def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
     """The CMU 131 walk onto the fox, the firm pull's fit: its rounds of added keys end 20
-    times over the task limit, none within it, and its first rounds of emphasis and calming
-    after them miss by 29 and 39 times the limit. It stops there (keyfit.RUNAWAY): run on
-    through its emphasis rounds, it ends 5 times over the limit, refused all the same, at
-    more than twice the cost. The solve keeps the keys that follow the dense curves."""
+    times over the task limit, none within it, and its rounds of emphasis and calming after
+    them miss by 29, 39, 7.4 and 37 times the limit. It stops there, at more than
+    keyfit.RUNAWAY times its least miss since its keys were added: run on through its
+    emphasis rounds, it ends 5 times over the limit, refused all the same, at a higher cost.
+    The solve keeps the keys that follow the dense curves."""
     from motion_composer.engine.correction import keyfit
     from motion_composer.engine.describe import figure_size
     scene, solution, _ = solve_case(CASES[IDS.index("walk-cmumax-fox")])
@@ -404,7 +405,7 @@ def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
     assert not unstopped["ran_away"] and unstopped["spent"]
     assert unstopped["adding_misses_m"] == stopped["adding_misses_m"]     # the same fit
     assert unstopped["worst_task_m"] > limit                    # not kept either
-    assert unstopped["iterations"] > 2 * stopped["iterations"]
+    assert unstopped["iterations"] > stopped["iterations"]
     assert solution.report["keys"]["fitted_to"] == "dense curves"
 
 
