@@ -76,7 +76,7 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   the floor at 0: 367 evaluations, 63 s, ending 1.6 mm off; stopped after 161), and until
   round 47 a stalled fit with nothing within the limit stopped there: emphasised, the CC3
   pickup onto Kenney's FBX character comes within it from 1.14 times the limit (its keys
-  kept, the solve 399 s -> 83 s). Only the rounds that add keys are judged so: the emphasis
+  kept, the solve 399 s -> 91 s). Only the rounds that add keys are judged so: the emphasis
   rounds below wander (a fit of frames 100-399 of that walk went 0.87, 1.26, 0.91, 1.91,
   1.06 mm and ended at 0.56, kept).
 * **A fit that no round has held stops when it runs away or its emphasis is spent.** It
@@ -298,10 +298,11 @@ PER_MISS = 2
 #: came within the limit after their added keys missed by more than 1.69 times that before
 #: (the CMU jumps onto Kenney's FBX character, the firm pull after a stall: 1.03 then 1.74
 #: times the limit, then 0.84; at 1.5 it was stopped); the CC3 walk onto the fox went from
-#: 11.9 times the limit to 1.75 and 0.75. Those that ran past it went on to 5-289 times the limit over up to 133 s
-#: of rounds and were refused (the CMU jumps onto the fox); on the bundled walk onto the
-#: bundled T-pose with the right arm's and the left leg's IK blend, three stalled fits at 41 mm went
-#: down to 9-13 mm with emphasis and back up to 20-83 mm with calming
+#: 11.9 times the limit to 1.75 and 0.75. Those that ran past it went on to 5-289 times
+#: the limit over up to 133 s of rounds and were refused (the CMU jumps onto the fox); on
+#: the bundled walk onto the bundled T-pose with the right arm's and the left leg's IK
+#: blend, three stalled fits at 41 mm went down to 9-13 mm with emphasis and back up to
+#: 20-83 mm with calming
 RUNAWAY = 2.0
 
 
@@ -573,8 +574,8 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
-    the fit's figures (largest held-task error [m], evaluations, rounds, whether it stalled
-    or ran away (:data:`RUNAWAY`),
+    the fit's figures (largest held-task error [m], evaluations, rounds, whether it stalled,
+    ran away (:data:`RUNAWAY`) or stopped with its emphasis spent,
     the largest miss after each round of added keys, and the kept keys' worst turn over the
     steady limit, at least 1, or ``None`` where it was not measured); ``stagger`` shifts
     every channel's first keys by that fraction of the key spacing; ``at_ramps`` keys each
