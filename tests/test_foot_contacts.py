@@ -389,14 +389,13 @@ def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
     emphasis rounds, it ends 5 times over the limit, refused all the same, at a higher cost.
     The solve keeps the keys that follow the dense curves."""
     from motion_composer.engine.correction import keyfit
-    from motion_composer.engine.describe import figure_size
     scene, solution, _ = solve_case(CASES[IDS.index("walk-cmumax-fox")])
-    edited = solution.scene.edited
-    limit = keyfit.TASK_LIMIT * keyfit.fit_share(figure_size(edited))
-    args = (edited, solution.constraints, solution.correction.rotvecs,
+    args = (solution.scene.edited, solution.constraints, solution.correction.rotvecs,
             solution.correction.root)
     stopped: dict = {}
     keyfit.fit_to_tasks(*args, pull=keyfit.FAITHFUL_PULL, stats=stopped)
+    limit = stopped["limit_m"]              # the 1 mm limit grown with the 61 m fox
+    assert limit > keyfit.TASK_LIMIT
     assert stopped["ran_away"] and not stopped["stalled"]
     assert min(stopped["adding_misses_m"]) > limit
     monkeypatch.setattr(keyfit, "RUNAWAY", np.inf)

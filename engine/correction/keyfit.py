@@ -574,7 +574,8 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
-    the fit's figures (largest held-task error [m], evaluations, rounds, whether it stalled,
+    the fit's figures (largest held-task error [m] and its limit on this figure,
+    evaluations, rounds, whether it stalled,
     ran away (:data:`RUNAWAY`) or stopped with its emphasis spent,
     the largest miss after each round of added keys, and the kept keys' worst turn over the
     steady limit, at least 1, or ``None`` where it was not measured); ``stagger`` shifts
@@ -749,7 +750,8 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     if worst > limit and kept is not None and kept_worst < worst:
         result, worst, unsteady = _as_map(sk, _Layout(kept[0], F), kept[1]), kept_worst, None
     if stats is not None:
-        stats.update({"worst_task_m": float(worst), "iterations": total, "rounds": rounds,
+        stats.update({"worst_task_m": float(worst), "limit_m": float(limit),
+                      "iterations": total, "rounds": rounds,
                       "calming": calming, "steadied": steadied, "emphasised": emphasised,
                       "stalled": stalls >= STALLS, "ran_away": ran_away,
                       "spent": spent,
