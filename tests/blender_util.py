@@ -89,7 +89,12 @@ def run_blender(script_text: str, script_name: str, job: dict, folder: Path,
     out = folder / "result.json"
     job_file = folder / "job.json"
     job_file.write_text(json.dumps(dict(job, out=str(out))))
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
+    # Debian's Blender embeds the system Python and finds its home from the first python3 on
+    # PATH: behind pyenv's shims it would take pyenv's standard library and miss
+    # /usr/lib/python3/dist-packages, where the numpy its glTF add-on needs lives
+    path = os.pathsep.join([os.path.dirname(os.path.realpath(blender)),
+                            os.environ.get("PATH", "")])
+    env = dict(os.environ, PYTHONNOUSERSITE="1", PATH=path)
     proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
                            "--python", str(script), "--", str(job_file)],
                           capture_output=True, text=True, timeout=timeout, env=env)

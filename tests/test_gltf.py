@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import base64
 import json
-import os
 import struct
-import subprocess
 import textwrap
 from pathlib import Path
 
@@ -30,7 +28,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from blender_util import blender_or_skip
+from blender_util import blender_or_skip, run_blender
 from conftest import clip_path, shared_path
 from motion_composer.engine.conversion.automap import automap
 from motion_composer.engine.formats.bvh import read_bvh, write_bvh
@@ -933,7 +931,7 @@ def test_blender_reads_what_we_read_and_write(tmp_path, robot, fox, retargeted):
     bone orientation) equal our forward kinematics within 1e-4 of the character's height.
     Blender keys quaternions per component, so frames are compared on the files' key times
     (the originals are read at their 24 fps keys here)."""
-    blender = blender_or_skip()
+    blender_or_skip()
     robot24 = read_gltf(shared_path(ROBOT), fps=24)
     fox24 = read_gltf(shared_path(FOX), fps=24)
     walk, walk_path = retargeted
@@ -954,23 +952,8 @@ def test_blender_reads_what_we_read_and_write(tmp_path, robot, fox, retargeted):
          [0, 50, 100], False),
     ]
     job = {"files": [{"key": k, "kind": kind, "path": str(p), "fps": fps, "frames": frames}
-                     for k, kind, p, fps, _, frames, _ in cases],
-           "out": str(tmp_path / "result.json")}
-    (tmp_path / "job.json").write_text(json.dumps(job))
-    (tmp_path / "script.py").write_text(BLENDER_GLTF_SCRIPT)
-    # Debian's Blender embeds the system Python and finds its home from the first python3 on
-    # PATH: behind pyenv's shims it would take pyenv's standard library and miss
-    # /usr/lib/python3/dist-packages, where the numpy its glTF add-on needs lives
-    path = os.pathsep.join([os.path.dirname(os.path.realpath(blender)),
-                            os.environ.get("PATH", "")])
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(tmp_path / "script.py"), "--",
-                           str(tmp_path / "job.json")], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ, PYTHONNOUSERSITE="1", PATH=path))
-    result_file = tmp_path / "result.json"
-    assert proc.returncode == 0 and result_file.is_file(), proc.stdout[-3000:] + \
-        proc.stderr[-3000:]
-    results = json.loads(result_file.read_text())
+                     for k, kind, p, fps, _, frames, _ in cases]}
+    results = run_blender(BLENDER_GLTF_SCRIPT, "script.py", job, tmp_path)
     for key, kind, _, _, motion, frames, y_up in cases:
         ours = forward_kinematics(motion).positions
         sk = motion.skeleton
@@ -1175,7 +1158,6 @@ def test_blenders_gltf_written_z_up_read_with_its_up_axis_is_its_y_up_export(tmp
     mistake) and ticked, both of Ely: the Z-up file's doubt names +Z, and read with it every
     joint of the bind pose and of the animation and every vertex is the Y-up file's within
     a micrometre (float32 data)."""
-    from blender_util import run_blender
     from motion_composer.engine.formats import read_character
     run_blender(_BLENDER_Z_UP, "z_up.py", {"source": str(shared_path(
         "target_mixamo_ely.glb")), "folder": str(tmp_path)}, tmp_path)

@@ -6,14 +6,12 @@ and a reader bug of ours cannot cancel out."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from blender_util import blender_or_skip
+from blender_util import blender_or_skip, run_blender
 from conftest import REPO, clip_path
 from motion_composer.engine import read_bvh
 from motion_composer.engine.formats.gltf import read_gltf, write_gltf
@@ -113,26 +111,13 @@ def test_the_window_draws_it_as_a_skinned_mesh(qtbot, tmp_path):
 def test_blender_reads_it_where_our_reader_does(tmp_path, character):
     """Blender's glTF importer on the test character and on our export of it: its pose-bone
     heads sit where our forward kinematics puts the joints (within 1e-4 of its height)."""
-    blender = blender_or_skip()
+    blender_or_skip()
     written = tmp_path / "swing_again.glb"
     write_gltf(character.motion(SWING), character, written)
     cases = [("test character", CHARACTER, [0, 7, 22]), ("written again", written, [0, 15, 29])]
     job = {"files": [{"key": key, "kind": "gltf", "path": str(path), "fps": 30, "frames": frames}
-                     for key, path, frames in cases],
-           "out": str(tmp_path / "result.json")}
-    (tmp_path / "job.json").write_text(json.dumps(job))
-    (tmp_path / "script.py").write_text(BLENDER_GLTF_SCRIPT)
-    # as in test_gltf: Debian's Blender must find the system Python first on PATH
-    path = os.pathsep.join([os.path.dirname(os.path.realpath(blender)),
-                            os.environ.get("PATH", "")])
-    proc = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python", str(tmp_path / "script.py"), "--",
-                           str(tmp_path / "job.json")], capture_output=True, text=True,
-                          timeout=300, env=dict(os.environ, PYTHONNOUSERSITE="1", PATH=path))
-    result_file = tmp_path / "result.json"
-    assert proc.returncode == 0 and result_file.is_file(), proc.stdout[-3000:] + \
-        proc.stderr[-3000:]
-    results = json.loads(result_file.read_text())
+                     for key, path, frames in cases]}
+    results = run_blender(BLENDER_GLTF_SCRIPT, "script.py", job, tmp_path)
     motion = character.motion(SWING)
     ours = forward_kinematics(motion).positions
     height = float(np.ptp(ours[0, :, 1]))
