@@ -64,6 +64,17 @@ def demo_document():
     return doc
 
 
+def shown(qtbot, widget, width: int, height: int | None = None):
+    """``widget`` handed to ``qtbot`` (closed after the test), ``width`` by ``height`` pixels
+    (its size hint's height by default), shown, and once the window system has exposed it:
+    the widget."""
+    qtbot.addWidget(widget)
+    widget.resize(width, widget.sizeHint().height() if height is None else height)
+    widget.show()
+    qtbot.waitExposed(widget, timeout=WAIT_MS)
+    return widget
+
+
 def quiet_window(qtbot, tmp_path, monkeypatch):
     """A real :class:`MainWindow` whose settings and autosaves live in ``tmp_path`` and which
     asks nothing: errors are kept in ``w.errors``, closing discards. Tests set other answers

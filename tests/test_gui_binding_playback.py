@@ -28,7 +28,7 @@ from motion_composer.engine.conversion import BindOptions  # noqa: E402
 from motion_composer.engine.conversion import RootOptions  # noqa: E402
 
 from conftest import clip_path  # noqa: E402
-from gui_support import WAIT_MS  # noqa: E402
+from gui_support import WAIT_MS, shown  # noqa: E402
 from ik_fixtures import MAX_TO_HOLDEN  # noqa: E402
 
 Qt = QtCore.Qt
@@ -55,21 +55,12 @@ def doc(qtbot, clips):
 
 @pytest.fixture
 def panel(qtbot, doc):
-    w = BindingPanel(doc)
-    qtbot.addWidget(w)
-    w.resize(440, w.sizeHint().height())
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
-    return w
+    return shown(qtbot, BindingPanel(doc), 440)
 
 
 @pytest.fixture
 def bar(qtbot, doc):
-    w = PlaybackBar(doc)
-    qtbot.addWidget(w)
-    w.resize(900, w.sizeHint().height())
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
+    w = shown(qtbot, PlaybackBar(doc), 900)
     yield w
     w.pause()
 

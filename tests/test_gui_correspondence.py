@@ -28,7 +28,7 @@ from motion_composer.app.gui.correspondence_panel import (CorrespondencePanel, J
 from motion_composer.app.gui.document import Document  # noqa: E402
 from motion_composer.engine.formats.bvh import read_bvh  # noqa: E402
 from tests.conftest import clip_path, shared_path  # noqa: E402
-from gui_support import WAIT_MS  # noqa: E402
+from gui_support import WAIT_MS, shown  # noqa: E402
 
 automap_module = pytest.importorskip("motion_composer.engine.conversion.automap")
 
@@ -55,12 +55,7 @@ def doc(clips):
 
 @pytest.fixture
 def panel(qtbot, doc):
-    widget = CorrespondencePanel(doc)
-    qtbot.addWidget(widget)
-    widget.resize(560, 800)
-    with qtbot.waitExposed(widget, timeout=WAIT_MS):
-        widget.show()
-    return widget
+    return shown(qtbot, CorrespondencePanel(doc), 560, 800)
 
 
 def auto(doc):
@@ -525,11 +520,7 @@ def test_other_conventions_as_target(qtbot, clips, name):
     target = read_bvh(shared_path(name))
     doc = Document()
     push_sources(doc, performer=clips[0], target=target)
-    panel = CorrespondencePanel(doc)
-    qtbot.addWidget(panel)
-    panel.resize(560, 800)
-    with qtbot.waitExposed(panel, timeout=WAIT_MS):
-        panel.show()
+    panel = shown(qtbot, CorrespondencePanel(doc), 560, 800)
     assert len(panel.target_tree.items) == target.skeleton.num_joints
     assert panel.unmapped_required()
     panel.automap_action.trigger()
@@ -548,11 +539,7 @@ def test_screenshot(qtbot, clips, tmp_path):
     push_sources(doc, performer=read_bvh(clip_path("fair1_child8_jumping.bvh")),
                  performer_path=clip_path("fair1_child8_jumping.bvh"),
                  target=clips[1], target_path=clip_path("cmu_rest_tpose.bvh"))
-    panel = CorrespondencePanel(doc)
-    qtbot.addWidget(panel)
-    panel.resize(620, 860)
-    with qtbot.waitExposed(panel, timeout=WAIT_MS):
-        panel.show()
+    panel = shown(qtbot, CorrespondencePanel(doc), 620, 860)
     panel.automap_action.trigger()
     push_pair(doc, "LeftHand", None)                 # one required joint left unmapped
     doc.select("target", "LeftArm")

@@ -33,7 +33,7 @@ from motion_composer.engine.correction.constraints import Constraint  # noqa: E4
 from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
 from motion_composer.engine.correction.displacement import ROOT, hermite_basis  # noqa: E402
 
-from gui_support import WAIT_MS, demo_document  # noqa: E402
+from gui_support import WAIT_MS, demo_document, shown  # noqa: E402
 
 Qt = QtCore.Qt
 LEFT = Qt.MouseButton.LeftButton
@@ -59,11 +59,7 @@ def doc(qtbot):
 
 @pytest.fixture
 def editor(qtbot, doc):
-    w = CurveEditor(doc)
-    qtbot.addWidget(w)
-    w.resize(1100, 480)
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
+    w = shown(qtbot, CurveEditor(doc), 1100, 480)
     w.activateWindow()
     qtbot.waitActive(w, timeout=WAIT_MS)    # keyboard shortcuts (Delete, Escape) need it
     doc.select("target", JOINT)

@@ -21,7 +21,7 @@ from motion_composer.engine.conversion.chains import (ChainSettings, chains_of, 
 from motion_composer.engine.quaternions import about_axis, qconj, qmul, qrot  # noqa: E402
 
 from conftest import clip_path  # noqa: E402
-from gui_support import WAIT_MS, demo_document, quiet_window, require_gl  # noqa: E402
+from gui_support import WAIT_MS, demo_document, quiet_window, require_gl, shown  # noqa: E402
 
 Qt = QtCore.Qt
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
@@ -108,12 +108,7 @@ def doc(qtbot):
 
 @pytest.fixture
 def panel(qtbot, doc):
-    w = BindingPanel(doc)
-    qtbot.addWidget(w)
-    w.resize(460, w.sizeHint().height())
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
-    return w
+    return shown(qtbot, BindingPanel(doc), 460)
 
 
 def _click(button):

@@ -33,7 +33,7 @@ from motion_composer.engine.correction.constraints import Constraint  # noqa: E4
 from motion_composer.engine.correction.enforcement import enforce  # noqa: E402
 from motion_composer.engine.kinematics import forward_kinematics  # noqa: E402
 
-from gui_support import SOLVE_WAIT_MS, WAIT_MS, demo_document  # noqa: E402
+from gui_support import SOLVE_WAIT_MS, WAIT_MS, demo_document, shown  # noqa: E402
 
 Qt = QtCore.Qt
 LEFT, RIGHT = Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton
@@ -82,11 +82,7 @@ def doc(qtbot, solved):
 
 @pytest.fixture
 def timeline(qtbot, doc):
-    w = ConstraintTimeline(doc)
-    qtbot.addWidget(w)
-    w.resize(1100, 440)
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
+    w = shown(qtbot, ConstraintTimeline(doc), 1100, 440)
     w.view.setXRange(0, 240, padding=0)        # ~3.7 px per frame: drags land on frames
     qtbot.wait(10)
     return w
@@ -492,11 +488,7 @@ def test_add_delete_duplicate(qtbot, timeline, doc):
 # ====================================================================== inspector
 @pytest.fixture
 def inspector(qtbot, timeline, doc):
-    w = ConstraintInspector(doc, timeline)
-    qtbot.addWidget(w)
-    w.resize(380, 470)
-    w.show()
-    qtbot.waitExposed(w, timeout=WAIT_MS)
+    w = shown(qtbot, ConstraintInspector(doc, timeline), 380, 470)
     timeline.select(_row_of(doc, HAND))
     return w
 
@@ -642,11 +634,7 @@ def test_screenshots(qtbot, solved, tmp_path):
     ordered = [hand] + constraints[:3] + [off] + constraints[4:-1]
     push_constraints(d, ordered, displacement, text="Demo")
     d.set_frame(330)
-    tl = ConstraintTimeline(d)
-    qtbot.addWidget(tl)
-    tl.resize(1200, 520)
-    tl.show()
-    qtbot.waitExposed(tl, timeout=WAIT_MS)
+    tl = shown(qtbot, ConstraintTimeline(d), 1200, 520)
     tl.view.setXRange(0, 480, padding=0.005)
     insp = ConstraintInspector(d, tl)
     qtbot.addWidget(insp)
