@@ -411,6 +411,26 @@ def test_structural_fallback_on_every_real_skeleton_over_its_frames(name):
             assert _role_joint(roles, role) == want, (name, int(f), role)
 
 
+def test_a_hand_whose_end_site_is_most_of_its_arm_is_still_the_hand(tmp_path):
+    """The Bandai clip with its right hand renamed ``_`` (no name to go by) and that hand's
+    End Site OFFSET mistyped as 1e6: the arm's length is then almost all End Site, no joint
+    lies three quarters along it, and the hand is the arm's last joint (it raised
+    StopIteration, a traceback from the command line: the CLI fuzz, seed 4801)."""
+    lines = shared_path("bandai2_raise-up-right-hand_normal_001.bvh").read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip() == "JOINT Hand_R")
+    lines[at] = lines[at].replace("Hand_R", "_")
+    end = next(i for i in range(at, len(lines)) if lines[i].strip() == "End Site")
+    lines[end + 2] = lines[end + 2].split("OFFSET")[0] + "OFFSET 1e6 1e6 1e6"
+    path = tmp_path / "long_end_site.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    skeleton = read_bvh(path).skeleton
+    hand = skeleton.index["_"]
+    tip = next(e for e in skeleton.end_sites if e.parent == hand)
+    assert np.linalg.norm(tip.offset) > 1e4 * np.linalg.norm(skeleton.offsets[hand])
+    roles = identify(skeleton)
+    assert _role_joint(roles, "hand_r") == "_" and _role_joint(roles, "hand_l") == "Hand_L"
+
+
 def test_geometry_decides_the_sides_of_an_unnamed_skeleton():
     skeleton, positions, expected = load("UNNAMED-bundled-FAIR1")   # lists the right side first
     roles = identify(skeleton, positions)

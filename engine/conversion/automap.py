@@ -615,7 +615,10 @@ def _structural_anchors(tree: _Tree, info: list[NameInfo]):
     upper = below(chest)
     legs = [e for e in ends if e not in upper]
     branches = [tree.path(chest, e) for e in upper]
-    lengths = [sum(tree.bone[j] for j in b) + tree.end[b[-1]] for b in branches]
+    # each branch's length, its End Site counted up to the length of its bones (an End Site
+    # longer than the rest of the limb is a mistyped or fuzzed offset, not a fingertip)
+    bones = [sum(tree.bone[j] for j in b) for b in branches]
+    lengths = [n + min(tree.end[b[-1]], n) for n, b in zip(bones, branches)]
 
     def unlike(a, b):
         la, lb = lengths[a], lengths[b]
@@ -641,7 +644,9 @@ def _structural_anchors(tree: _Tree, info: list[NameInfo]):
         hand = next((j for j, c in zip(b, cum) if c >= 0.6 * total and len(full_kids[j]) >= 2),
                     None)
         if hand is None:
-            hand = next(j for j, c in zip(b, cum) if c >= 0.75 * total - 1e-12)
+            # the branch's length counts its End Site: one longer than a quarter of it leaves
+            # no joint that far along, and the hand is the branch's last joint
+            hand = next((j for j, c in zip(b, cum) if c >= 0.75 * total - 1e-12), b[-1])
         hands.append(proximal(hand, b, total))
     return head, hands, legs, [False, False]
 
