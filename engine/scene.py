@@ -433,8 +433,9 @@ class Scene:
         if p.floor is not None:
             # the contacts' floor planes stand on the same floor (``ground``): once is enough
             floored = {c.joint for c in out if c.meta.get("floor")}
+            carried = {sk.names[j] for j in self.carried}
             for ankle, toe in self.target_feet(pairs):
-                below = [sk.names[k] for k in below_foot(sk, ankle, toe)]
+                below = [sk.names[k] for k in below_foot(sk, ankle, toe, carried)]
                 for joint in (ankle, toe, *below):
                     if joint and joint in ground.heights and joint not in floored:
                         floored.add(joint)          # a foot found twice gets one plane each

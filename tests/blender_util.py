@@ -164,7 +164,9 @@ FBX_SCRIPT = textwrap.dedent(r'''
             bpy.ops.import_anim.bvh(filepath=item["source"], global_scale=1.0)
         else:
             bpy.ops.import_scene.gltf(filepath=item["source"])
-        bpy.ops.export_scene.fbx(filepath=item["out"], bake_anim=True, add_leaf_bones=False)
+        options = dict(bake_anim=True, add_leaf_bones=False)
+        options.update(item.get("options", {}))
+        bpy.ops.export_scene.fbx(filepath=item["out"], **options)
         results["exports"][item["key"]] = item["out"]
     for item in job.get("imports", []):
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -212,7 +214,9 @@ def run_blender_fbx(job: dict, folder: Path, timeout: float = 300) -> dict:
     FBX files with its importer (``io_scene_fbx``, default settings).
 
     Args:
-        job: ``{"exports": [{"key", "source": a .bvh or .glb, "out": an .fbx path}],
+        job: ``{"exports": [{"key", "source": a .bvh or .glb, "out": an .fbx path,
+            "options": the exporter's settings beside ``bake_anim`` on and
+            ``add_leaf_bones`` off (optional)}],
             "imports": [{"key", "path": an .fbx, "frames": [scene frame (may be fractional),
             ...], "skin_at": [indices into frames where the skinned vertices are reported]}]}``.
         folder: where the script, the job and the result are written.

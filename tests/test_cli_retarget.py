@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from motion_composer.app.cli import main
-from blender_util import blender_or_skip, run_blender_import
+from blender_util import blender_or_skip, run_blender_fbx, run_blender_import
 from conftest import REPO, SHARED_DATA, clip_path, resolve, shared_path
 from test_cli import console_script
 from motion_composer.engine import forward_kinematics, read_bvh
@@ -607,3 +607,30 @@ def test_blender_plays_the_retargeted_file(key, blender_outputs):
     # the motion is really there: the body moves between the sampled frames
     assert np.ptp(theirs, axis=0).max() > 100 * tol
     print(f"{key}: Blender vs our FK {err:.3g} file units, tolerance {tol:.3g}")
+
+
+@pytest.mark.blender
+def test_leaf_bones_under_a_carried_foot_get_no_floor(capsys, tmp_path):
+    """The robot as Blender's FBX exporter writes it with leaf bones (``FootL_end`` under
+    ``FootL``, a control joint the binding carries with the shin): automatic contacts and an
+    explicit floor held each joint below a held foot above the floor, leaf bones included,
+    and the scene then refused its own constraint (exit 2: "FootL_end hangs from FootL, a
+    control joint carried with LowerLegL"). Joints hanging from a carried joint follow it
+    after the IK, which cannot move them: they get no floor, and both runs write the file."""
+    robot = tmp_path / "robot_leaf.fbx"
+    run_blender_fbx({"exports": [{"key": "robot", "out": str(robot),
+                                  "source": str(shared_path("target_robot_expressive.glb")),
+                                  "options": {"add_leaf_bones": True,
+                                              "primary_bone_axis": "X",
+                                              "secondary_bone_axis": "Y"}}]}, tmp_path)
+    walk = shared_path("bandai1_walk_normal_001.bvh")
+    for extra in (["--auto-contacts"], ["--floor", "0"]):
+        report = tmp_path / "report.json"
+        code = main(["retarget", str(walk), "--target", str(robot), "-o",
+                     str(tmp_path / "out.glb"), "--report", str(report), *extra])
+        err = capsys.readouterr().err
+        assert code == 0, err
+        floors = [c["joint"] for c in json.loads(report.read_text())["constraints"]
+                  if c["kind"] == "plane"]
+        assert floors and not any(j.endswith("_end") for j in floors), floors
+        assert {"FootL", "FootR"} <= set(floors)

@@ -288,15 +288,20 @@ def target_ground(target: Motion, feet: list[tuple[str, str | None]], *,
     return Ground(rest_floor if floor is None else float(floor), heights, flat)
 
 
-def below_foot(skeleton: Skeleton, ankle: str, toe: str | None) -> list[int]:
+def below_foot(skeleton: Skeleton, ankle: str, toe: str | None,
+               carried=frozenset()) -> list[int]:
     """The joints below a foot other than its ``ankle`` and ``toe`` (indices): a toe's end
     joint (Mixamo's ``*Toe_End``), separate toes (CC3's five per foot). They are foot joints
     too: a plant that holds the ankle and the toe joint can still bend the toe's tip into the
-    floor, so the floor rule holds each of them at or above its own rest height."""
+    floor, so the floor rule holds each of them at or above its own rest height. Joints that
+    hang from one of the ``carried`` joints (names of control joints carried with a limb,
+    such as the robot's feet) are left out: they are placed after the IK, which cannot move
+    them (a leaf bone Blender's FBX exporter adds under such a foot)."""
     a = skeleton.index[ankle]
     held = {a} | ({skeleton.index[toe]} if toe else set())
     return [k for k in range(skeleton.num_joints)
-            if k not in held and a in skeleton.ancestors(k)]
+            if k not in held and a in skeleton.ancestors(k)
+            and not any(skeleton.names[p] in carried for p in skeleton.ancestors(k))]
 
 
 def converted_ground(composed: Motion, feet: list[tuple[str, str | None]], *,
@@ -568,7 +573,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     floors = {joint: pairs[joint] for joint in held}
     for ankle, toe in feet_t:
         if ankle in held:
-            for k in below_foot(sk, ankle, toe):
+            for k in below_foot(sk, ankle, toe, carried):
                 name = sk.names[k]
                 if name in ground.heights and name not in floors:
                     floors[name] = pairs.get(name) or pairs[toe if toe in held else ankle]
