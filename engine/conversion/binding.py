@@ -341,8 +341,8 @@ def _height_above_floor(positions: np.ndarray, joint: int,
     then End Sites), leaving out the joints ``carriers`` (indices) names.
 
     The target's hips are measured in the bound posture, above its lowest body point. A node
-    above the hips that no performer joint drives carries the body without being part of it:
-    the armature node Blender's FBX exporter puts above the hips sits at the origin, and
+    above the hips carries the body without being part of it: the armature node Blender's
+    FBX exporter puts above the hips sits at the origin, and
     counted as the floor it measured the hips from there, not from the feet the bound posture
     lifts (a target bound to a performer's wide stance): Ely read from its glTF and from
     Blender's FBX of it got hip ratios of 0.97 and 1.13 for the same walk."""
@@ -397,8 +397,11 @@ def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, bod
     ``joint_Root`` mapped to the ``Armature`` node Blender's FBX puts above the hips), at
     the shallowest mapped joint under it that does not: a joint on the floor has no height
     to compare, and the ratio fell back to 1 (a 3 m robot walked at the performer's pace).
-    The target's unmapped nodes above the body root are not points of its body (see
-    :func:`_height_above_floor`); the performer's points are all counted, as before."""
+    The target's nodes above the joint measured are not points of its body (see
+    :func:`_height_above_floor`), mapped or not: Blender's ``Armature`` node mapped to a
+    ground-level root sits at the origin, and counted as the floor it measured the hips from
+    there (CC3's walk onto Ely from Blender's FBX: 0.93 where Ely's glTF gives 0.81, as the
+    walk onto other humanoids does). The performer's points are all counted, as before."""
     t_size = max(float(np.ptp(t_points[:, 1])), 1e-9)
     p_size = max(float(np.ptp(p_points[:, 1])), 1e-9)
     depth = np.zeros(tsk.num_joints, dtype=np.intp)
@@ -406,9 +409,8 @@ def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, bod
         depth[j] = depth[anchor[j]] + 1 if anchor[j] >= 0 else 0
     below = [j for j in range(tsk.num_joints) if mapped[j] >= 0 and
              (j == body_root or body_root in tsk.ancestors(j))]
-    carriers = np.array(tsk.ancestors(body_root), dtype=np.intp)
     for j in sorted(below, key=lambda k: (depth[k], k)):
-        t_hip = _height_above_floor(t_points, j, carriers)
+        t_hip = _height_above_floor(t_points, j, np.array(tsk.ancestors(j), dtype=np.intp))
         p_hip = _height_above_floor(p_points, int(mapped[j]))
         if t_hip > _GROUND_LEVEL * t_size and p_hip > _GROUND_LEVEL * p_size:
             return t_hip / p_hip
