@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 from blender_fbx import engine_axes, run_blender_fbx
+from blender_util import run_blender_fbx as blender_job
 from conftest import SHARED_DATA
 from motion_composer.engine.formats.fbx.scene import read_fbx
 from motion_composer.engine.kinematics import forward_kinematics
@@ -140,3 +141,54 @@ def test_skinned_vertices_match_blenders_armature_modifier(readers, name):
             assert other.shape == vertices[k].shape
             error = np.abs(vertices[k] - other).max()
             assert error < 1e-5 * stature, (mesh.name, frames[k], error / stature)
+
+
+def test_rigid_parts_under_joints_are_read_as_the_gltf_reads_them(tmp_path):
+    """Quaternius' robot is rigid parts under its bones (15 meshes without a skin) and two
+    skinned hands. Written by Blender's FBX exporter, the parts' models hang under the bone
+    models: each is read as a rigid part bound wholly to that joint (they were left out,
+    and the robot had no feet to stand on), placed as the glTF reader places it on the same
+    joint (to 1e-5 of the stature relative to the joint: Blender moves the whole figure
+    2.37 m down), and posed on a take it turns and moves with its joint."""
+    from motion_composer.engine.formats import read_character
+    from motion_composer.engine.kinematics import forward_kinematics
+    from motion_composer.engine.skinning import skin_character
+    from conftest import shared_path
+    out = tmp_path / "robot.fbx"
+    blender_job({"exports": [{"key": "robot", "out": str(out),
+                              "source": str(shared_path("target_robot_expressive.glb"))}]},
+                tmp_path)
+    gltf = read_character(shared_path("target_robot_expressive.glb"))
+    fbx = read_character(out)
+    size = float(np.ptp(gltf.bind_positions, axis=0).max())
+    rigid = [m for m in fbx.meshes if m.skin is None]
+    assert len(rigid) == 15 == sum(1 for m in gltf.meshes if m.skin is None)
+    assert any("15 rigid mesh parts" in n for n in fbx.notes)
+    by_name = {m.name: m for m in gltf.meshes}
+    for part in rigid:
+        theirs = by_name[part.name]
+        j, k = int(part.joints[0, 0]), int(theirs.joints[0, 0])
+        assert np.all(part.joints == j) and np.all(part.weights == 1.0)
+        assert fbx.skeleton.names[j] == gltf.skeleton.names[k], part.name
+        np.testing.assert_allclose(part.positions - fbx.bind_positions[j],
+                                   theirs.positions - gltf.bind_positions[k], atol=1e-5 * size)
+    # posed on the dance, at the same times: each part where the glTF's is, relative to its
+    # joint (the two files' takes read independently; Blender bakes the take at its own
+    # rate: 1.5 mm apart at 1 s), and the parts move
+    ours = next(m for m in fbx.motions if "Dance" in m.name)
+    theirs = next(m for m in gltf.motions if m.name == "Dance")
+    times = np.array([0.0, 0.5, 1.0])
+    skinned = [skin_character(c, m, np.round(times * m.fps).astype(int))
+               for c, m in ((fbx, ours), (gltf, theirs))]
+    poses = [forward_kinematics(m.frames(np.round(times * m.fps).astype(int)))
+             for m in (ours, theirs)]
+    moved = 0.0
+    for index, part in enumerate(fbx.meshes):
+        if part.skin is None:
+            other = next(i for i, m in enumerate(gltf.meshes) if m.name == part.name)
+            j, k = int(part.joints[0, 0]), int(gltf.meshes[other].joints[0, 0])
+            np.testing.assert_allclose(skinned[0][index] - poses[0].positions[:, j, None],
+                                       skinned[1][other] - poses[1].positions[:, k, None],
+                                       atol=1e-3 * size)
+            moved = max(moved, float(np.ptp(skinned[0][index], axis=0).max()))
+    assert moved > 0.05 * size

@@ -957,8 +957,13 @@ def _influences(doc: _Doc, clusters, index_of: dict[int, int], V: int):
     return joints, weights, unbound
 
 
-def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str]) -> list[Mesh]:
-    """The skinned meshes in the bind pose (engine space)."""
+def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str],
+            bind_file: np.ndarray) -> list[Mesh]:
+    """The skinned meshes in the bind pose (engine space), then the rigid parts: meshes
+    without a skin whose model hangs under a joint (a game rig's armour plates, the robot's
+    limbs as Blender's FBX exporter writes them), bound wholly to that joint and placed by
+    their models' transforms below it (``bind_file``: the joints' file-space bind
+    matrices)."""
     index_of = {m: j for j, m in enumerate(joints.models) if m >= 0}
     out = []
     unbound_total = 0
@@ -998,11 +1003,69 @@ def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str]) -> list[Mesh]:
         what = "1 vertex" if unbound_total == 1 else f"{unbound_total} vertices"
         notes.append(f"{what} no cluster weighs bound to their skin's first joint")
     skinned = {m.node for m in out}
-    loose = sum(1 for oid, node in doc.objects.items() if node.name == "Model" and
-                doc.kind(oid)[2] == "Mesh" and oid not in skinned)
+    loose = rigid = 0
+    for oid, node in doc.objects.items():
+        if node.name != "Model" or doc.kind(oid)[2] != "Mesh" or oid in skinned:
+            continue
+        part = _rigid_part(doc, oid, index_of, A, s, bind_file)
+        if part is None:
+            loose += 1
+        else:
+            out.append(part)
+            rigid += 1
+    if rigid:
+        notes.append(f"{rigid} rigid mesh part{'s' if rigid != 1 else ''} under joint models "
+                     "bound to their joints")
     if loose:
-        notes.append(f"{_plural(loose, 'mesh')} without a skin on the skeleton left out")
+        notes.append(f"{loose} mesh{'es' if loose != 1 else ''} on no joint of the skeleton "
+                     "left out")
     return out
+
+
+def _rigid_part(doc: _Doc, oid: int, index_of: dict[int, int], A, s,
+                bind_file: np.ndarray) -> Mesh | None:
+    """The mesh of model ``oid`` (no skin) bound wholly to the joint its model hangs under,
+    in the bind pose (engine space); ``None`` where it hangs under no joint or has no
+    polygons. The models between it and the joint are placed by their own transforms (their
+    Lcl values; an InheritType of 2 between them is not applied), and the mesh's
+    GeometricTranslation, GeometricRotation and GeometricScaling after them."""
+    chain = np.eye(4)
+    m = oid
+    while m not in index_of:
+        chain = _model(doc, m).local()[0] @ chain
+        m = _scene_parent(doc, m)
+        if m is None:
+            return None
+    geometry = [g for g in doc.linked(oid, "Geometry", up=False)
+                if doc.kind(g)[2] == "Mesh"]
+    if not geometry:
+        return None
+    p = doc.props(doc.objects[oid])
+    shift = np.eye(4)
+    shift[:3, :3] = _euler(_vector(p, "GeometricRotation", (0, 0, 0))[None], "xyz")[0] * \
+        _vector(p, "GeometricScaling", (1, 1, 1))
+    shift[:3, 3] = _vector(p, "GeometricTranslation", (0, 0, 0))
+    j = index_of[m]
+    name = doc.kind(oid)[1] or f"mesh_{oid}"
+    frame = _to_engine(bind_file[j] @ chain @ shift, A, s)
+    node = doc.objects[geometry[0]]
+    vertices, triangles = _polygons(doc, node)
+    if not len(triangles):
+        return None
+    positions = (A @ (vertices.T * s)).T @ frame[:3, :3].T + frame[:3, 3]
+    if not np.all(np.isfinite(positions)):
+        raise doc.error(f"the mesh {name!r} is not finite where its joint's bind pose puts it")
+    normals = _normals(doc, node, _array(doc, node, "PolygonVertexIndex", integer=True),
+                       len(vertices))
+    if normals is not None:
+        normals = (A @ normals.T).T @ _inverse(doc, frame, f"the mesh {name!r}")[:3, :3]
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = normals / np.where(length > 1e-12, length, 1.0)
+    V = len(vertices)
+    return Mesh(name=name, positions=_frozen(positions),
+                normals=None if normals is None else _frozen(normals),
+                triangles=_frozen(triangles), joints=_frozen(np.full((V, 1), j, dtype=np.intp)),
+                weights=_frozen(np.ones((V, 1))), skin=None, node=int(oid))
 
 
 # =========================================================================== the character
@@ -1087,7 +1150,7 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str],
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
     node_pose = _pose_motion(rest, skeleton, joints.parents, 1.0 / fps).replace(
         name=f"{name} (rest pose)")
-    meshes = _meshes(doc, joints, A, s, notes)
+    meshes = _meshes(doc, joints, A, s, notes, bind_file)
     J = len(joints.models)
     node_t = np.zeros((J, 3))
     node_q = np.tile([0.0, 0.0, 0.0, 1.0], (J, 1))
