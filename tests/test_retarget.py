@@ -394,10 +394,11 @@ def test_a_ground_level_root_on_a_node_above_the_hips_scales_by_the_hips(clip):
     """A performer's ground-level root (Bandai's ``joint_Root``, CC3's) mapped to the node
     above a target's hips (Blender's FBX ``Armature``) stands on the floor on both sides: it
     has no height, and the root scale fell back to 1 (the character walked at the
-    performer's pace whatever its size). The ratio is measured at the hips below it, above
-    the feet (the node at the origin is no point of the body, mapped or not: counted, it
-    gave CC3's walk 0.93 on Ely where Ely's glTF gives 0.81): the ratio is the same target's
-    without the node, and a target twice as large gets twice the ratio."""
+    performer's pace whatever its size). The ratio is measured at the hips below it, each
+    side's above its own feet (the nodes above the hips are no points of the body, mapped or
+    not: the target's node at the origin counted, CC3's walk got 0.93 on Ely where Ely's
+    glTF gave 0.81; now 0.88 on both): the ratio is the same target's without the node, and
+    a target twice as large gets twice the ratio."""
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.formats import read_character
     from motion_composer.engine.skeleton import Skeleton

@@ -388,8 +388,8 @@ def _check_mapping(target: Skeleton, performer: Skeleton, corr: Correspondence) 
 _GROUND_LEVEL = 0.05
 
 
-def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, body_root: int,
-                      t_points: np.ndarray, p_points: np.ndarray) -> float:
+def _hip_height_ratio(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
+                      body_root: int, t_points: np.ndarray, p_points: np.ndarray) -> float:
     """Target hip height over performer hip height (the default root scale), each above its
     floor in its bound posture (``t_points``, ``p_points``: joints then End Sites).
 
@@ -397,11 +397,13 @@ def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, bod
     ``joint_Root`` mapped to the ``Armature`` node Blender's FBX puts above the hips), at
     the shallowest mapped joint under it that does not: a joint on the floor has no height
     to compare, and the ratio fell back to 1 (a 3 m robot walked at the performer's pace).
-    The target's nodes above the joint measured are not points of its body (see
-    :func:`_height_above_floor`), mapped or not: Blender's ``Armature`` node mapped to a
-    ground-level root sits at the origin, and counted as the floor it measured the hips from
-    there (CC3's walk onto Ely from Blender's FBX: 0.93 where Ely's glTF gives 0.81, as the
-    walk onto other humanoids does). The performer's points are all counted, as before."""
+    On both sides the nodes above the joint measured are not points of the body (see
+    :func:`_height_above_floor`), mapped or not: each side's hips are measured above its
+    own lowest body point, like for like. Blender's ``Armature`` node mapped to a ground-level
+    root sits at the origin, and counted as the target's floor it measured the hips from
+    there (CC3's walk onto Ely from Blender's FBX got 0.93, from Ely's glTF 0.81); and a
+    performer's ground-level root (Bandai's, CC3's) below its feet measured its hips from the
+    ground where the target's were measured from its lowest joint."""
     t_size = max(float(np.ptp(t_points[:, 1])), 1e-9)
     p_size = max(float(np.ptp(p_points[:, 1])), 1e-9)
     depth = np.zeros(tsk.num_joints, dtype=np.intp)
@@ -411,7 +413,8 @@ def _hip_height_ratio(tsk: Skeleton, mapped: np.ndarray, anchor: np.ndarray, bod
              (j == body_root or body_root in tsk.ancestors(j))]
     for j in sorted(below, key=lambda k: (depth[k], k)):
         t_hip = _height_above_floor(t_points, j, np.array(tsk.ancestors(j), dtype=np.intp))
-        p_hip = _height_above_floor(p_points, int(mapped[j]))
+        p_hip = _height_above_floor(p_points, int(mapped[j]),
+                                    np.array(psk.ancestors(int(mapped[j])), dtype=np.intp))
         if t_hip > _GROUND_LEVEL * t_size and p_hip > _GROUND_LEVEL * p_size:
             return t_hip / p_hip
     return 1.0
@@ -474,7 +477,7 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
         rest_world, rest_positions = posed.rotations[0], posed.positions[0]
     chain_of = _chain_of(tsk, options, aligned_positions)
 
-    ratio = _hip_height_ratio(tsk, mapped, anchor, body_root,
+    ratio = _hip_height_ratio(tsk, psk, mapped, anchor, body_root,
                               np.concatenate([aligned_positions, bound.end_positions[0]]),
                               p_ref.all_positions)
     return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
