@@ -1030,8 +1030,11 @@ def _rigid_part(doc: _Doc, oid: int, index_of: dict[int, int], A, s,
     Lcl values; an InheritType of 2 between them is not applied), and the mesh's
     GeometricTranslation, GeometricRotation and GeometricScaling after them."""
     chain = np.eye(4)
-    m = oid
+    m, seen = oid, set()
     while m not in index_of:
+        if m in seen:
+            raise doc.error("models whose parents form a loop", doc.objects[m])
+        seen.add(m)
         chain = _model(doc, m).local()[0] @ chain
         m = _scene_parent(doc, m)
         if m is None:
