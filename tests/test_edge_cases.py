@@ -96,6 +96,25 @@ def test_a_short_clip_with_automatic_contacts_gives_no_contacts_and_no_error(
     assert solution.motion.num_frames == frames
 
 
+@pytest.mark.parametrize("start", [0, 200])
+def test_a_three_frame_clip_gets_its_keys(capsys, tmp_path, start):
+    """Three frames of the walk with automatic contacts: the clip is long enough for them,
+    and its layer's key budget (a tenth of a key a frame) rounded to no key at all, and the
+    key fit raised IndexError (exit 3, the CLI fuzz at seed 4807). Every curve keeps at
+    least its span's two ends."""
+    clip = tmp_path / "walk3.bvh"
+    write_motion(read_motion(WALK).excerpt(start, start + 2), clip)
+    code, out, err = run(capsys, "retarget", clip, "--target", TPOSE, "-o",
+                         tmp_path / "out.bvh", "--auto-contacts", "--report",
+                         tmp_path / "r.json")
+    assert (code, err) == (0, ""), err
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["frames"] == 3 and report["constraints"]
+    assert max(c["max_residual"] for c in report["constraints"]
+               if c["residual_unit"] == "m") < 1e-3
+    assert read_motion(tmp_path / "out.bvh").num_frames == 3
+
+
 # ------------------------------------------------------------------ no feet
 def test_a_target_without_legs_warns_once_on_stderr_and_in_the_report(capsys, tmp_path):
     target = tmp_path / "legless.bvh"

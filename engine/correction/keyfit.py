@@ -616,8 +616,10 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
             # tasks see a new piece of curve every few frames
             n = 3 * len(joints)
             phases = ((n + np.arange(3)) * 0.618034 + stagger) % 1.0
+            # a curve keeps its span's two ends however short the clip (three frames at a
+            # tenth of a key a frame rounded to none)
             joints.append(_Joint(int(j), spans, spacing, F,
-                                 int(np.floor(budget * window.sum())), phases,
+                                 max(2, int(np.floor(budget * window.sum()))), phases,
                                  _ramp_ends(cons, sk, j, carried) if at_ramps else ()))
     if not joints:
         return DisplacementMap()
