@@ -511,3 +511,24 @@ def test_an_fbx_whose_axis_settings_lie_is_read_up_with_the_axis_the_doubt_names
     # the performer's take through the same option
     np.testing.assert_allclose(read_performer(lying, up_axis="-Z").translations,
                                original.motions[0].translations, atol=1e-9)
+
+
+def test_a_key_attribute_counted_for_more_keys_than_there_are_is_read(tmp_path):
+    """An AnimationCurve's ``KeyAttrRefCount`` says how many keys each attribute serves; one
+    that says 2**32 (the FBX fuzz at seed 4808) was repeated that many times to find the
+    keys' attributes (32 GiB: a MemoryError, exit 3). It serves all the curve's keys: the
+    file reads as the one with the true counts, every take value for value."""
+    text = ascii_fbx(parse_binary(shared_path("fbx/blender_279_sausage_7400_binary.fbx")
+                                  .read_bytes())).decode()
+    lines = text.splitlines()
+    counts = [i + 1 for i, line in enumerate(lines) if line.strip() == "KeyAttrRefCount: *1 {"]
+    assert len(counts) > 3 and all(lines[i].strip().startswith("a: ") for i in counts)
+    for i in counts:                   # one attribute for every key of the curve: any count
+        lines[i] = lines[i].split("a:")[0] + "a: 4294967296"     # at least their number serves
+    (tmp_path / "true.fbx").write_text(text)
+    (tmp_path / "wide.fbx").write_text("\n".join(lines) + "\n")
+    true, wide = read_fbx(tmp_path / "true.fbx"), read_fbx(tmp_path / "wide.fbx")
+    assert len(true.motions) == len(wide.motions) > 0
+    for a, b in zip(true.motions, wide.motions):
+        np.testing.assert_array_equal(a.rotations, b.rotations)
+        np.testing.assert_array_equal(a.translations, b.translations)

@@ -412,9 +412,11 @@ def _curve(doc: _Doc, node: Node):
         if attr.dtype.kind not in "biuf" or (attr.dtype != np.float32 and not np.all(
                 np.abs(attr.astype(float)) <= np.finfo(np.float32).max)):
             raise doc.error("KeyAttrDataFloat holds values that are not 32-bit floats", node)
-        flags = np.repeat(raw_flags, counts)[:K] & 0xFFFFFFFF
-        bits = np.asarray(attr, dtype=np.float32).reshape(-1, 4)
-        data = np.repeat(bits, counts, axis=0)[:K]
+        # the attribute each key takes (an attribute serves its count of keys in turn),
+        # found without repeating them: a count may be far larger than the keys
+        which = np.searchsorted(np.cumsum(counts), np.arange(K), side="right")
+        flags = raw_flags[which] & 0xFFFFFFFF
+        data = np.asarray(attr, dtype=np.float32).reshape(-1, 4)[which]
     return times, values, flags, data
 
 
