@@ -977,21 +977,12 @@ def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str],
         if not clusters:
             continue
         vertices, triangles = _polygons(doc, geometry)
-        index = _array(doc, geometry, "PolygonVertexIndex", integer=True)
         link = _matrix16(doc, clusters[0][1], "TransformLink")
         transform = _matrix16(doc, clusters[0][1], "Transform")
         frame = (link if link is not None else np.eye(4)) @ \
             (transform if transform is not None else np.eye(4))
-        frame = _to_engine(frame, A, s)
-        # vertices are in file units: frame is engine-space, so scale them into metres first
-        positions = (A @ (vertices.T * s)).T
-        lin = frame[:3, :3]
-        positions = positions @ lin.T + frame[:3, 3]
-        normals = _normals(doc, geometry, index, len(vertices))
-        if normals is not None:
-            normals = (A @ normals.T).T @ _inverse(doc, frame, f"the mesh {doc.kind(geometry_id)[1]!r}")[:3, :3]
-            length = np.linalg.norm(normals, axis=1, keepdims=True)
-            normals = normals / np.where(length > 1e-12, length, 1.0)
+        positions, normals = _placed(doc, geometry, vertices, _to_engine(frame, A, s), A, s,
+                                     f"the mesh {doc.kind(geometry_id)[1]!r}")
         jj, ww, unbound = _influences(doc, clusters, index_of, len(vertices))
         unbound_total += unbound
         owner = doc.linked(geometry_id, "Model", up=True)
@@ -1024,6 +1015,20 @@ def _meshes(doc: _Doc, joints: _Joints, A, s, notes: list[str],
     return out
 
 
+def _placed(doc: _Doc, geometry: Node, vertices: np.ndarray, frame: np.ndarray, A, s,
+            what: str):
+    """A geometry's ``vertices`` (file units and axes) and its normals (``None`` where it has
+    none) placed by ``frame`` (engine space: the vertices are scaled into metres first)."""
+    positions = (A @ (vertices.T * s)).T @ frame[:3, :3].T + frame[:3, 3]
+    index = _array(doc, geometry, "PolygonVertexIndex", integer=True)
+    normals = _normals(doc, geometry, index, len(vertices))
+    if normals is not None:
+        normals = (A @ normals.T).T @ _inverse(doc, frame, what)[:3, :3]
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = normals / np.where(length > 1e-12, length, 1.0)
+    return positions, normals
+
+
 def _rigid_part(doc: _Doc, oid: int, index_of: dict[int, int], A, s,
                 bind_file: np.ndarray) -> Mesh | None:
     """The mesh of model ``oid`` (no skin) bound wholly to the joint its model hangs under,
@@ -1052,20 +1057,15 @@ def _rigid_part(doc: _Doc, oid: int, index_of: dict[int, int], A, s,
     shift[:3, 3] = _vector(p, "GeometricTranslation", (0, 0, 0))
     j = index_of[m]
     name = doc.kind(oid)[1] or f"mesh_{oid}"
-    frame = _to_engine(bind_file[j] @ chain @ shift, A, s)
     node = doc.objects[geometry[0]]
     vertices, triangles = _polygons(doc, node)
     if not len(triangles):
         return None
-    positions = (A @ (vertices.T * s)).T @ frame[:3, :3].T + frame[:3, 3]
+    positions, normals = _placed(doc, node, vertices,
+                                 _to_engine(bind_file[j] @ chain @ shift, A, s), A, s,
+                                 f"the mesh {name!r}")
     if not np.all(np.isfinite(positions)):
         raise doc.error(f"the mesh {name!r} is not finite where its joint's bind pose puts it")
-    normals = _normals(doc, node, _array(doc, node, "PolygonVertexIndex", integer=True),
-                       len(vertices))
-    if normals is not None:
-        normals = (A @ normals.T).T @ _inverse(doc, frame, f"the mesh {name!r}")[:3, :3]
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        normals = normals / np.where(length > 1e-12, length, 1.0)
     V = len(vertices)
     return Mesh(name=name, positions=_frozen(positions),
                 normals=None if normals is None else _frozen(normals),
