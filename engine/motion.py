@@ -114,6 +114,16 @@ class Motion:
         """A copy with some fields changed (the arrays are validated again)."""
         return dataclasses.replace(self, **changes)
 
+    def with_position_channels(self, joints) -> "Motion":
+        """This motion on :meth:`Skeleton.with_position_channels` of ``joints``: each joint
+        given channels translates by its offset on every frame (the same poses)."""
+        skeleton = self.skeleton.with_position_channels(joints)
+        if skeleton is self.skeleton:
+            return self
+        local = self.local_translations()
+        return Motion(skeleton, self.rotations, local[:, skeleton.translated],
+                      self.frame_time, self.name)
+
     def frames(self, selection) -> "Motion":
         """The sub-motion at a slice or index array of frames."""
         return self.replace(rotations=self.rotations[selection],

@@ -183,3 +183,16 @@ class Skeleton:
 
     def describe_channels(self, j: int) -> str:
         return " ".join(self.channels[j]) if self.channels[j] else "(none)"
+
+    def with_position_channels(self, joints) -> "Skeleton":
+        """This skeleton with position channels (``absolute``) put before the rotation channels
+        of each of ``joints`` that has none: a joint whose translation the engine sets (a
+        control joint carried with a limb) in a file that never animated it."""
+        add = {int(j) for j in joints} - {int(j) for j in self.translated}
+        if not add:
+            return self
+        channels = tuple(POSITION_CHANNELS + ch if j in add else ch
+                         for j, ch in enumerate(self.channels))
+        modes = tuple("absolute" if j in add else m for j, m in enumerate(self.position_modes))
+        return Skeleton(self.names, self.parents, self.offsets, channels, modes,
+                        self.end_sites, self.source)

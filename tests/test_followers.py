@@ -421,3 +421,52 @@ def test_the_robots_feet_keep_their_turn_through_the_correction_not_through_a_la
     for foot in ("FootL", "FootR"):
         j = sk.index[foot]
         np.testing.assert_allclose(_angle(turned_rot[80, j], edited_rot[80, j]), 30.0, atol=1e-6)
+
+
+def _without_animations(path, out):
+    """The GLB at ``path`` written to ``out`` with its animations removed: the character as
+    it is often delivered, in its rest pose only."""
+    import json
+    import struct
+    data = path.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + length])
+    assert doc.pop("animations")
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<I4s", len(text), b"JSON") + text + data[20 + length:]
+    out.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+    return out
+
+
+def test_a_character_without_animation_carries_its_feet_alike(tmp_path, capsys):
+    """The robot delivered without its clips: no pose moves its feet, so the file gives them
+    no translation channels, and they were left at the origin while the robot walked 5 m away
+    from them. They are carried as the animated file's are: the binding gives them position
+    channels, and the retarget (with automatic contacts, written and read back) puts every
+    joint where the animated file's retarget does, bit for bit."""
+    from motion_composer.app.cli import main
+    bare = _without_animations(ROBOT, tmp_path / "robot_bare.glb")
+    target = read_character(bare).rest_motion()
+    sk = target.skeleton
+    assert sk.index["FootL"] not in sk.translated and sk.index["FootR"] not in sk.translated
+    performer = _performer("bandai1_walk_normal_001.bvh")
+    correspondence = automap(sk, performer.skeleton)
+    binding = bind(performer, target, correspondence)
+    assert sorted(sk.names[f.joint] for f in binding.followers) == ["FootL", "FootR"]
+    assert {"FootL", "FootR"} <= {binding.target.names[j] for j in binding.target.translated}
+    full = _character(ROBOT).rest_motion()
+    _, bare_pos = _world(retarget(performer, target, correspondence))
+    _, full_pos = _world(retarget(performer, full, automap(full.skeleton,
+                                                               performer.skeleton)))
+    np.testing.assert_array_equal(bare_pos, full_pos)
+    walk = clip_path("cmu_131_01_walk.bvh")
+    worlds = []
+    for name, character in (("bare", bare), ("full", ROBOT)):
+        out = tmp_path / f"{name}.bvh"
+        assert main(["retarget", str(walk), "--target", str(character), "-o", str(out),
+                     "--auto-contacts"]) == 0, capsys.readouterr().err
+        worlds.append(_world(read_motion(out))[1])
+    np.testing.assert_array_equal(worlds[0], worlds[1])
+    shin = worlds[0][:, sk.index["LowerLegL"]] - worlds[0][:, sk.index["FootL"]]
+    assert np.ptp(np.linalg.norm(shin, axis=1)) < 1e-6

@@ -459,6 +459,12 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
         target, max(float(np.ptp(t_ref.all_positions, axis=0).max()), 1e-6))
     followers = find_followers(tsk, psk, mapped, (t_ref.world, t_ref.positions),
                                (p_ref.world, p_ref.positions), performer)
+    # a follower the file never translated gets position channels (the same poses): the
+    # converted motion carries it in them
+    placed = target.with_position_channels([f.joint for f in followers])
+    if placed is not target:
+        target, tsk = placed, placed.skeleton
+        t_ref = _reference(target, options.target_reference)
     bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving,
                            followers)
     chains = _chains(tsk, bones)

@@ -8,12 +8,13 @@ on ``LeftFoot``. In the character's own clips an IK solver kept the shin pointin
 retargeted, nothing moves it, so the skinned foot stays where the rest pose put it while the
 legs walk away.
 
-A *follower* is such a joint: animated translation, unmapped, hanging off the trunk (the joints
-from the root to the hips) rather than a limb, with no mapped joint below it, and standing
+A *follower* is such a joint: unmapped, hanging off the trunk (the joints from the root to
+the hips) rather than a limb, with no mapped joint below it, and standing
 either on a mapped joint or past the end of a mapped chain along its last bone. It is carried
 rigidly with that joint (its *anchor*), as the character's own IK carried the chain to it, and
 turns as the performer joint that continues the anchor's chain (the performer's ankle past its
-knee) where there is one, else with the anchor.
+knee) where there is one, else with the anchor. A follower the file never translated (a
+character without animation) is given position channels by the binding.
 
 :func:`find_followers` finds them when the binding is made; the converter and composer place
 them (:mod:`.converter`, :mod:`.composer`), and :func:`follow` places them again on a motion
@@ -128,13 +129,17 @@ def _mapped_below(tsk: Skeleton, mapped: np.ndarray) -> np.ndarray:
 
 
 def _candidates(tsk: Skeleton, mapped: np.ndarray, has_mapped_below: np.ndarray) -> list[int]:
-    """Translated unmapped non-root joints hanging off the trunk (:func:`_trunk`: no mapped
-    limb carries them) with no mapped joint below them, and none of them above another (a
-    joint below a follower moves with it)."""
+    """Unmapped non-root joints hanging off the trunk (:func:`_trunk`: no mapped limb carries
+    them) with no mapped joint below them, and none of them above another (a joint below a
+    follower moves with it).
+
+    Whether the file animated a joint's translation is not asked: a character delivered
+    without animation (or with an action that never moved its feet) has its control joints
+    at rest, and the robot walked away from its own feet (the binding gives such a joint
+    position channels: :func:`~engine.conversion.binding.bind`)."""
     trunk = _trunk(tsk, has_mapped_below, mapped)
     out = []
-    for j in tsk.translated:
-        j = int(j)
+    for j in range(tsk.num_joints):
         above = tsk.ancestors(j)
         if tsk.parents[j] < 0 or mapped[j] >= 0 or has_mapped_below[j] \
                 or any(mapped[a] >= 0 and a not in trunk for a in above) or set(above) & set(out):
