@@ -192,3 +192,30 @@ def test_rigid_parts_under_joints_are_read_as_the_gltf_reads_them(tmp_path):
                                        atol=1e-3 * size)
             moved = max(moved, float(np.ptp(skinned[0][index], axis=0).max()))
     assert moved > 0.05 * size
+
+
+def test_blenders_leaf_bones_do_not_change_the_root_scale(tmp_path):
+    """Blender's FBX exporter adds a leaf bone past each last bone by default (``_end``).
+    Ely exported so gave the BANDAI walk a root scale of 1.16 where Ely's glTF gives 1.09:
+    bound on a mid-stride frame, the pitched foot put the leaf past the toe lowest, and the
+    hips were measured from it. The ratio is now the glTF's (to the file's float precision),
+    with the leaf bones read as joints and left unmapped."""
+    from motion_composer.engine.conversion import automap, bind
+    from motion_composer.engine.formats import read_character, read_performer
+    from conftest import shared_path
+    out = tmp_path / "ely_leaf.fbx"
+    blender_job({"exports": [{"key": "ely", "out": str(out),
+                              "source": str(shared_path("target_mixamo_ely.glb")),
+                              "options": {"add_leaf_bones": True}}]}, tmp_path)
+    performer = read_performer(shared_path("bandai1_walk_normal_001.bvh"))
+    ratios = []
+    for path in (shared_path("target_mixamo_ely.glb"), out):
+        target = read_character(path).rest_motion()
+        corr = automap(target.skeleton, performer.skeleton)
+        ratios.append(bind(performer, target, corr).hip_height_ratio)
+        if path == out:
+            leaves = [n for n in target.skeleton.names if n.endswith("_end")]
+            assert "mixamorig:LeftToe_End_end" in leaves
+            assert not set(leaves) & set(corr.pairs)
+    assert ratios[1] == pytest.approx(ratios[0], rel=1e-5)
+    assert ratios[0] == pytest.approx(1.086, abs=0.001)

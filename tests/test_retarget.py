@@ -421,6 +421,55 @@ def test_a_ground_level_root_on_a_node_above_the_hips_scales_by_the_hips(clip):
     assert ratios[1] == pytest.approx(2 * ratios[0], rel=1e-9)
 
 
+def _with_tips(motion, as_joints):
+    """``motion`` with a tip past each childless joint, along its bone and as long: a leaf bone
+    ``<joint>_end`` (``as_joints``, Blender's FBX exporter adds them) or an End Site (its BVH
+    exporter writes them)."""
+    from motion_composer.engine.motion import Motion
+    from motion_composer.engine.skeleton import EndSite, Skeleton
+    sk = motion.skeleton
+    leaves = [j for j in range(1, sk.num_joints) if not sk.children[j]]
+    offsets = sk.offsets[leaves]
+    if as_joints:
+        wrapped = Skeleton(names=sk.names + tuple(f"{sk.names[j]}_end" for j in leaves),
+                           parents=np.concatenate([sk.parents, leaves]),
+                           offsets=np.vstack([sk.offsets, offsets]),
+                           channels=sk.channels + (("Zrotation", "Xrotation", "Yrotation"),) *
+                           len(leaves))
+        rot = np.concatenate([motion.rotations, np.tile([0.0, 0.0, 0.0, 1.0],
+                                                        (motion.num_frames, len(leaves), 1))],
+                             axis=1)
+        return Motion(wrapped, rot, motion.translations, motion.frame_time, name=motion.name)
+    sites = tuple(EndSite(j, o, f"{sk.names[j]}_end") for j, o in zip(leaves, offsets))
+    return motion.replace(skeleton=Skeleton(sk.names, sk.parents, sk.offsets, sk.channels,
+                                            end_sites=sites))
+
+
+@pytest.mark.parametrize("clip", ["bandai1_walk_normal_001.bvh", "bandai1_run_active_001.bvh",
+                                  "rokoko_mixamo_jesse_dance.bvh"])
+def test_tips_past_the_last_joints_do_not_change_the_root_scale(clip):
+    """Ely with a leaf bone past each last joint (Blender's FBX of Ely) or an End Site there
+    (Blender's BVH of it) got a root scale of 1.16 for the BANDAI walk where Ely's glTF gave
+    1.09: bound on a mid-stride frame, the pitched foot put the tip past the toe lowest, and
+    the hips were measured from it. The tips are each exporter's convention, not the body:
+    each side's floor leaves out what hangs past the joints the two sides share, and the
+    ratio and the hips' path are the same with and without them."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character
+    performer = read_bvh(shared_path(clip))
+    plain = read_character(shared_path("target_mixamo_ely.glb")).rest_motion()
+    results = []
+    for target in (plain, _with_tips(plain, True), _with_tips(plain, False)):
+        corr = automap(target.skeleton, performer.skeleton)
+        assert corr.pairs == automap(plain.skeleton, performer.skeleton).pairs
+        out = retarget(performer, target, corr)
+        hips = forward_kinematics(out).positions[:, target.skeleton.index["mixamorig:Hips"]]
+        results.append((bind(performer, target, corr).hip_height_ratio, hips))
+    for ratio, hips in results[1:]:
+        assert ratio == pytest.approx(results[0][0], rel=1e-12)
+        np.testing.assert_allclose(hips, results[0][1], atol=1e-9)
+
+
 @pytest.mark.parametrize("target_file", ["bandai1_walk_normal_001.bvh", "target_mixamo_ely.glb"])
 def test_a_writers_rounding_on_position_channels_is_no_movement(target_file):
     """Blender writes a position channel on every bone not connected to its parent, its values

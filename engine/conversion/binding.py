@@ -335,21 +335,27 @@ class _Bones:
     carries: bool = False
 
 
-def _height_above_floor(positions: np.ndarray, joint: int,
-                        carriers: np.ndarray | None = None) -> float:
+def _height_above_floor(positions: np.ndarray, joint: int, left_out: np.ndarray) -> float:
     """How far ``joint`` is above the lowest of ``positions`` (``(J + E, 3)``: joints first,
-    then End Sites), leaving out the joints ``carriers`` (indices) names.
+    then End Sites), leaving out the points ``left_out`` (``(J + E,)`` bool) marks."""
+    return float(positions[joint, 1] - positions[~left_out, 1].min())
 
-    The target's hips are measured in the bound posture, above its lowest body point. A node
-    above the hips carries the body without being part of it: the armature node Blender's
-    FBX exporter puts above the hips sits at the origin, and
-    counted as the floor it measured the hips from there, not from the feet the bound posture
-    lifts (a target bound to a performer's wide stance): Ely read from its glTF and from
-    Blender's FBX of it got hip ratios of 0.97 and 1.13 for the same walk."""
-    keep = np.ones(len(positions), dtype=bool)
-    if carriers is not None:
-        keep[carriers] = False
-    return float(positions[joint, 1] - positions[keep, 1].min())
+
+def _tails(skeleton: Skeleton, kept: np.ndarray, num_points: int) -> np.ndarray:
+    """``(J + E,)`` bool: the points past the ``kept`` joints' ends: every End Site, and each
+    joint under a kept joint with no kept joint at or below it (a toe's tip, a leaf bone, the
+    control rig under a carried foot)."""
+    J = skeleton.num_joints
+    below = kept.copy()                       # a kept joint at or below
+    for j in range(J - 1, 0, -1):
+        below[skeleton.parents[j]] |= below[j]
+    above = np.zeros(J, dtype=bool)           # a kept joint above
+    for j in range(1, J):
+        p = skeleton.parents[j]
+        above[j] = above[p] or kept[p]
+    out = np.ones(num_points, dtype=bool)
+    out[:J] = above & ~below
+    return out
 
 
 def _align(from_dirs: np.ndarray, to_dirs: np.ndarray, roll_by_bones: bool) -> np.ndarray:
@@ -389,32 +395,52 @@ _GROUND_LEVEL = 0.05
 
 
 def _hip_height_ratio(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.ndarray,
-                      body_root: int, t_points: np.ndarray, p_points: np.ndarray) -> float:
+                      body_root: int, t_points: np.ndarray, p_points: np.ndarray,
+                      followers: tuple = ()) -> float:
     """Target hip height over performer hip height (the default root scale), each above its
     floor in its bound posture (``t_points``, ``p_points``: joints then End Sites).
+
+    Like for like: each side's floor is the lowest of the joints the two sides share (the
+    mapped joints, and the control joints carried with the limbs with the performer joints
+    whose turn they take, :mod:`.followers`) and of the joints off the mapped limbs. What
+    hangs past a shared joint's end is left out on both sides: End Sites, toe tips, leaf
+    bones and control rigs are each exporter's convention, not the body. Blender's FBX of
+    Ely adds a leaf bone past each toe tip, its BVH of Ely an End Site there: bound to a
+    BANDAI walk on a mid-stride frame, the pitched foot put them lowest, and the ratio read
+    1.16 where Ely's glTF gave 1.09.
 
     Measured at the body root, or, when that stands on the floor on either side (Bandai's
     ``joint_Root`` mapped to the ``Armature`` node Blender's FBX puts above the hips), at
     the shallowest mapped joint under it that does not: a joint on the floor has no height
     to compare, and the ratio fell back to 1 (a 3 m robot walked at the performer's pace).
-    On both sides the nodes above the joint measured are not points of the body (see
-    :func:`_height_above_floor`), mapped or not: each side's hips are measured above its
-    own lowest body point, like for like. Blender's ``Armature`` node mapped to a ground-level
-    root sits at the origin, and counted as the target's floor it measured the hips from
-    there (CC3's walk onto Ely from Blender's FBX got 0.93, from Ely's glTF 0.81); and a
-    performer's ground-level root (Bandai's, CC3's) below its feet measured its hips from the
-    ground where the target's were measured from its lowest joint."""
+    On both sides the nodes above the joint measured are not points of the body either,
+    mapped or not: Blender's ``Armature`` node mapped to a ground-level root sits at the
+    origin, and counted as the target's floor it measured the hips from there (CC3's walk
+    onto Ely from Blender's FBX got 0.93, from Ely's glTF 0.81); and a performer's
+    ground-level root (Bandai's, CC3's) below its feet measured its hips from the ground
+    where the target's were measured from its lowest joint."""
     t_size = max(float(np.ptp(t_points[:, 1])), 1e-9)
     p_size = max(float(np.ptp(p_points[:, 1])), 1e-9)
+    t_kept, p_kept = mapped >= 0, np.zeros(psk.num_joints, dtype=bool)
+    p_kept[mapped[t_kept]] = True
+    for f in followers:
+        t_kept[f.joint] = True
+        if f.source >= 0:
+            p_kept[f.source] = True
+    t_tails = _tails(tsk, t_kept, len(t_points))
+    p_tails = _tails(psk, p_kept, len(p_points))
     depth = np.zeros(tsk.num_joints, dtype=np.intp)
     for j in range(1, tsk.num_joints):
         depth[j] = depth[anchor[j]] + 1 if anchor[j] >= 0 else 0
     below = [j for j in range(tsk.num_joints) if mapped[j] >= 0 and
              (j == body_root or body_root in tsk.ancestors(j))]
     for j in sorted(below, key=lambda k: (depth[k], k)):
-        t_hip = _height_above_floor(t_points, j, np.array(tsk.ancestors(j), dtype=np.intp))
-        p_hip = _height_above_floor(p_points, int(mapped[j]),
-                                    np.array(psk.ancestors(int(mapped[j])), dtype=np.intp))
+        pj = int(mapped[j])
+        t_out, p_out = t_tails.copy(), p_tails.copy()
+        t_out[tsk.ancestors(j)] = True
+        p_out[psk.ancestors(pj)] = True
+        t_hip = _height_above_floor(t_points, j, t_out)
+        p_hip = _height_above_floor(p_points, pj, p_out)
         if t_hip > _GROUND_LEVEL * t_size and p_hip > _GROUND_LEVEL * p_size:
             return t_hip / p_hip
     return 1.0
@@ -485,7 +511,7 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
 
     ratio = _hip_height_ratio(tsk, psk, mapped, anchor, body_root,
                               np.concatenate([aligned_positions, bound.end_positions[0]]),
-                              p_ref.all_positions)
+                              p_ref.all_positions, followers)
     return Binding(target=tsk, performer=psk, correspondence=correspondence, mapped=mapped,
                    rest_world=rest_world, rest_local=rest_local, rest_positions=rest_positions,
                    aligned_world=aligned_world, aligned_local=aligned_local,
