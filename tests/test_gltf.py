@@ -1107,6 +1107,27 @@ def test_a_gltf_written_z_up_is_said_to_lie_in_one_line(tmp_path, capsys):
     assert code == 0 and err == said + "--target-up-axis +Z\n"
 
 
+def test_a_bind_pose_that_lies_under_clips_that_stand_raises_no_doubt(tmp_path, capsys):
+    """A BANDAI clip written as glTF (here by our writer; Blender's exporter does the same)
+    keeps the BVH's zero pose as its bind pose, and that lies along +X while every frame of
+    the walk stands along +Y. ``info`` said to read it with ``--up-axis +X``, which would lay
+    the walking figure down: the clips tell, and the file is read without a doubt. The
+    same skeleton without clips still says it lies."""
+    from motion_composer.engine.formats import read_character, read_performer
+    from motion_composer.engine.formats.figure import lying_doubt
+    walk = read_performer(shared_path("bandai1_walk_normal_001.bvh"))
+    assert lying_doubt(walk.skeleton, "zero pose")[1] == "+X"
+    path = tmp_path / "bandai_walk.glb"
+    write_gltf(walk, None, path)
+    character = read_character(path)
+    assert character.skeleton.source.doubt == "" and character.skeleton.source.overrides == ()
+    assert all(m.skeleton is character.skeleton for m in character.motions)
+    code, out, err = _info(capsys, path)
+    assert code == 0 and err == "" and "up axis:     +Y" in out
+    doubt, axis = lying_doubt(character.skeleton, "bind pose")
+    assert axis == "+X" and doubt.startswith("the figure stands along +X, not +Y, in its bind")
+
+
 def test_a_gltf_written_z_up_read_with_its_up_axis_is_the_file_written_y_up(tmp_path, capsys):
     """The same file read with the up axis the warning names (``up_axis="+Z"``,
     ``--target-up-axis +Z``, a project's target ``up_axis``) is Ely as written +Y up: every

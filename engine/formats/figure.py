@@ -9,7 +9,6 @@ which the command line and the window show as one warning line naming that overr
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -71,14 +70,34 @@ def body_vertical(roles, skeleton: Skeleton, pose) -> np.ndarray:
     return vertical
 
 
-def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y") -> tuple[str, str]:
+#: frames of each clip the clips' stance is judged on (evenly spread)
+STANCE_SAMPLES = 32
+
+
+def _hips_angle(roles, skeleton: Skeleton, pose) -> np.ndarray:
+    """``(S,)`` [deg] how far the legs (their ends to the hips) lie from +Y per frame, and
+    the vectors ``(S, 3)``."""
+    v = pose.positions[:, skeleton.index[roles["hips"]]] - _feet(roles, skeleton, pose)
+    norm = np.linalg.norm(v, axis=1)
+    cos = np.divide(v[:, 1], norm, out=np.ones_like(norm), where=norm > 0.0)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))), v
+
+
+def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y",
+                motions=()) -> tuple[str, str]:
     """``("", "")`` where the skeleton's zero pose (``what``: ``"bind pose"``, ``"rest
     pose"``) stands along +Y, or is no humanoid to tell by; else one sentence saying along
     which axis it stands, and the up axis to read the file with (``read_with``: the one it
     was read with): its legs, from their ends to the hips, more than
     :data:`UP_AXIS_TOLERANCE` off +Y. (The legs, not the feet-to-head vertical that tells a
     BVH file's up axis: a quadruped read as a humanoid, the glTF fox, stands on its hind
-    legs' line but carries its head 59 degrees forward of it.)"""
+    legs' line but carries its head 59 degrees forward of it.)
+
+    Where the file has clips (``motions``, on this skeleton), they tell: a figure whose
+    clips stand along +Y (the median over :data:`STANCE_SAMPLES` frames of each) was read
+    with the right axis up, whatever its zero pose. Blender's glTF of a BANDAI clip keeps the
+    BVH's zero pose, which lies along +X, and the reader said to read it with +X up, which
+    laid the walking figure down."""
     J = skeleton.num_joints
     rest = np.zeros((1, J, 4))
     rest[..., 3] = 1.0
@@ -86,25 +105,30 @@ def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y") -> tuple[s
     roles = body_roles(skeleton, pose.positions[0])
     if roles is None:
         return "", ""
-    v = pose.positions[0, skeleton.index[roles["hips"]]] - _feet(roles, skeleton, pose)[0]
-    norm = float(np.linalg.norm(v))
-    if not norm > 0.0:
+    angle, v = _hips_angle(roles, skeleton, pose)
+    if not np.linalg.norm(v[0]) > 0.0 or angle[0] <= UP_AXIS_TOLERANCE:
         return "", ""
-    angle = math.degrees(math.acos(min(1.0, max(-1.0, v[1] / norm))))
-    if angle <= UP_AXIS_TOLERANCE:
+    angles = []
+    for motion in motions:
+        frames = np.unique(np.linspace(0, motion.num_frames - 1,
+                                       STANCE_SAMPLES).round().astype(np.intp))
+        sample = fk_arrays(skeleton, motion.rotations[frames], motion.translations[frames])
+        angles.append(_hips_angle(roles, skeleton, sample)[0])
+    if angles and float(np.median(np.concatenate(angles))) <= UP_AXIS_TOLERANCE:
         return "", ""
     # read with ``read_with`` up, the file's vectors were turned by its rotation
-    axis = nearest_axis(up_axis_rotation(read_with).T @ v)
-    return (f"the figure stands along {nearest_axis(v)}, not +Y, in its {what} ({angle:.0f} "
-            "degrees off): the file was probably written with another axis up"), axis
+    axis = nearest_axis(up_axis_rotation(read_with).T @ v[0])
+    return (f"the figure stands along {nearest_axis(v[0])}, not +Y, in its {what} "
+            f"({angle[0]:.0f} degrees off){' and its clips' if angles else ''}: the file was "
+            "probably written with another axis up"), axis
 
 
-def with_lying_doubt(skeleton: Skeleton, what: str) -> Skeleton:
+def with_lying_doubt(skeleton: Skeleton, what: str, motions=()) -> Skeleton:
     """``skeleton`` read from a glTF or FBX file, with the doubt of :func:`lying_doubt` (read
-    with its source's up axis) on its source and the up axis to read it with as the
-    override; itself where it stands."""
+    with its source's up axis; ``motions``: the file's clips on it) on its source and the up
+    axis to read it with as the override; itself where it stands."""
     source = skeleton.source
-    doubt, axis = lying_doubt(skeleton, what, source.up_axis)
+    doubt, axis = lying_doubt(skeleton, what, source.up_axis, motions)
     if not doubt:
         return skeleton
     return dataclasses.replace(skeleton, source=dataclasses.replace(

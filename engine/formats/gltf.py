@@ -966,9 +966,12 @@ def _build(doc: _Doc, *, skin, fps, source: SourceFrame = GLTF_SOURCE) -> Charac
     channels = _channels(joints, offsets, size, [default] + poses, hint)
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=channels, end_sites=end_sites, source=source)
-    skeleton = with_lying_doubt(skeleton, "bind pose")
-    stem = Path(doc.path).stem if doc.path else "character"
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
+    doubted = with_lying_doubt(skeleton, "bind pose", motions)
+    if doubted is not skeleton:
+        skeleton = doubted
+        motions = tuple(m.replace(skeleton=skeleton) for m in motions)
+    stem = Path(doc.path).stem if doc.path else "character"
     node_pose = _pose_motion(default, skeleton, joints.parents, 1.0 / fps)
     node_pose = node_pose.replace(name=f"{stem} (default pose)")
 

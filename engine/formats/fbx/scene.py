@@ -1151,8 +1151,11 @@ def _build(doc: _Doc, name: str, fps: float | None, notes: list[str],
     skeleton = Skeleton(names=joints.names, parents=joints.parents, offsets=offsets,
                         channels=_channels(joints.parents, offsets, size, [rest] + poses),
                         source=source)
-    skeleton = with_lying_doubt(skeleton, "rest pose")
     motions = tuple(_pose_motion(p, skeleton, joints.parents, 1.0 / fps) for p in poses)
+    doubted = with_lying_doubt(skeleton, "rest pose", motions)
+    if doubted is not skeleton:
+        skeleton = doubted
+        motions = tuple(m.replace(skeleton=skeleton) for m in motions)
     node_pose = _pose_motion(rest, skeleton, joints.parents, 1.0 / fps).replace(
         name=f"{name} (rest pose)")
     meshes = _meshes(doc, joints, A, s, notes, bind_file)
