@@ -470,3 +470,52 @@ def test_a_character_without_animation_carries_its_feet_alike(tmp_path, capsys):
     np.testing.assert_array_equal(worlds[0], worlds[1])
     shin = worlds[0][:, sk.index["LowerLegL"]] - worlds[0][:, sk.index["FootL"]]
     assert np.ptp(np.linalg.norm(shin, axis=1)) < 1e-6
+
+
+def _unreal_with_ik_bones_on_the_limbs():
+    """The UE4 mannequin's names and IK bones (tests/test_automap.py), each IK bone where
+    Unreal puts it: ``ik_foot_l`` on ``foot_l`` and ``ik_hand_gun`` on ``hand_r`` (both under
+    IK roots at the origin), ``ik_hand_l`` on ``hand_l`` under the gun. Only the root and the
+    pelvis translate (no clip of the file moves the IK bones)."""
+    from motion_composer.engine.motion import Motion
+    from motion_composer.engine.skeleton import Skeleton
+    from test_automap import unreal_mannequin
+    sk = unreal_mannequin()
+    rest = np.tile([0.0, 0.0, 0.0, 1.0], (1, sk.num_joints, 1))
+    pos = fk_arrays(sk, rest, sk.offsets[sk.translated][None]).positions[0]
+    offsets = sk.offsets.copy()
+    for bone, on in (("ik_foot_l", "foot_l"), ("ik_foot_r", "foot_r"),
+                     ("ik_hand_gun", "hand_r"), ("ik_hand_l", "hand_l")):
+        j = sk.index[bone]
+        offsets[j] = pos[sk.index[on]] - pos[sk.parents[j]] - (
+            0.0 if bone != "ik_hand_l" else pos[sk.index["hand_r"]] - pos[sk.parents[j]])
+    sk = Skeleton(sk.names, sk.parents, offsets, sk.channels)
+    return Motion(sk, rest, sk.offsets[sk.translated][None], 1 / 30, name="mannequin")
+
+
+def test_unreals_ik_bones_follow_the_feet_and_hand_without_clips():
+    """Unreal's IK bones hang under IK roots at the origin (``ik_foot_root``,
+    ``ik_hand_root``), which follow nothing. A root that follows nothing does not hold back
+    the bones under it: ``ik_foot_l`` follows ``foot_l``, ``ik_hand_gun`` follows ``hand_r``
+    and ``ik_hand_l`` moves with the gun (a bone under a follower is not carried again),
+    though no clip ever translated them. Retargeted, each stays on its limb on every
+    frame, and ``ik_hand_l`` where it was on the gun."""
+    target = _unreal_with_ik_bones_on_the_limbs()
+    sk = target.skeleton
+    performer = read_performer(clip_path("cmu_131_01_walk.bvh"))
+    correspondence = automap(sk, performer.skeleton)
+    binding = bind(performer, target, correspondence)
+    carried = {sk.names[f.joint]: sk.names[f.anchor] for f in binding.followers}
+    assert carried == {"ik_foot_l": "foot_l", "ik_foot_r": "foot_r", "ik_hand_gun": "hand_r"}
+    motion = retarget(performer, target, correspondence)
+    _, pos = _world(motion)
+    assert np.ptp(pos[:, sk.index["pelvis"]], axis=0).max() > 1.0      # it walks
+    for bone, on in (("ik_foot_l", "foot_l"), ("ik_foot_r", "foot_r"),
+                     ("ik_hand_gun", "hand_r")):
+        gap = np.linalg.norm(pos[:, sk.index[bone]] - pos[:, sk.index[on]], axis=1)
+        assert gap.max() < 1e-9, (bone, gap.max())
+    rot, _ = _world(motion)
+    gun, hand = sk.index["ik_hand_gun"], sk.index["ik_hand_l"]
+    on_gun = qrot(qconj(rot[:, gun]), pos[:, hand] - pos[:, gun])
+    np.testing.assert_allclose(on_gun, np.broadcast_to(sk.offsets[hand], on_gun.shape),
+                               atol=1e-9)

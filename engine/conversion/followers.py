@@ -130,8 +130,9 @@ def _mapped_below(tsk: Skeleton, mapped: np.ndarray) -> np.ndarray:
 
 def _candidates(tsk: Skeleton, mapped: np.ndarray, has_mapped_below: np.ndarray) -> list[int]:
     """Unmapped non-root joints hanging off the trunk (:func:`_trunk`: no mapped limb carries
-    them) with no mapped joint below them, and none of them above another (a joint below a
-    follower moves with it).
+    them) with no mapped joint below them, parents first (a joint below a follower moves
+    with it: :func:`find_followers` skips it; below a candidate that follows nothing, such
+    as Unreal's ``ik_foot_root`` at the origin, it may follow: ``ik_foot_l`` on ``foot_l``).
 
     Whether the file animated a joint's translation is not asked: a character delivered
     without animation (or with an action that never moved its feet) has its control joints
@@ -142,7 +143,7 @@ def _candidates(tsk: Skeleton, mapped: np.ndarray, has_mapped_below: np.ndarray)
     for j in range(tsk.num_joints):
         above = tsk.ancestors(j)
         if tsk.parents[j] < 0 or mapped[j] >= 0 or has_mapped_below[j] \
-                or any(mapped[a] >= 0 and a not in trunk for a in above) or set(above) & set(out):
+                or any(mapped[a] >= 0 and a not in trunk for a in above):
             continue
         out.append(j)
     return out
@@ -252,6 +253,8 @@ def find_followers(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, reference: 
     below = _mapped_below(tsk, mapped)
     out = []
     for j in _candidates(tsk, mapped, below):
+        if set(tsk.ancestors(j)) & {f.joint for f in out}:
+            continue
         k = _anchor(tsk, mapped, below, t_pos, j, size)
         if k < 0:
             continue
