@@ -109,7 +109,7 @@ def lying_doubt(skeleton: Skeleton, what: str, read_with: str = "+Y",
     if not np.linalg.norm(v[0]) > 0.0 or angle[0] <= UP_AXIS_TOLERANCE:
         return "", ""
     angles = []
-    for motion in motions:
+    for motion in (m for m in motions if m.num_frames):
         frames = np.unique(np.linspace(0, motion.num_frames - 1,
                                        STANCE_SAMPLES).round().astype(np.intp))
         sample = fk_arrays(skeleton, motion.rotations[frames], motion.translations[frames])
