@@ -1128,6 +1128,40 @@ def test_a_bind_pose_that_lies_under_clips_that_stand_raises_no_doubt(tmp_path, 
     assert axis == "+X" and doubt.startswith("the figure stands along +X, not +Y, in its bind")
 
 
+def test_shin_end_nodes_above_the_knees_raise_no_doubt_where_the_shins_stand(tmp_path):
+    """The robot's legs end at its shins (its feet are control joints under the root), so its
+    stance was measured from the hips to the shins' ``_end`` nodes. Blender's glTF of the
+    robot puts those nodes above the knees, and the standing robot was said to stand along
+    -Y (160 degrees off). An End Site that turns back up the leg is no ankle: the leg ends
+    at the shin, that file reads without a doubt, and the robot turned Z-up (End Sites and
+    all) still lies along +Z."""
+    from motion_composer.engine.formats import read_character
+    js, binary = unpack_glb(shared_path(ROBOT).read_bytes())
+    ends = [n for n in js["nodes"] if n.get("name") in ("LowerLegL_end", "LowerLegR_end")]
+    assert len(ends) == 2
+    for node in ends:
+        node["translation"] = [0.0, -10 * node["translation"][1], 0.0]
+    raised = tmp_path / "robot_raised_ends.glb"
+    raised.write_bytes(pack_glb(js, binary))
+    character = read_character(raised)
+    sk = character.skeleton
+    sites = {s.name: s for s in sk.end_sites}
+    for side in "LR":
+        shin = sk.index[f"LowerLeg{side}"]
+        end = character.bind_positions[shin] + sites[f"LowerLeg{side}_end"].offset
+        assert end[1] > character.bind_positions[shin][1] > 0.0     # above the knee
+    assert sk.source.doubt == ""
+    for i in js["scenes"][js.get("scene", 0)]["nodes"]:
+        node = js["nodes"][i]
+        node["rotation"] = (Rotation.from_euler("x", 90, degrees=True) * Rotation.from_quat(
+            node.get("rotation", [0, 0, 0, 1]))).as_quat().tolist()
+    lying = tmp_path / "robot_z_up.glb"
+    lying.write_bytes(pack_glb(js, binary))
+    source = read_character(lying).skeleton.source
+    assert source.doubt.startswith("the figure stands along +Z, not +Y")
+    assert source.overrides == (("up_axis", "+Z"),)
+
+
 def test_a_gltf_written_z_up_read_with_its_up_axis_is_the_file_written_y_up(tmp_path, capsys):
     """The same file read with the up axis the warning names (``up_axis="+Z"``,
     ``--target-up-axis +Z``, a project's target ``up_axis``) is Ely as written +Y up: every

@@ -38,7 +38,12 @@ def body_roles(skeleton: Skeleton, positions: np.ndarray):
 
 def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
     """``(S, 3)`` the middle of the two legs' ends per frame (a leg without a foot ends at its
-    shin's End Site, or at the shin)."""
+    shin's End Site where that continues the leg, else at the shin).
+
+    An End Site that turns back up the leg (its offset from the shin against the thigh's
+    direction) is a node the exporter placed, not an ankle: Blender's glTF of the robot puts
+    its shins' ``_end`` nodes above the knees, and the standing robot was said to stand
+    along -Y."""
     index = skeleton.index
     positions = pose.positions
     site_of = {site.parent: e for e, site in enumerate(skeleton.end_sites)}
@@ -48,8 +53,12 @@ def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
             ends.append(positions[:, index[roles[f"foot_{side}"]]])
             continue
         last = index[roles[next(r for r in (f"shin_{side}", f"thigh_{side}") if r in roles)]]
-        ends.append(pose.end_positions[:, site_of[last]] if last in site_of
-                    else positions[:, last])
+        end = positions[:, last]
+        if last in site_of:
+            site = pose.end_positions[:, site_of[last]]
+            along = np.sum((site - end) * (end - positions[:, skeleton.parents[last]]), axis=1)
+            end = np.where((along > 0.0)[:, None], site, end)
+        ends.append(end)
     return (ends[0] + ends[1]) / 2
 
 
