@@ -97,6 +97,18 @@ _UNITY = dict(
              thigh=("LeftUpperLeg", "RightUpperLeg"), shin=("LeftLowerLeg", "RightLowerLeg"),
              foot=("LeftFoot", "RightFoot")))
 
+_DAZ = dict(
+    # hip > pelvis > legs; hip > abdomenLower ... chestUpper > neckLower > neckUpper > head;
+    # each limb bone a Bend joint with a Twist joint below it (Genesis 3 and 8)
+    hips="hip", spine_first="abdomenLower", chest="chestUpper", head="head",
+    **_sided(upper_arm=("lShldrBend", "rShldrBend"), forearm=("lForearmBend", "rForearmBend"),
+             hand=("lHand", "rHand"), thigh=("lThighBend", "rThighBend"),
+             shin=("lShin", "rShin"), foot=("lFoot", "rFoot")))
+_MOTIVE = dict(
+    hips="Hip", spine_first="Ab", chest="Chest", head="Head",
+    **_sided(upper_arm=("LUArm", "RUArm"), forearm=("LFArm", "RFArm"), hand=("LHand", "RHand"),
+             thigh=("LThigh", "RThigh"), shin=("LShin", "RShin"), foot=("LFoot", "RFoot")))
+
 #: convention -> (source, expected role -> joint name). Sources: ("shared", file),
 #: ("bundled", file), ("glb", file), ("synthetic", kind), ("unnamed", inner source, frame).
 CONVENTIONS = {
@@ -112,6 +124,8 @@ CONVENTIONS = {
     "ROBOT": (("glb", "target_robot_expressive.glb"), _ROBOT),
     "UNREAL": (("synthetic", "unreal"), _UNREAL),
     "UNITY": (("synthetic", "unity"), _UNITY),
+    "DAZ": (("synthetic", "daz"), _DAZ),
+    "MOTIVE": (("synthetic", "motive"), _MOTIVE),
     "UNNAMED-CMU-MB": (("unnamed", ("shared", "cmu_mb_01_01_jumps.bvh"), 300), _CMU_MB),
     "UNNAMED-BANDAI": (("unnamed", ("shared", "bandai1_walk_normal_001.bvh"), 50), _BANDAI),
     "bundled-CMU-MAX": (("bundled", "cmu_131_01_walk.bvh"), _CMU_MAX),
@@ -268,6 +282,61 @@ def unity_humanoid() -> Skeleton:
     return build_skeleton(_mirror(spec, "Left", "Right"))
 
 
+def daz_genesis() -> Skeleton:
+    """Daz Genesis 8's names (T-pose, facing +Z, left at +X): a Bend and a Twist joint per
+    limb bone, the legs under ``pelvis``, the spine in lower/upper pairs."""
+    spec = [("hip", None, (0, 0.95, 0)), ("pelvis", "hip", (0, -0.02, 0)),
+            ("abdomenLower", "hip", (0, 0.08, 0)), ("abdomenUpper", "abdomenLower", (0, 0.1, 0)),
+            ("chestLower", "abdomenUpper", (0, 0.1, 0)), ("chestUpper", "chestLower", (0, 0.1, 0)),
+            ("neckLower", "chestUpper", (0, 0.15, 0)), ("neckUpper", "neckLower", (0, 0.05, 0)),
+            ("head", "neckUpper", (0, 0.06, 0)),
+            ("lCollar", "chestUpper", (0.03, 0.08, 0)),
+            ("lShldrBend", "lCollar", (0.14, 0, 0)), ("lShldrTwist", "lShldrBend", (0.14, 0, 0)),
+            ("lForearmBend", "lShldrTwist", (0.14, 0, 0)),
+            ("lForearmTwist", "lForearmBend", (0.12, 0, 0)),
+            ("lHand", "lForearmTwist", (0.13, 0, 0))]
+    for finger, z in (("Thumb", 0.03), ("Index", 0.02), ("Mid", 0.0), ("Ring", -0.02),
+                      ("Pinky", -0.04)):
+        spec += [(f"l{finger}1", "lHand", (0.09 if finger != "Thumb" else 0.03, 0, z)),
+                 (f"l{finger}2", f"l{finger}1", (0.04, 0, 0)),
+                 (f"l{finger}3", f"l{finger}2", (0.03, 0, 0))]
+    spec += [("lThighBend", "pelvis", (0.09, -0.03, 0)),
+             ("lThighTwist", "lThighBend", (0, -0.21, 0)),
+             ("lShin", "lThighTwist", (0, -0.21, 0)), ("lFoot", "lShin", (0, -0.42, 0)),
+             ("lMetatarsals", "lFoot", (0, -0.03, 0.06)),
+             ("lToe", "lMetatarsals", (0, -0.03, 0.07))]
+    right = [("r" + n[1:], "r" + p[1:] if p[0] == "l" and p[1].isupper() else p, (-x, y, z))
+             for n, p, (x, y, z) in spec if n[0] == "l" and n[1].isupper()]
+    return build_skeleton(spec + right)
+
+
+def optitrack_motive() -> Skeleton:
+    """OptiTrack Motive's skeleton names on the Unity figure: ``LUArm``/``LFArm`` (upper
+    arm, forearm), ``LThigh``/``LShin``, a spine of ``Ab`` and ``Chest``."""
+    rename = {"Hips": "Hip", "Spine": "Ab", "Chest": "Chest", "UpperChest": None,
+              "Neck": "Neck", "Head": "Head", "Shoulder": "Shoulder", "UpperArm": "UArm",
+              "LowerArm": "FArm", "Hand": "Hand", "UpperLeg": "Thigh", "LowerLeg": "Shin",
+              "Foot": "Foot", "Toes": "Toe"}
+    sk = unity_humanoid()
+    keep = [j for j, n in enumerate(sk.names)
+            if rename.get(n.removeprefix("Left").removeprefix("Right"), "") is not None
+            and not any(f in n for f in ("Thumb", "Index", "Middle", "Ring", "Little"))]
+    names = []
+    for j in keep:
+        n = sk.names[j]
+        side = "L" if n.startswith("Left") else "R" if n.startswith("Right") else ""
+        names.append(side + rename[n.removeprefix("Left").removeprefix("Right")])
+    spec = []
+    for j, name in zip(keep, names):
+        p = sk.parents[j]
+        offset = sk.offsets[j].copy()
+        while p >= 0 and p not in keep:             # UpperChest left out: its children
+            offset += sk.offsets[p]                 # hang from Chest
+            p = sk.parents[p]
+        spec.append((name, names[keep.index(p)] if p >= 0 else None, tuple(offset)))
+    return build_skeleton(spec)
+
+
 def unnamed(skeleton: Skeleton) -> Skeleton:
     """The same skeleton with every joint renamed ``j0`` ... ``jN``."""
     return dataclasses.replace(skeleton, names=[f"j{k}" for k in range(skeleton.num_joints)])
@@ -286,7 +355,8 @@ def _source(source) -> tuple[Skeleton, np.ndarray | None]:
     if kind == "glb":
         return read_glb_skeleton(shared_path(source[1]))
     if kind == "synthetic":
-        return {"unreal": unreal_mannequin, "unity": unity_humanoid}[source[1]](), None
+        return {"unreal": unreal_mannequin, "unity": unity_humanoid, "daz": daz_genesis,
+                "motive": optitrack_motive}[source[1]](), None
     if kind == "unnamed":
         motion = _motion(*source[1])
         frame = min(source[2], motion.num_frames - 1)
@@ -325,6 +395,12 @@ def _role_joint(roles: Roles, role: str) -> str | None:
     ("LeftInHandIndex", "l", set(), "index", False),                    # Rokoko metacarpal
     ("LeftHandThumb1", "l", set(), "thumb", False),
     ("RightHandEnd", "r", set(), None, True),                           # FAIR1 end joint
+    ("headend", None, set(), None, True),                               # an end glued on
+    ("lShldrBend", "l", {"clavicle", "upper_arm"}, None, False),        # Daz: not an "end"
+    ("rForearmBend", "r", {"forearm"}, None, False),
+    ("lThighTwist", "l", set(), None, True),
+    ("LFArm", "l", {"forearm"}, None, False),                           # OptiTrack Motive
+    ("RUArm", "r", {"upper_arm"}, None, False),
     ("CC_Base_L_Thigh", "l", {"thigh"}, None, False),
     ("CC_Base_R_Calf", "r", {"shin"}, None, False),
     ("CC_Base_L_UpperarmTwist01", "l", set(), None, True),

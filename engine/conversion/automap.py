@@ -178,11 +178,11 @@ _BODY_WORDS = (
     ("shin", {"shin"}), ("knee", {"shin"}),
     ("foot", {"foot"}), ("ankle", {"foot"}),
     ("clavicle", {"clavicle"}), ("collar", {"clavicle"}), ("clav", {"clavicle"}),
-    ("shoulder", {"clavicle", "upper_arm"}),
+    ("shoulder", {"clavicle", "upper_arm"}), ("shldr", {"clavicle", "upper_arm"}),
     ("upperarm", {"upper_arm"}), ("uparm", {"upper_arm"}), ("armupper", {"upper_arm"}),
-    ("humerus", {"upper_arm"}),
+    ("uarm", {"upper_arm"}), ("humerus", {"upper_arm"}),
     ("forearm", {"forearm"}), ("lowerarm", {"forearm"}), ("lowarm", {"forearm"}),
-    ("armlower", {"forearm"}), ("elbow", {"forearm"}),
+    ("armlower", {"forearm"}), ("farm", {"forearm"}), ("elbow", {"forearm"}),
     ("wrist", {"hand"}), ("hand", {"hand"}), ("palm", {"hand"}),
     ("leg", {"thigh", "shin"}),
     ("arm", {"upper_arm"}),
@@ -198,7 +198,7 @@ def _classify(core: str, words: list[str], sided: bool):
     if not core:
         return False, frozenset(), None, False, None
     if any(p in core for p in _HELPER_PARTS) or any(w in _HELPER_WORDS for w in words) or \
-            (core.endswith("end") and len(core) > 3):
+            (core.endswith("end") and _ends_known(core[:-3])):
         return True, frozenset(), None, False, None
     if "toe" in core or "ball" in core:
         return False, frozenset({"toe"}), None, False, None
@@ -228,6 +228,13 @@ _VOCAB = ({w for w, _ in _BODY_WORDS} | {w for w, _ in _TRUNK_WORDS} |
 
 def _known(word: str) -> bool:
     return word in _VOCAB
+
+
+def _ends_known(text: str) -> bool:
+    """Whether ``text`` ends with a known word (``head`` of ``headend``): an ``end`` glued to
+    a body word marks an end joint, but ``bend`` does not (Daz's ``lShldrBend``, its upper
+    arm, was taken for a helper)."""
+    return any(text.endswith(w) for w in _VOCAB | _HELPER_WORDS)
 
 
 _SIDE_WORDS = {"l": "l", "left": "l", "r": "r", "right": "r"}
@@ -279,6 +286,11 @@ def _parse(name: str) -> tuple[NameInfo, str | None]:
         kept.append(w)
     side = sides.pop() if len(sides) == 1 else None
     core = "".join(w for w in kept if not w.isdigit())
+    if not sides and core[:1] in ("l", "r") and _known(core[1:]):
+        # a side letter glued to an abbreviation split off as its own word: OptiTrack
+        # Motive's LFArm (words "LF", "Arm") is the left forearm
+        side, core = core[0], core[1:]
+        kept = [core]
     numbers = tuple(int(w) for w in kept if w.isdigit())
     helper, roles, finger, meta, trunk = _classify(core, kept, side is not None)
     if biped and not helper:
