@@ -532,3 +532,29 @@ def test_a_key_attribute_counted_for_more_keys_than_there_are_is_read(tmp_path):
     for a, b in zip(true.motions, wide.motions):
         np.testing.assert_array_equal(a.rotations, b.rotations)
         np.testing.assert_array_equal(a.translations, b.translations)
+
+
+def test_a_head_torn_off_its_neck_is_read_without_a_crash(tmp_path, capsys):
+    """The FBX fuzz at seed 4904 changed two numbers of the Maya character: the left thigh's
+    model id, and the connection that hangs the head on the neck, to that same new number.
+    The head no longer hangs on the neck; the humanoid roles found there have no right leg,
+    and telling which way the figure stands raised StopIteration (exit 3). A leg the roles
+    do not find is left out of the stance: ``info`` and a retarget onto it exit 0."""
+    import re
+    text = ascii_fbx(parse_binary(shared_path("fbx/maya_character_7500_binary.fbx")
+                                  .read_bytes())).decode()
+    ids = {name: re.search(rf'Model: (\d+), "Model::{name}"', text).group(1)
+           for name in ("Character1_LeftUpLeg", "Character1_Head")}
+    link = re.search(rf'C: "OO", {ids["Character1_Head"]}, (\d+)\n', text)
+    text = text.replace(link.group(0), f'C: "OO", {ids["Character1_Head"]}, 1e-320\n')
+    text = text.replace(f'Model: {ids["Character1_LeftUpLeg"]}, "Model::Character1_LeftUpLeg"',
+                        'Model: 1e-320, "Model::Character1_LeftUpLeg"')
+    path = tmp_path / "head_on_thigh.fbx"
+    path.write_text(text)
+    sk = read_character(path).skeleton
+    assert sk.names[sk.parents[sk.index["Character1_Head"]]] != "Character1_Neck"
+    assert main(["info", str(path)]) == 0
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", str(clip_path("cmu_131_01_walk.bvh")), "--target", str(path),
+                 "-o", str(out), "--frames", "0:30"]) == 0
+    assert "Traceback" not in capsys.readouterr().err and out.exists()

@@ -38,7 +38,8 @@ def body_roles(skeleton: Skeleton, positions: np.ndarray):
 
 def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
     """``(S, 3)`` the middle of the two legs' ends per frame (a leg without a foot ends at its
-    shin's End Site where that continues the leg, else at the shin).
+    shin's End Site where that continues the leg, else at the shin; a leg the roles do not
+    find is left out, and without either the hips stand for them).
 
     An End Site that turns back up the leg (its offset from the shin against the thigh's
     direction) is a node the exporter placed, not an ankle: Blender's glTF of the robot puts
@@ -52,14 +53,20 @@ def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
         if f"foot_{side}" in roles:
             ends.append(positions[:, index[roles[f"foot_{side}"]]])
             continue
-        last = index[roles[next(r for r in (f"shin_{side}", f"thigh_{side}") if r in roles)]]
+        role = next((r for r in (f"shin_{side}", f"thigh_{side}", f"hip_joint_{side}")
+                     if r in roles), None)
+        if role is None:            # a leg the roles do not find (a file's numbers broken)
+            continue
+        last = index[roles[role]]
         end = positions[:, last]
         if last in site_of:
             site = pose.end_positions[:, site_of[last]]
             along = np.sum((site - end) * (end - positions[:, skeleton.parents[last]]), axis=1)
             end = np.where((along > 0.0)[:, None], site, end)
         ends.append(end)
-    return (ends[0] + ends[1]) / 2
+    if not ends:                    # no leg: the hips themselves (no direction to tell by)
+        return positions[:, index[roles["hips"]]]
+    return sum(ends) / len(ends)
 
 
 def body_vertical(roles, skeleton: Skeleton, pose) -> np.ndarray:
