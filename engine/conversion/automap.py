@@ -230,11 +230,14 @@ def _known(word: str) -> bool:
     return word in _VOCAB
 
 
+_END_AFTER = tuple(_VOCAB | _HELPER_WORDS)
+
+
 def _ends_known(text: str) -> bool:
     """Whether ``text`` ends with a known word (``head`` of ``headend``): an ``end`` glued to
     a body word marks an end joint, but ``bend`` does not (Daz's ``lShldrBend``, its upper
     arm, was taken for a helper)."""
-    return any(text.endswith(w) for w in _VOCAB | _HELPER_WORDS)
+    return any(text.endswith(w) for w in _END_AFTER)
 
 
 _SIDE_WORDS = {"l": "l", "left": "l", "r": "r", "right": "r"}

@@ -59,7 +59,7 @@ def _feet(roles, skeleton: Skeleton, pose) -> np.ndarray:
             continue
         last = index[roles[role]]
         end = positions[:, last]
-        if last in site_of:
+        if last in site_of and skeleton.parents[last] >= 0:
             site = pose.end_positions[:, site_of[last]]
             along = np.sum((site - end) * (end - positions[:, skeleton.parents[last]]), axis=1)
             end = np.where((along > 0.0)[:, None], site, end)
