@@ -232,6 +232,18 @@ def _mirror(spec, left, right):
     return out
 
 
+def _fingers(hand: str, fingers: tuple, name, thumb_base: float = 0.09) -> list:
+    """Three joints per finger under ``hand`` (left side, x along the arm): ``fingers`` the
+    five names from the thumb, ``name(finger, k)`` the k-th joint's name (k = 1, 2, 3)."""
+    spec = []
+    for finger, z in zip(fingers, (0.03, 0.02, 0.0, -0.02, -0.04)):
+        base = thumb_base if finger == fingers[0] else 0.09
+        spec += [(name(finger, 1), hand, (base, 0, z)),
+                 (name(finger, 2), name(finger, 1), (0.04, 0, 0)),
+                 (name(finger, 3), name(finger, 2), (0.03, 0, 0))]
+    return spec
+
+
 def unreal_mannequin() -> Skeleton:
     """The UE4 mannequin's names (T-pose, facing +Z, left at +X), with its twist and IK bones."""
     spec = [("root", None, (0, 0, 0)), ("pelvis", "root", (0, 0.95, 0)),
@@ -246,11 +258,8 @@ def unreal_mannequin() -> Skeleton:
             ("lowerarm_l", "upperarm_l", (0.28, 0, 0)),
             ("lowerarm_twist_01_l", "lowerarm_l", (0.12, 0, 0)),
             ("hand_l", "lowerarm_l", (0.25, 0, 0))]
-    for finger, z in (("thumb", 0.03), ("index", 0.02), ("middle", 0.0), ("ring", -0.02),
-                      ("pinky", -0.04)):
-        left += [(f"{finger}_01_l", "hand_l", (0.09 if finger != "thumb" else 0.03, 0, z)),
-                 (f"{finger}_02_l", f"{finger}_01_l", (0.04, 0, 0)),
-                 (f"{finger}_03_l", f"{finger}_02_l", (0.03, 0, 0))]
+    left += _fingers("hand_l", ("thumb", "index", "middle", "ring", "pinky"),
+                     lambda f, k: f"{f}_0{k}_l", thumb_base=0.03)
     left += [("thigh_l", "pelvis", (0.09, -0.05, 0)),
              ("thigh_twist_01_l", "thigh_l", (0, -0.2, 0)),
              ("calf_l", "thigh_l", (0, -0.42, 0)),
@@ -270,11 +279,8 @@ def unity_humanoid() -> Skeleton:
             ("LeftUpperArm", "LeftShoulder", (0.14, 0, 0)),
             ("LeftLowerArm", "LeftUpperArm", (0.28, 0, 0)),
             ("LeftHand", "LeftLowerArm", (0.25, 0, 0))]
-    for finger, z in (("Thumb", 0.03), ("Index", 0.02), ("Middle", 0.0), ("Ring", -0.02),
-                      ("Little", -0.04)):
-        spec += [(f"Left{finger}Proximal", "LeftHand", (0.09, 0, z)),
-                 (f"Left{finger}Intermediate", f"Left{finger}Proximal", (0.04, 0, 0)),
-                 (f"Left{finger}Distal", f"Left{finger}Intermediate", (0.03, 0, 0))]
+    spec += _fingers("LeftHand", ("Thumb", "Index", "Middle", "Ring", "Little"),
+                     lambda f, k: f"Left{f}{('Proximal', 'Intermediate', 'Distal')[k - 1]}")
     spec += [("LeftUpperLeg", "Hips", (0.09, -0.05, 0)),
              ("LeftLowerLeg", "LeftUpperLeg", (0, -0.42, 0)),
              ("LeftFoot", "LeftLowerLeg", (0, -0.42, 0)),
@@ -295,11 +301,8 @@ def daz_genesis() -> Skeleton:
             ("lForearmBend", "lShldrTwist", (0.14, 0, 0)),
             ("lForearmTwist", "lForearmBend", (0.12, 0, 0)),
             ("lHand", "lForearmTwist", (0.13, 0, 0))]
-    for finger, z in (("Thumb", 0.03), ("Index", 0.02), ("Mid", 0.0), ("Ring", -0.02),
-                      ("Pinky", -0.04)):
-        spec += [(f"l{finger}1", "lHand", (0.09 if finger != "Thumb" else 0.03, 0, z)),
-                 (f"l{finger}2", f"l{finger}1", (0.04, 0, 0)),
-                 (f"l{finger}3", f"l{finger}2", (0.03, 0, 0))]
+    spec += _fingers("lHand", ("Thumb", "Index", "Mid", "Ring", "Pinky"),
+                     lambda f, k: f"l{f}{k}", thumb_base=0.03)
     spec += [("lThighBend", "pelvis", (0.09, -0.03, 0)),
              ("lThighTwist", "lThighBend", (0, -0.21, 0)),
              ("lShin", "lThighTwist", (0, -0.21, 0)), ("lFoot", "lShin", (0, -0.42, 0)),
