@@ -90,7 +90,7 @@ def body_vertical(roles, skeleton: Skeleton, pose) -> np.ndarray:
 STANCE_SAMPLES = 32
 
 
-def _hips_angle(roles, skeleton: Skeleton, pose) -> np.ndarray:
+def _hips_angle(roles, skeleton: Skeleton, pose) -> tuple[np.ndarray, np.ndarray]:
     """``(S,)`` [deg] how far the legs (their ends to the hips) lie from +Y per frame, and
     the vectors ``(S, 3)``."""
     v = pose.positions[:, skeleton.index[roles["hips"]]] - _feet(roles, skeleton, pose)
