@@ -5,6 +5,9 @@ The contract of every command (and of the window's flags):
 * an error the user can cause (a bad argument, a malformed file, an impossible mapping) is a
   :class:`~engine.errors.MotionComposerError`: one line on stderr, no traceback, exit code 2.
   Argument errors are :class:`UsageError` (the usage text is printed only with ``--help``);
+* a warning (a file whose units or up axis are in doubt, a solve's warnings) is one line on
+  stderr when the command ends; a command that fails prints its error's line only, with the
+  warnings it had in it (a doubtful unit is often why the mapping failed);
 * an unexpected exception is a bug: its traceback on stderr and exit code 3.
 """
 from __future__ import annotations
@@ -25,6 +28,9 @@ EXIT_USER_ERROR = 2
 #: an unexpected exception: a bug, reported with its traceback
 EXIT_BUG = 3
 
+#: the warnings of the command running, in order: printed when it ends (see the module's text)
+_WARNINGS: list[str] = []
+
 
 class UsageError(MotionComposerError):
     """A command line argparse refuses (a missing argument, an unknown flag, a bad value)."""
@@ -39,10 +45,24 @@ class ArgumentParser(argparse.ArgumentParser):
 
 
 def _print_error(exc: MotionComposerError) -> None:
-    """``exc`` on one line of stderr."""
+    """``exc`` on one line of stderr, with the warnings the command had before it."""
     text = " ".join(str(exc).split())
-    print(text if isinstance(exc, UsageError) else f"motion-composer: error: {text}",
-          file=sys.stderr)
+    if isinstance(exc, UsageError):
+        print(text, file=sys.stderr)
+        return
+    notes = "".join(f" [warning: {' '.join(w.split())}]" for w in _WARNINGS)
+    print(f"motion-composer: error: {text}{notes}", file=sys.stderr)
+
+
+def _warning(line: str) -> None:
+    """Keep ``line`` to print as a warning when the command ends."""
+    _WARNINGS.append(line)
+
+
+def _print_warnings() -> None:
+    for line in _WARNINGS:
+        print(f"motion-composer: warning: {line}", file=sys.stderr)
+    _WARNINGS.clear()
 
 
 def _print_bug() -> None:
@@ -117,11 +137,11 @@ def _side_flags(options: dict, side: str) -> str:
 
 
 def _warn(motion, path, flag_prefix: str) -> None:
-    """Print the one warning line of a clip whose detected units or up axis are in doubt
+    """Warn (:func:`_warning`) of a clip whose detected units or up axis are in doubt
     (:meth:`engine.units.SourceFrame.warning`); never Python's multi-line warning format."""
     line = motion.skeleton.source.warning(path, flag_prefix)
     if line:
-        print(f"motion-composer: warning: {line}", file=sys.stderr)
+        _warning(line)
 
 
 #: (flag, IKOptions field, help) of the solver settings the commands that run IK take
@@ -463,7 +483,7 @@ def cmd_retarget(args) -> int:
         contact_options=profile.contact_options, floor=args.floor, ik_options=ik_options)
     result = Scene(project, performer, target).solve(regenerate=True)
     for line in result.report["warnings"]:
-        print(f"motion-composer: warning: {line}", file=sys.stderr)
+        _warning(line)
     written = _write_output(args, result.motion, character)  # mesh and skin when it has
     if args.save_map:
         correspondence.save(args.save_map)
@@ -833,8 +853,11 @@ def main(argv: list[str] | None = None) -> int:
     from motion_composer.app.runtime import tune_allocator
     tune_allocator()
     argv = list(_sys.argv[1:] if argv is None else argv)
+    _WARNINGS.clear()
     try:
-        return _run(argv)
+        code = _run(argv)
+        _print_warnings()
+        return code
     except UsageError as exc:
         _print_error(exc)
         raise SystemExit(EXIT_USER_ERROR) from None
@@ -847,6 +870,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         return 0
     except Exception:                     # noqa: BLE001 - a bug: say so, with its traceback
+        _print_warnings()
         _print_bug()
         return EXIT_BUG
 

@@ -44,6 +44,22 @@ def ambiguous_walk(tmp_path):
     return path
 
 
+def test_a_command_that_fails_after_a_warning_prints_one_line_with_it(capsys, tmp_path,
+                                                                      ambiguous_walk):
+    """The performer's unit is in doubt and then the target cannot be read: exit 2 with the
+    error's one line, and the warning (which flag settles the doubt) in it, not a line of its
+    own before it (found by the CLI fuzz: a target of zero size, then no humanoid in it)."""
+    code, out, err = cli(capsys, "retarget", ambiguous_walk, "--target",
+                         tmp_path / "absent.bvh", "-o", tmp_path / "a.bvh")
+    assert code == 2 and out == ""
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("motion-composer: error: "), err
+    assert "absent.bvh" in lines[0]
+    assert lines[0].endswith("give --performer-units cm]")
+    assert "[warning: " in lines[0] and str(ambiguous_walk) in lines[0]
+    assert not (tmp_path / "a.bvh").exists()
+
+
 def test_retarget_warns_in_one_line_and_the_override_settles_it(capsys, tmp_path,
                                                                  ambiguous_walk):
     code, out, err = cli(capsys, "retarget", ambiguous_walk, "--target", TPOSE,
