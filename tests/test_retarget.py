@@ -528,3 +528,46 @@ def test_a_target_clips_moving_hips_give_its_ground_root_no_bone_to_align():
     ground = p[:, sk.index["joint_Root"], 1]
     assert np.allclose(p[:, hips, 1] - ground, t[0, hips, 1] - t[0, 0, 1], rtol=0.05)
     assert np.all(p[:, head, 1] > p[:, hips, 1] + 0.3)
+
+
+def _under_a_reference_root(text: str) -> str:
+    """BVH ``text`` with a still ``reference`` root added above its root (six channels, all
+    zero on every frame), as some exporters write a capture: the old root (the hips, its
+    OFFSET zero) keeps its six channels, which carry its whole place."""
+    lines = text.splitlines()
+    top = next(k for k, line in enumerate(lines) if line.startswith("ROOT"))
+    motion = lines.index("MOTION")
+    head = ["HIERARCHY", "ROOT reference", "{", "\tOFFSET 0 0 0",
+            "\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    body = ["\t" + ("JOINT " + line.split(None, 1)[1] if line.startswith("ROOT") else line)
+            for line in lines[top:motion]]
+    rows = lines[motion:]
+    k = next(n for n, line in enumerate(rows) if line.startswith("Frame Time"))
+    frames = ["0 0 0 0 0 0 " + row for row in rows[k + 1:] if row.strip()]
+    return "\n".join(head + body + ["}"] + rows[:k + 1] + frames) + "\n"
+
+
+@pytest.mark.parametrize("clip", [("bundled", "cmu_131_01_walk.bvh"),
+                                  ("shared", "cmu_xia_angry_13_000_run.bvh"),
+                                  ("bundled", "fair1_child8_jumping.bvh")],
+                         ids=lambda c: c[1].split(".")[0])
+def test_a_still_reference_root_above_the_hips_changes_nothing(clip):
+    """A capture written with a still ``reference`` root above its hips (whose OFFSET is zero,
+    their channels carrying their whole place) retargets as the capture itself does, joint
+    for joint. The binding's rest pose (zero channel values) put such hips on the ground at
+    the reference, where a file's root stands at its first frame: the root motion, measured
+    from there, lifted the CMU walk's character by the performer's hip height (1.18 m on
+    Kenney's Maya character) and moved it by where the capture began."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character
+    where, name = clip
+    text = format_bvh(read_bvh(clip_path(name) if where == "bundled" else shared_path(name)))
+    plain, wrapped = parse_bvh(text), parse_bvh(_under_a_reference_root(text))
+    assert wrapped.skeleton.names[1:] == plain.skeleton.names
+    assert not np.any(wrapped.skeleton.offsets[1])                  # the hips: no offset
+    target = read_character(shared_path("target_mixamo_ely.glb")).rest_motion()
+    out = []
+    for performer in (plain, wrapped):
+        corr = automap(target.skeleton, performer.skeleton)
+        out.append(forward_kinematics(retarget(performer, target, corr)).positions)
+    np.testing.assert_allclose(out[1], out[0], atol=1e-9)

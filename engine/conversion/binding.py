@@ -223,7 +223,9 @@ def reference_pose(motion: Motion, choice: str | int) -> tuple[np.ndarray, np.nd
     """Local rotations ``(J, 4)`` and translations ``(K, 3)`` of a reference pose, and a label.
 
     ``choice`` is ``"rest"`` (zero channel values: offsets, no rotation but the file's own
-    up-axis turn at the root, the root at its first-frame position),
+    up-axis turn at the root, the root at its first-frame position, and so is a joint whose
+    position channels carry its whole place, its offset zero: the hips under a still ground
+    root),
     a frame number, or ``"auto"`` (rest if it stands upright, else frame 0).
     """
     sk = motion.skeleton
@@ -232,7 +234,12 @@ def reference_pose(motion: Motion, choice: str | int) -> tuple[np.ndarray, np.nd
     # zero channel values: the root keeps the turn from the file's up axis to +Y
     rest_rot[0] = from_matrix(sk.source.rotation)
     rest_tra = sk.offsets[sk.translated].copy()
-    rest_tra[0] = motion.translations[0, 0]
+    # the root, and a joint with no offset of its own, stand where the first frame puts
+    # them: with its channels at zero the hips of a file whose ground root stands still
+    # (a reference node added above a capture's hips) would be on the ground, and the
+    # root motion measured from there lifted the character by the performer's hip height
+    placed = (np.arange(len(rest_tra)) == 0) | ~np.any(rest_tra, axis=1)
+    rest_tra[placed] = motion.translations[0, placed]
     if choice == "auto":
         choice = "rest" if is_upright(sk, rest_rot, rest_tra) else 0
     if choice == "rest":
