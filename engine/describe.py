@@ -27,17 +27,27 @@ FLAT_SHARE = 0.1
 def figure_size(motion: Motion, *, samples: int = 48) -> float:
     """[m] the length the correction measures a figure by (its tolerances, steps and
     thresholds are shares of it, or shrink with it, so that a character is solved alike at
-    any size): its :func:`stature`, but at least :data:`FLAT_SHARE` of its largest extent
-    along an axis (median over the same sampled frames); 1 for a figure of no size (every
-    joint at one point)."""
+    any size): its :func:`stature`, but at least :data:`FLAT_SHARE` of its body's largest
+    extent along an axis (median over the same sampled frames; the nodes above the body, a
+    ground root or an exporter's node that stays at the origin while the body walks away,
+    left out); 1 for a figure of no size (every joint at one point)."""
     F = motion.num_frames
+    sk = motion.skeleton
     idx = np.unique(np.linspace(0, F - 1, min(F, samples)).round().astype(int))
-    pose = fk_arrays(motion.skeleton, motion.rotations[idx], motion.translations[idx])
+    pose = fk_arrays(sk, motion.rotations[idx], motion.translations[idx])
     points = pose.all_positions()
-    extent = np.ptp(points, axis=1)                                   # (S, 3)
-    size = max(float(np.median(extent[:, 1])),
-               FLAT_SHARE * float(np.median(extent.max(axis=1))))
+    height = np.ptp(points[..., 1], axis=1)                           # (S,)
+    body = np.ptp(np.delete(points, _above_the_body(sk), axis=1), axis=1)      # (S, 3)
+    size = max(float(np.median(height)), FLAT_SHARE * float(np.median(body.max(axis=1))))
     return size if size > 0 else 1.0
+
+
+def _above_the_body(skeleton) -> list[int]:
+    """The joints above the topmost one that branches (the hips, where legs and spine part):
+    nodes that carry the body, no part of it; none for a figure that never branches."""
+    counts = np.bincount(skeleton.parents[1:], minlength=skeleton.num_joints)
+    branching = np.flatnonzero(counts >= 2)
+    return skeleton.ancestors(int(branching[0])) if len(branching) else []
 
 
 def joint_tree_lines(motion: Motion) -> list[str]:

@@ -300,3 +300,27 @@ def test_a_zero_length_range_inside_the_clip_is_refused_naming_the_range():
     assert caught.value.field == "range"
     last = composed.num_frames - 1
     enforce(composed, [Constraint("Hips", "position", point, last, last, last, last)])
+
+
+@pytest.mark.parametrize("shift", [10.0, 40.0])
+def test_a_body_far_from_its_still_ground_root_is_measured_as_the_body(shift):
+    """Bandai's walk with its hips ``shift`` metres along the floor from its ground root, which
+    stays at the origin (a long take: the root is where the capture began): the figure is
+    measured by its body, so its size and the contacts found in it are those of the walk
+    itself. The share of the largest extent that a flat figure is measured by took in the
+    still root: 40 m away the size grew from 1.37 to about 4 m, and the contacts lengthened by the
+    looser height and speed thresholds."""
+    from motion_composer.engine.correction.contacts import detect_contacts
+    from motion_composer.engine.describe import figure_size
+    from conftest import shared_path
+    walk = read_motion(shared_path("bandai1_walk_normal_001.bvh"))
+    sk = walk.skeleton
+    assert sk.names[0] == "joint_Root" and not np.any(walk.translations[:, 0])
+    slot = list(sk.translated).index(sk.index["Hips"])
+    moved = walk.translations.copy()
+    moved[:, slot, 0] += shift
+    far = walk.replace(translations=moved)
+    assert figure_size(far) == figure_size(walk)
+    found = detect_contacts(far)
+    assert found == detect_contacts(walk)
+    assert len(found) >= 10
