@@ -37,17 +37,9 @@ def figure_size(motion: Motion, *, samples: int = 48) -> float:
     pose = fk_arrays(sk, motion.rotations[idx], motion.translations[idx])
     points = pose.all_positions()
     height = np.ptp(points[..., 1], axis=1)                           # (S,)
-    body = np.ptp(np.delete(points, _above_the_body(sk), axis=1), axis=1)      # (S, 3)
+    body = np.ptp(np.delete(points, sk.above_the_body(), axis=1), axis=1)      # (S, 3)
     size = max(float(np.median(height)), FLAT_SHARE * float(np.median(body.max(axis=1))))
     return size if size > 0 else 1.0
-
-
-def _above_the_body(skeleton) -> list[int]:
-    """The joints above the topmost one that branches (the hips, where legs and spine part):
-    nodes that carry the body, no part of it; none for a figure that never branches."""
-    counts = np.bincount(skeleton.parents[1:], minlength=skeleton.num_joints)
-    branching = np.flatnonzero(counts >= 2)
-    return skeleton.ancestors(int(branching[0])) if len(branching) else []
 
 
 def joint_tree_lines(motion: Motion) -> list[str]:

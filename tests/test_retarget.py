@@ -549,25 +549,32 @@ def _under_a_reference_root(text: str) -> str:
 
 @pytest.mark.parametrize("clip", [("bundled", "cmu_131_01_walk.bvh"),
                                   ("shared", "cmu_xia_angry_13_000_run.bvh"),
-                                  ("bundled", "fair1_child8_jumping.bvh")],
+                                  ("bundled", "fair1_child8_jumping.bvh"),
+                                  ("shared", "rokoko_mixamo_jesse_dance.bvh")],
                          ids=lambda c: c[1].split(".")[0])
 def test_a_still_reference_root_above_the_hips_changes_nothing(clip):
-    """A capture written with a still ``reference`` root above its hips (whose OFFSET is zero,
-    their channels carrying their whole place) retargets as the capture itself does, joint
-    for joint. The binding's rest pose (zero channel values) put such hips on the ground at
-    the reference, where a file's root stands at its first frame: the root motion, measured
-    from there, lifted the CMU walk's character by the performer's hip height (1.18 m on
-    Kenney's Maya character) and moved it by where the capture began."""
+    """A capture written with a still ``reference`` root above its hips retargets as the
+    capture itself does, joint for joint, onto Ely.
+
+    * Hips whose OFFSET is zero (CMU's, FAIR's), their channels carrying their whole place:
+      the binding's rest pose (zero channel values) put them on the ground at the reference,
+      where a file's root stands at its first frame, and the root motion, measured from
+      there, lifted the CMU walk's character by the performer's hip height (1.18 m on
+      Kenney's Maya character) and moved it by where the capture began.
+    * Rokoko's, whose zero pose lies (hips, knees and feet at one height): the reference
+      root on the ground below made that pose tall enough to pass for standing, and it was
+      bound on it instead of on its first frame (the root scale 1.25 instead of 1.05)."""
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.formats import read_character
     where, name = clip
     text = format_bvh(read_bvh(clip_path(name) if where == "bundled" else shared_path(name)))
     plain, wrapped = parse_bvh(text), parse_bvh(_under_a_reference_root(text))
     assert wrapped.skeleton.names[1:] == plain.skeleton.names
-    assert not np.any(wrapped.skeleton.offsets[1])                  # the hips: no offset
     target = read_character(shared_path("target_mixamo_ely.glb")).rest_motion()
-    out = []
+    out, notes = [], []
     for performer in (plain, wrapped):
         corr = automap(target.skeleton, performer.skeleton)
+        notes.append(bind(performer, target, corr).notes)      # reference poses, root scale
         out.append(forward_kinematics(retarget(performer, target, corr)).positions)
+    assert notes[1] == notes[0]
     np.testing.assert_allclose(out[1], out[0], atol=1e-9)

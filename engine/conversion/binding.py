@@ -192,13 +192,15 @@ def _chain_pairs(value) -> tuple:
 def is_upright(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndarray) -> bool:
     """Whether a single pose stands up along +Y.
 
-    Its vertical extent must be at least 0.7 of its widest horizontal extent (a T-pose's arm
-    span is about its height; a skeleton lying along an axis fails), and where the head and
-    feet can be told (:func:`engine.conversion.automap.identify`), the head must be above the
-    hips and the hips above the feet (CC3's zero pose stands upside down).
+    Its body's vertical extent must be at least 0.7 of its widest horizontal extent (a
+    T-pose's arm span is about its height; a skeleton lying along an axis fails; the nodes
+    above the body left out: a still reference root on the ground below lying hips made a
+    lying pose tall), and where the head and feet can be told
+    (:func:`engine.conversion.automap.identify`), the head must be above the hips and the hips
+    above the feet (CC3's zero pose stands upside down).
     """
     pose = fk_arrays(skeleton, rotations[None], translations[None])
-    pts = pose.all_positions()[0]
+    pts = np.delete(pose.all_positions()[0], skeleton.above_the_body(), axis=0)
     ext = pts.max(axis=0) - pts.min(axis=0)
     if ext[1] < 0.7 * max(ext[0], ext[2]):
         return False
