@@ -578,3 +578,22 @@ def test_a_still_reference_root_above_the_hips_changes_nothing(clip):
         out.append(forward_kinematics(retarget(performer, target, corr)).positions)
     assert notes[1] == notes[0]
     np.testing.assert_allclose(out[1], out[0], atol=1e-9)
+
+
+@pytest.mark.parametrize("name, above", [
+    ("bandai1_walk_normal_001.bvh", ["joint_Root"]),
+    ("cc3_cmu_02_01_walk.bvh", ["RL_BoneRoot"]),
+    ("cmu_max_131_01_walk.bvh", []),
+    ("target_fox.glb", ["b_Root_00", "_rootJoint"]),
+    ("fbx/maya_character_7500_binary.fbx", ["Character1_Reference"]),
+    ("fbx/maya_kenney_character_7700_binary.fbx", []),        # its Root carries the controls
+])
+def test_the_nodes_above_the_body_are_those_above_where_it_branches(name, above):
+    """``Skeleton.above_the_body`` (which the figure's size and the upright check leave out):
+    the ground roots and exporters' nodes above the hips, on real files of several
+    conventions; none where the root itself branches."""
+    from motion_composer.engine.formats import read_character
+    path = shared_path(name)
+    character = read_character(path)
+    sk = character.skeleton if character is not None else read_bvh(path).skeleton
+    assert [sk.names[j] for j in sk.above_the_body()] == above
