@@ -308,8 +308,8 @@ def test_a_body_far_from_its_still_ground_root_is_measured_as_the_body(shift):
     stays at the origin (a long take: the root is where the capture began): the figure is
     measured by its body, so its size and the contacts found in it are those of the walk
     itself. The share of the largest extent that a flat figure is measured by took in the
-    still root: 40 m away the size grew from 1.37 to about 4 m, and the contacts lengthened by the
-    looser height and speed thresholds."""
+    still root: 40 m away the size grew from 1.37 to about 4 m, and the contacts lengthened
+    by the looser height and speed thresholds."""
     from motion_composer.engine.correction.contacts import detect_contacts
     from motion_composer.engine.describe import figure_size
     from conftest import shared_path

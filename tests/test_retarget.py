@@ -532,8 +532,8 @@ def test_a_target_clips_moving_hips_give_its_ground_root_no_bone_to_align():
 
 def _under_a_reference_root(text: str) -> str:
     """BVH ``text`` with a still ``reference`` root added above its root (six channels, all
-    zero on every frame), as some exporters write a capture: the old root (the hips, its
-    OFFSET zero) keeps its six channels, which carry its whole place."""
+    zero on every frame), as some exporters write a capture: the old root (the hips) keeps
+    its OFFSET and its six channels."""
     lines = text.splitlines()
     top = next(k for k, line in enumerate(lines) if line.startswith("ROOT"))
     motion = lines.index("MOTION")
