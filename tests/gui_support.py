@@ -116,7 +116,7 @@ def skinned_character_in_window(qtbot, tmp_path, character):
     first = v.skin.opts["meshdata"].vertexes().copy()
     doc.set_frame(400)
     second = v.skin.opts["meshdata"].vertexes().copy()
-    assert w.export_bvh(tmp_path / "out.glb")
+    assert w.export_motion(tmp_path / "out.glb")
     exported = read_gltf(tmp_path / "out.glb")
     doc.undo_stack.setClean()
     return doc, v, first, second, exported

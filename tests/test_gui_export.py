@@ -74,7 +74,7 @@ def test_the_options_left_alone_write_the_whole_clip_as_before(window, qtbot, tm
     window.ask_save_path = lambda caption, filters: str(out)
     _drive_dialog(qtbot, lambda dialog: None, QtWidgets.QDialogButtonBox.StandardButton.Ok)
     window.export_dialog()
-    assert window.export_bvh(reference), window.errors
+    assert window.export_motion(reference), window.errors
     assert out.read_bytes() == reference.read_bytes()
     assert read_motion(out).num_frames == 994
 
@@ -90,5 +90,5 @@ def test_cancelling_the_options_writes_nothing(window, qtbot, tmp_path):
 
 def test_a_first_frame_after_the_last_is_refused_in_one_message(window, tmp_path):
     out = tmp_path / "bad.bvh"
-    assert not window.export_bvh(out, ExportOptions(frames=(600, 500)))
+    assert not window.export_motion(out, ExportOptions(frames=(600, 500)))
     assert "outside the clip" in window.errors[-1] and not out.exists()

@@ -47,7 +47,7 @@ def test_files_import_by_content_whatever_their_name(window, tmp_path):
     assert doc.scene.performer.num_frames == 994 and doc.scene.ready
     assert doc.scene.character is not None and doc.scene.character.meshes
     out = tmp_path / "onto.glb"
-    assert window.export_bvh(out), window.errors
+    assert window.export_motion(out), window.errors
     assert sniff(out).mesh and read_character(out).num_vertices == doc.scene.character.num_vertices
 
 
@@ -65,7 +65,7 @@ def test_an_export_to_an_unknown_suffix_is_refused(window, tmp_path):
     window.import_file("performer", WALK)
     window.import_file("target", TPOSE)
     out = tmp_path / "take.txt"
-    assert not window.export_bvh(out)
+    assert not window.export_motion(out)
     assert "cannot write" in window.errors[-1] and not out.exists()
 
 

@@ -84,7 +84,7 @@ def test_import_export_and_automatic_mapping(window, tmp_path):
     # the import that completes the pair auto-maps, in the same undoable command
     assert window.undo_action.text() == "&Undo Import target cmu_rest_tpose.bvh"
     out = tmp_path / "out.bvh"
-    assert window.export_bvh(out)
+    assert window.export_motion(out)
     from motion_composer.engine import read_bvh
     assert read_bvh(out).num_frames == 994
 

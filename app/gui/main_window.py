@@ -288,7 +288,7 @@ class MainWindow(QtWidgets.QMainWindow):
         file.addSeparator()
         self._action(file, "Import &Performer...", lambda: self.import_dialog("performer"))
         self._action(file, "Import &Target...", lambda: self.import_dialog("target"))
-        self._action(file, "&Export BVH or glTF...", self.export_dialog, "Ctrl+E")
+        self._action(file, "&Export Motion (BVH, glTF, FBX)...", self.export_dialog, "Ctrl+E")
         file.addSeparator()
         self._action(file, "Save Retarget Pro&file...", self.save_profile_dialog)
         self._action(file, "&Load Retarget Profile...", self.load_profile_dialog)
@@ -624,11 +624,11 @@ class MainWindow(QtWidgets.QMainWindow):
             return
         options = self.ask_export_options(self.doc.motion)
         if options is not None:
-            self.export_bvh(with_output_suffix(path), options)
+            self.export_motion(with_output_suffix(path), options)
 
-    def export_bvh(self, path, options=None) -> bool:
+    def export_motion(self, path, options=None) -> bool:
         """Write the final motion in the format ``path``'s suffix names: BVH, or glTF
-        (.glb/.gltf) with the character's mesh and skin when the target is a glTF character;
+        (.glb/.gltf) or FBX with the character's mesh and skin when the target has them;
         ``options`` (:class:`~app.gui.export_dialog.ExportOptions`) choose frames, frame rate
         and channels (default: all frames, as they are)."""
         from motion_composer.engine.formats import write_motion
