@@ -657,6 +657,8 @@ class Scene:
         # the floor the character stands on: the project's, with the conversion moved onto
         # it (``lift_m``), else the one under its feet in its reference pose
         report["floor"] = {"height_m": self.ground().floor, "lift_m": self.lift()}
+        # how the two figures were bound: reference poses, root scale, a turn of the target
+        report["binding"] = dict(self.binding.notes)
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 

@@ -58,6 +58,9 @@ def test_auto_contacts_floor_and_report(tmp_path, mapping, capsys):
     assert (f"{keys['count']} keys fitted to the {keys['fitted_to']} (at most "
             f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)") in text
     assert data["frames"] == 994
+    # how the figures were bound: both rest poses face +Z, so the target was not turned
+    assert data["binding"]["performer reference"] == "rest pose (zero rotations)"
+    assert data["binding"]["hip height ratio"] and "target facing" not in data["binding"]
     # the character stands on that floor: the conversion moved by it less the T-pose's own
     # (its lowest foot point with the hips at 0), and the summary says so
     rest_floor = forward_kinematics(read_bvh(TPOSE)).end_positions[0, :, 1].min()
@@ -137,3 +140,18 @@ def test_a_missing_constraints_file(tmp_path, mapping, capsys):
                         str(tmp_path / "o.bvh"), "--map", mapping, "--constraints",
                         str(tmp_path / "absent.json"))
     assert code == 2 and "absent.json" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_report_says_when_the_target_was_turned_to_face_as_the_performer(tmp_path, capsys):
+    """The Bandai run is bound on its first frame (its rest pose lies), where the performer
+    faces 3.7 degrees from +Z: the CMU T-pose is turned so, and the report says it."""
+    from conftest import shared_path
+    report = tmp_path / "r.json"
+    code, _, err = _run(capsys, "retarget", str(shared_path("bandai1_run_active_001.bvh")),
+                        "--target", TPOSE, "-o", str(tmp_path / "out.bvh"), "--auto-contacts",
+                        "--report", str(report))
+    assert code == 0, err
+    binding = json.loads(report.read_text())["binding"]
+    assert binding["performer reference"] == "frame 0"
+    assert binding["target facing"] == ("turned +3.7 degrees about the vertical to face as "
+                                        "the performer")

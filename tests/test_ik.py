@@ -266,8 +266,11 @@ def test_automatic_contacts_stop_the_planted_foot_sliding(case, record_property)
     for i, c in enumerate(cons):
         res = result.residual[i][c.start:c.end + 1]
         assert np.nanmax(res) < 1e-3, c.name
+    # no joint turns faster than the conversion's fastest turn (the run's fastest is a joint
+    # the contacts leave alone: the same turn to rounding) or 3 degrees a frame at 120 fps
     rate = _max_turn_rate(result.motion).max()
-    assert rate <= max(_max_turn_rate(composed).max(), np.radians(3.0) * 120 * composed.frame_time)
+    assert rate <= max(_max_turn_rate(composed).max() + 1e-12,
+                       np.radians(3.0) * 120 * composed.frame_time)
 
 
 # --------------------------------------------------------------------------- the model

@@ -597,3 +597,87 @@ def test_the_nodes_above_the_body_are_those_above_where_it_branches(name, above)
     character = read_character(path)
     sk = character.skeleton if character is not None else read_bvh(path).skeleton
     assert [sk.names[j] for j in sk.above_the_body()] == above
+
+
+def _turned_about_up(path, tmp_path, degrees: float):
+    """A copy of the glb character at ``path`` under a new top node turned ``degrees`` about
+    +Y: the same figure, its rest pose facing elsewhere (as a file whose front is +X)."""
+    from test_gltf import pack_glb, unpack_glb
+    js, binary = unpack_glb(path.read_bytes())
+    half = np.radians(degrees) / 2
+    top = len(js["nodes"])
+    js["nodes"].append({"name": "turned", "rotation": [0.0, float(np.sin(half)), 0.0,
+                                                       float(np.cos(half))],
+                        "children": list(js["scenes"][0]["nodes"])})
+    js["scenes"][0]["nodes"] = [top]
+    out = tmp_path / f"turned_{degrees:g}.glb"
+    out.write_bytes(pack_glb(js, binary))
+    return out
+
+
+@pytest.mark.parametrize("clip", [("bundled", "cmu_131_01_walk.bvh"),
+                                  ("shared", "cmu_xia_angry_13_000_run.bvh"),
+                                  ("bundled", "fair1_child8_jumping.bvh"),
+                                  ("shared", "bandai1_kick_normal_001.bvh")],
+                         ids=lambda c: c[1].split(".")[0])
+@pytest.mark.parametrize("degrees", [90.0, 180.0, -90.0])
+def test_a_target_whose_rest_pose_faces_elsewhere_moves_the_same(clip, degrees, tmp_path):
+    """Ely's glb with its rest pose turned about the vertical (a new top node) takes every
+    clip to the same motion, joint for joint, as Ely facing +Z. CMU's hips (the walk's Max
+    naming, the run's MotionBuilder one) have no bone of their own (LowerBack sits on them)
+    and take their performer joint's turn from the reference pose: the turned Ely kept its
+    rest facing on every frame and walked sideways (a joint 0.5 of its size from where it
+    is now). FAIR's and Bandai's hips roll by their bones, which already faced them."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_character
+    performer = read_bvh(resolve(clip))
+    ely = shared_path("target_mixamo_ely.glb")
+    out, stands = [], []
+    for path in (ely, _turned_about_up(ely, tmp_path, degrees)):
+        target = read_character(path).rest_motion()
+        corr = automap(target.skeleton, performer.skeleton)
+        out.append(forward_kinematics(retarget(performer, target, corr)).positions)
+        stands.append(forward_kinematics(target).positions[0, 0])      # its hips at rest
+    # the turn about the origin moves where the hips stand (Ely's are 6 mm off it), and the
+    # character starts where it stands
+    size = np.ptp(out[0][0], axis=0).max()
+    np.testing.assert_allclose(out[1] - (stands[1] - stands[0]), out[0], atol=1e-6 * size)
+
+
+def _pelvis_turn(motion, left: str, right: str) -> np.ndarray:
+    """[deg] per frame, the heading of the line from the ``left`` to the ``right`` joint."""
+    p = forward_kinematics(motion).positions
+    d = p[:, motion.skeleton.index[right]] - p[:, motion.skeleton.index[left]]
+    return np.degrees(np.arctan2(d[:, 0], d[:, 2]))
+
+
+@pytest.mark.parametrize("clip, target, thighs", [
+    ("cc3_cmu_02_06_pickup.bvh", "target_cmu_mb_rest_tpose.bvh", ("LeftUpLeg", "RightUpLeg")),
+    ("bandai1_kick_normal_001.bvh", "target_cmu_mb_rest_tpose.bvh",
+     ("LeftUpLeg", "RightUpLeg")),
+    ("rokoko_mixamo_jesse_dance.bvh", "target_cmu_mb_rest_tpose.bvh",
+     ("LeftUpLeg", "RightUpLeg")),
+    ("cc3_cmu_02_01_walk.bvh", "target_robot_expressive.glb", ("UpperLegL", "UpperLegR")),
+    ("cc3_cmu_02_06_pickup.bvh", "fbx/maya_kenney_character_7700_binary.fbx",
+     ("LeftUpLeg", "RightUpLeg")),
+], ids=lambda v: v.split(".")[0] if isinstance(v, str) else "")
+def test_a_pelvis_bound_on_a_clips_frame_faces_as_the_performers(clip, target, thighs):
+    """Clips whose rest pose lies are bound on their frame 0, which faces wherever the
+    performer stood; onto a target whose pelvis no bone rolls (the CMU T-pose's hips, the
+    robot's Body, Kenney's hips), the pelvis took its performer joint's turn from there and
+    kept the target's own facing at that frame: turned 11 to 123 degrees from the
+    performer's pelvis, between legs that point as the performer's do (the CC3 pickup onto
+    the CMU T-pose: 123). The line between the thigh roots now heads as the performer's
+    within 3 degrees on every frame (the two pelvises are built differently)."""
+    from motion_composer.engine.conversion.automap import automap
+    from motion_composer.engine.formats import read_motion, read_performer
+    performer = read_performer(shared_path(clip))
+    target = read_motion(shared_path(target))
+    corr = automap(target.skeleton, performer.skeleton)
+    b = bind(performer, target, corr)
+    assert b.notes["performer reference"] == "frame 0"
+    out = retarget(performer, target, corr)
+    mine = _pelvis_turn(out, *thighs)
+    theirs = _pelvis_turn(performer, corr.pairs[thighs[0]], corr.pairs[thighs[1]])
+    off = (mine - theirs + 180.0) % 360.0 - 180.0
+    assert np.abs(off).max() < 3.0, np.abs(off).max()

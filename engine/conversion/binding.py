@@ -14,6 +14,9 @@ bone* in the performer's reference pose. Its steps:
   is a short target bone pointing against its virtual bone; a joint whose primary bone gives
   none has no bones (the converter turns it with its performer joint).
 * chains: the unmapped target joints between a mapped joint and its primary child.
+* facing (with rest alignment): the target's pelvis turned about the vertical so that its
+  reference posture faces as the performer's (:func:`_facing`: a quarter turn at a time
+  between two rest poses, exactly where either is a frame), before anything compares them.
 * rest alignment (section 2.1.4, on by default): root to leaves, each target bone turned onto
   its virtual bone and rolled to match the other bones of a branching joint; off keeps the
   target's own initial posture.
@@ -488,6 +491,8 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
 
     p_ref = _reference(performer, options.performer_reference)
     t_ref = _reference(target, options.target_reference)
+    if options.rest_alignment:
+        t_ref = _faced(target, t_ref, _facing(mapped, anchor, p_ref, t_ref))
     p_moving = _moving_joints(
         performer, max(float(np.ptp(p_ref.all_positions, axis=0).max()), 1e-6))
     t_moving = _moving_joints(
@@ -499,7 +504,7 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
     placed = target.with_position_channels([f.joint for f in followers])
     if placed is not target:
         target, tsk = placed, placed.skeleton
-        t_ref = _reference(target, options.target_reference)
+        t_ref = _faced(target, _reference(target, options.target_reference), t_ref.facing)
     bones = _virtual_bones(tsk, psk, mapped, anchor, p_ref, t_ref, p_moving, t_moving,
                            followers)
     chains = _chains(tsk, bones)
@@ -533,9 +538,19 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                    above_mapped=_above_mapped(tsk, mapped, followers),
                    root_translation=t_ref.translations, hip_height_ratio=float(ratio),
                    options=options,
-                   notes={"performer reference": p_ref.label, "target reference": t_ref.label,
-                          "hip height ratio": f"{ratio:.4f}"},
+                   notes=_notes(p_ref, t_ref, ratio),
                    followers=followers)
+
+
+def _notes(p_ref: _Reference, t_ref: _Reference, ratio: float) -> dict:
+    notes = {"performer reference": p_ref.label, "target reference": t_ref.label,
+             "hip height ratio": f"{ratio:.4f}"}
+    if t_ref.facing is not None:
+        turn = t_ref.facing[0]
+        degrees = math.degrees(2.0 * math.atan2(turn[1], turn[3]))
+        notes["target facing"] = (f"turned {(degrees + 180.0) % 360.0 - 180.0:+.1f} degrees "
+                                  "about the vertical to face as the performer")
+    return notes
 
 
 def _offsets(tsk: Skeleton, options: BindOptions) -> np.ndarray:
@@ -567,7 +582,8 @@ class _Reference:
     ``rotations``: ``(J, 4)`` local rotations; ``translations``: ``(K, 3)`` [m] local
     translations; ``label``: which pose it is, for display; ``world``: ``(J, 4)`` world
     rotations; ``positions``: ``(J, 3)`` [m] world joint positions; ``all_positions``:
-    ``(J + E, 3)`` [m] the joints' and then the End Sites' world positions.
+    ``(J + E, 3)`` [m] the joints' and then the End Sites' world positions; ``rest``: the
+    rest pose, not a frame; ``facing``: the turn it was given (:func:`_faced`), or ``None``.
     """
 
     rotations: np.ndarray
@@ -576,6 +592,8 @@ class _Reference:
     world: np.ndarray
     positions: np.ndarray
     all_positions: np.ndarray
+    rest: bool
+    facing: tuple | None = None
 
 
 def _reference(motion: Motion, choice: str | int) -> _Reference:
@@ -583,7 +601,7 @@ def _reference(motion: Motion, choice: str | int) -> _Reference:
     rot, tra, label = reference_pose(motion, choice)
     pose = fk_arrays(motion.skeleton, rot[None], tra[None], end_sites=True)
     return _Reference(rot, tra, label, pose.rotations[0], pose.positions[0],
-                      pose.all_positions()[0])
+                      pose.all_positions()[0], not label.startswith("frame"))
 
 
 #: a performer joint's translation is animated where it moves by more than this share of the
@@ -732,6 +750,88 @@ def _chains(tsk: Skeleton, bones: dict) -> dict[int, list[int]]:
                 k = tsk.parents[k]
             chains[j] = path[::-1]
     return chains
+
+
+#: [rad] rest poses face along their file's axes: two skeletons' rest poses that face apart
+#: differ by a quarter turn or more (a file's rest facing +X, another's +Z), and what is left
+#: of a quarter turn is their pelvises' own build (Mixamo's thighs sit a little behind and
+#: apart from the CMU capture's: 0.3 to 0.9 degrees)
+QUARTER_TURN = 0.5 * math.pi
+
+
+def _facing(mapped: np.ndarray, anchor: np.ndarray, p_ref: _Reference,
+            t_ref: _Reference):
+    """``(turn, pelvis)``: the turn about the vertical (``(4,)``) that makes the target's
+    reference posture face as the performer's, given to its pelvis (a joint index), or
+    ``None`` where they face alike.
+
+    The pelvis is the top-most mapped joint with two mapped children or more (below any
+    ground root); the turn is the least-squares turn of the horizontal vectors from it to
+    them onto the performer's (:func:`_facing_turn`). Between two rest poses it is the
+    nearest quarter turn (:data:`QUARTER_TURN`).
+
+    The binding compares the two reference postures in the world (which way a short bone
+    points, which performer bone continues a control joint's limb), and a joint whose bones
+    do not roll it takes its performer joint's turn from the reference pose. Faced
+    elsewhere, the target kept that difference on every frame: Ely with its rest pose facing
+    +X walked sideways under the CMU walk (whose hips have no bone of their own: LowerBack
+    sits on them); facing -Z, its clavicles pointed against the performer's and were taken
+    for a rig's helper offsets (no bone to follow); and a clip bound on its frame 0 (where
+    its rest pose lies) turned the CMU T-pose's pelvis 46 to 123 degrees from the
+    performer's, between legs that pointed as the performer's did."""
+    kids: dict[int, list[int]] = {}
+    for j in np.flatnonzero(mapped >= 0):
+        if anchor[j] >= 0:
+            kids.setdefault(int(anchor[j]), []).append(int(j))
+    pelvis = next((j for j in sorted(kids) if len(kids[j]) >= 2), None)
+    if pelvis is None:
+        return None
+    turn = _facing_turn(np.array(kids[pelvis]), pelvis, mapped, p_ref, t_ref)
+    if p_ref.rest and t_ref.rest:
+        turn = round(turn / QUARTER_TURN) * QUARTER_TURN
+    if turn == 0.0:
+        return None
+    return about_axis(np.array([0.0, 1.0, 0.0]), turn), pelvis
+
+
+def _faced(motion: Motion, ref: _Reference, facing) -> _Reference:
+    """``ref`` (``motion``'s reference pose) turned by ``facing`` (:func:`_facing`) about the
+    vertical through the pelvis, from the top-most joint that branches down: the body and
+    the control joints beside it (the robot's IK feet under its root) turn together, the
+    nodes above them (a ground root, an ``Armature`` node) stay, and so does the pelvis (the
+    branching joint moves about it where it has position channels, else turns about
+    itself)."""
+    if facing is None:
+        return ref
+    turn, pelvis = facing
+    sk = motion.skeleton
+    counts = np.bincount(sk.parents[1:], minlength=sk.num_joints)
+    top = int(np.flatnonzero(counts >= 2)[0]) if np.any(counts >= 2) else 0
+    rot, tra = ref.rotations.copy(), ref.translations.copy()
+    parent = sk.parents[top]
+    above = ref.world[parent] if parent >= 0 else np.array([0.0, 0.0, 0.0, 1.0])
+    rot[top] = qmul(qconj(above), qmul(turn, ref.world[top]))
+    slot = np.flatnonzero(sk.translated == top)
+    if len(slot):
+        centre = ref.positions[pelvis]
+        moved = qrot(turn, ref.positions[top] - centre) + centre
+        start = ref.positions[parent] if parent >= 0 else np.zeros(3)
+        tra[slot[0]] = qrot(qconj(above), moved - start)
+    pose = fk_arrays(sk, rot[None], tra[None], end_sites=True)
+    return _Reference(rot, tra, ref.label, pose.rotations[0], pose.positions[0],
+                      pose.all_positions()[0], ref.rest, facing)
+
+
+def _facing_turn(kids: np.ndarray, pelvis: int, mapped: np.ndarray, p_ref: _Reference,
+                 t_ref: _Reference) -> float:
+    """[rad] the least-squares turn about +Y of the target's horizontal vectors from
+    ``pelvis`` to ``kids`` onto the performer's between their joints (0 where they have no
+    horizontal extent)."""
+    t = t_ref.positions[kids] - t_ref.positions[pelvis]
+    v = p_ref.positions[mapped[kids]] - p_ref.positions[mapped[pelvis]]
+    sin = float(np.sum(t[:, 2] * v[:, 0] - t[:, 0] * v[:, 2]))
+    cos = float(np.sum(t[:, 2] * v[:, 2] + t[:, 0] * v[:, 0]))
+    return math.atan2(sin, cos) if math.hypot(sin, cos) > 0.0 else 0.0
 
 
 def _rest_posture(tsk: Skeleton, t_rot: np.ndarray, bones: dict,
