@@ -356,3 +356,29 @@ def test_two_axis_joint_refuses_a_rotation_about_its_missing_axis():
     rot[0, 1] = Rotation.from_euler("XYZ", [10, 20, 30], degrees=True).as_quat()
     with pytest.raises(ExportError, match="'two'"):
         format_bvh(motion.replace(rotations=rot))
+
+
+@pytest.mark.parametrize("spec", [("bundled", "cmu_131_01_walk.bvh"),
+                                  ("shared", "bandai1_walk_normal_001.bvh")],
+                         ids=lambda s: s[1])
+def test_a_root_that_starts_far_from_its_offset_reads_back_where_it_was(spec):
+    """A root with an OFFSET of its own (the robot's ``Bone`` stands 19.5 cm behind the
+    origin) whose first frame is elsewhere (the figure turned to face as the performer):
+    written as it was, its absolute position channels looked like values added to the
+    OFFSET (nearer zero than the OFFSET on its long axis), and the output read back 0.195 m
+    off on every joint. The root is written with its first frame's position as its OFFSET,
+    as the other joints that moved from theirs already were."""
+    import dataclasses
+    motion = read_bvh(resolve(spec))
+    sk = motion.skeleton
+    offsets = sk.offsets.copy()
+    offsets[0] = [0.0, 0.0, -0.195]
+    tra = motion.translations.copy()
+    tra[:, 0] += [0.0, 0.0, 0.3] - tra[0, 0] * [0.0, 0.0, 1.0]     # frame 0 at z = +0.3
+    moved = Motion(dataclasses.replace(sk, offsets=offsets), motion.rotations, tra,
+                   motion.frame_time, motion.name)
+    back = parse_bvh_text(format_bvh(moved))
+    back = record_to_motion(back, units=sk.source.units, up_axis=sk.source.up_axis)
+    w0 = forward_kinematics(moved)
+    p0, p1 = w0.all_positions(), forward_kinematics(back).all_positions()
+    assert np.abs(p1 - p0).max() <= _rounding_tolerance(moved, w0, sk.source.scale)

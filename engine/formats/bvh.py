@@ -985,13 +985,14 @@ def format_bvh(motion: Motion, *, source: SourceFrame | None = None,
                 raise ExportError(f"joint {sk.names[j]!r} moves, but it has no position "
                                   "channels to write the movement in")
             continue
-        if j and F and _position_mode(offsets[j], {
+        if F and np.any(offsets[j]) and _position_mode(offsets[j], {
                 a: t[0, a] - (offsets[j][a] if modes[j] == "relative" else 0.0)
                 for a in cols}) != modes[j]:
             # a reader tells the two modes apart by the first frame (detect_position_modes):
             # a joint that has moved far from its OFFSET there (the robot's foot, an IK target
-            # carried away from its rest place) is written with its first frame's position as
-            # its OFFSET, as exporters write it
+            # carried away from its rest place; the robot's root turned with the figure to
+            # face as the performer) is written with its first frame's position as its
+            # OFFSET, as exporters write it (a zero OFFSET reads the same either way)
             offsets[j] = t[0].copy()
         for axis, col in cols.items():
             values[:, col] = t[:, axis] - offsets[j][axis] if modes[j] == "relative" \
