@@ -374,7 +374,7 @@ def test_a_root_that_starts_far_from_its_offset_reads_back_where_it_was(spec):
     offsets = sk.offsets.copy()
     offsets[0] = [0.0, 0.0, -0.195]
     tra = motion.translations.copy()
-    tra[:, 0] += [0.0, 0.0, 0.3] - tra[0, 0] * [0.0, 0.0, 1.0]     # frame 0 at z = +0.3
+    tra[:, 0, 2] += 0.3 - tra[0, 0, 2]                          # frame 0 at z = +0.3
     moved = Motion(dataclasses.replace(sk, offsets=offsets), motion.rotations, tra,
                    motion.frame_time, motion.name)
     back = parse_bvh_text(format_bvh(moved))
