@@ -177,13 +177,18 @@ class Skeleton:
             p = int(self.parents[p])
         return out
 
-    def above_the_body(self) -> list[int]:
-        """The joints above the topmost one that branches (the hips, where legs and spine
-        part): nodes that carry the body, no part of it (a ground root, an exporter's
-        ``reference`` or ``Armature`` node); none for a figure that never branches."""
+    def body_top(self) -> int:
+        """The topmost joint that branches (the hips, where legs and spine part, or a root
+        that carries controls beside them); the root for a figure that never branches."""
         counts = np.bincount(self.parents[1:], minlength=self.num_joints)
         branching = np.flatnonzero(counts >= 2)
-        return self.ancestors(int(branching[0])) if len(branching) else []
+        return int(branching[0]) if len(branching) else 0
+
+    def above_the_body(self) -> list[int]:
+        """The joints above :meth:`body_top`: nodes that carry the body, no part of it (a
+        ground root, an exporter's ``reference`` or ``Armature`` node); none for a figure
+        that never branches."""
+        return self.ancestors(self.body_top())
 
     @property
     def num_channels(self) -> int:

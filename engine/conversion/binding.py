@@ -14,8 +14,8 @@ bone* in the performer's reference pose. Its steps:
   is a short target bone pointing against its virtual bone; a joint whose primary bone gives
   none has no bones (the converter turns it with its performer joint).
 * chains: the unmapped target joints between a mapped joint and its primary child.
-* facing (with rest alignment): the target's pelvis turned about the vertical so that its
-  reference posture faces as the performer's (:func:`_facing`: a quarter turn at a time
+* facing (with rest alignment): the target turned about the vertical through its pelvis so
+  that its reference posture faces as the performer's (:func:`_facing`: a quarter turn at a time
   between two rest poses, exactly where either is a frame), before anything compares them.
 * rest alignment (section 2.1.4, on by default): root to leaves, each target bone turned onto
   its virtual bone and rolled to match the other bones of a branching joint; off keeps the
@@ -642,10 +642,7 @@ def _virtual_bones(tsk: Skeleton, psk: Skeleton, mapped: np.ndarray, anchor: np.
     that continues its chain (the ankle), so that it points as the performer's bone does
     rather than turning as the performer's joint turned from its reference pose."""
     J = tsk.num_joints
-    kids: dict[int, list[int]] = {j: [] for j in range(J) if mapped[j] >= 0}
-    for j in range(J):
-        if mapped[j] >= 0 and anchor[j] >= 0:
-            kids[anchor[j]].append(j)
+    kids = _mapped_children(mapped, anchor)
     subtree = np.ones(J, dtype=np.intp)
     for j in range(J - 1, 0, -1):
         subtree[tsk.parents[j]] += subtree[j]
@@ -759,11 +756,19 @@ def _chains(tsk: Skeleton, bones: dict) -> dict[int, list[int]]:
 QUARTER_TURN = 0.5 * math.pi
 
 
+def _mapped_children(mapped: np.ndarray, anchor: np.ndarray) -> dict[int, list[int]]:
+    """Per mapped target joint, the mapped joints whose nearest mapped ancestor it is."""
+    kids: dict[int, list[int]] = {int(j): [] for j in np.flatnonzero(mapped >= 0)}
+    for j in np.flatnonzero((mapped >= 0) & (anchor >= 0)):
+        kids[int(anchor[j])].append(int(j))
+    return kids
+
+
 def _facing(mapped: np.ndarray, anchor: np.ndarray, p_ref: _Reference,
             t_ref: _Reference):
     """``(turn, pelvis)``: the turn about the vertical (``(4,)``) that makes the target's
-    reference posture face as the performer's, given to its pelvis (a joint index), or
-    ``None`` where they face alike.
+    reference posture face as the performer's, about its pelvis (a joint index; given by
+    :func:`_faced`), or ``None`` where they face alike.
 
     The pelvis is the top-most mapped joint with two mapped children or more (below any
     ground root); the turn is the least-squares turn of the horizontal vectors from it to
@@ -779,10 +784,7 @@ def _facing(mapped: np.ndarray, anchor: np.ndarray, p_ref: _Reference,
     for a rig's helper offsets (no bone to follow); and a clip bound on its frame 0 (where
     its rest pose lies) turned the CMU T-pose's pelvis 46 to 123 degrees from the
     performer's, between legs that pointed as the performer's did."""
-    kids: dict[int, list[int]] = {}
-    for j in np.flatnonzero(mapped >= 0):
-        if anchor[j] >= 0:
-            kids.setdefault(int(anchor[j]), []).append(int(j))
+    kids = _mapped_children(mapped, anchor)
     pelvis = next((j for j in sorted(kids) if len(kids[j]) >= 2), None)
     if pelvis is None:
         return None
@@ -805,8 +807,7 @@ def _faced(motion: Motion, ref: _Reference, facing) -> _Reference:
         return ref
     turn, pelvis = facing
     sk = motion.skeleton
-    counts = np.bincount(sk.parents[1:], minlength=sk.num_joints)
-    top = int(np.flatnonzero(counts >= 2)[0]) if np.any(counts >= 2) else 0
+    top = sk.body_top()
     rot, tra = ref.rotations.copy(), ref.translations.copy()
     parent = sk.parents[top]
     above = ref.world[parent] if parent >= 0 else np.array([0.0, 0.0, 0.0, 1.0])
