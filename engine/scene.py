@@ -659,6 +659,8 @@ class Scene:
         report["floor"] = {"height_m": self.ground().floor, "lift_m": self.lift()}
         # how the two figures were bound: reference poses, root scale, a turn of the target
         report["binding"] = dict(self.binding.notes)
+        # the capture's one-frame glitches under held goals, solved from the frames around
+        report["glitches"] = list(correction.glitches) if correction is not None else []
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 

@@ -414,16 +414,17 @@ def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
-    "jumps-cmumb-holden": "1.87: LeftFoot at frame 974, 394 deg/s over a limit of 211 (ramp "
-                          "965-979; the dense solve's worst is 2.11 at 976, 261 over 124): the "
-                          "capture jerks for one frame at 975 and 980 (the hips 4.5 degrees "
-                          "and back, the thighs 5.9 and 8.9, the right foot 4.9; the feet "
-                          "5 mm). With the toes and the right foot held, the solve of frame 975 "
-                          "alone (before any blend) moves the root 9 mm and turns LeftFoot's "
-                          "correction 1.7 degrees from its neighbours', and the keys spread "
-                          "that over frames 972-976; with the capture's one-frame jerks taken "
-                          "out of the attraction the dense worst is 1.09 (LeftLeg at 1539, "
-                          "three landing ramps overlapping)",
+    "jumps-cmumb-holden": "1.06: LeftLeg at frame 1539, 544 deg/s over a limit of 513 (the "
+                          "dense solve: 558, 1.09), the take-off of a jump: the performer's "
+                          "left heel rises 20 mm over frames 1533-1539 (767 mm/s into 1539) "
+                          "but stays within its held height (2 % of the stature above its "
+                          "lowest), so the hold keeps it down and the knee's correction grows "
+                          "1.3 degrees in three frames before the ramp out eases it. Holding "
+                          "a part only while it is slow in 3D moved the pop (1.05 at 973); "
+                          "heels held within 0.5 % of the stature let the standing feet "
+                          "slide (2.8 % of the stature). The capture's one-frame glitches at "
+                          "975 and 980, which popped 1.43 here, are solved from the frames "
+                          "around them (engine/correction/glitches.py)",
 }
 
 

@@ -215,11 +215,12 @@ def _pops_beyond_the_dense_solve(solution) -> list:
 
 def test_a_jerk_of_the_capture_licenses_no_pop_of_the_keys_elsewhere():
     """The CMU jumps (frames 880-1059) onto the FAIR child: the capture jerks for one frame at
-    975 and 980 (the hips 4.3 degrees and back) and the planted feet absorb it, so the dense
-    solve turns a foot at twice its no-pop limit there. The keys may match that jerk where it
-    is, not anywhere in the clip: fitted against the clip's worst ratio they turned the left
-    foot at 1.7 times its limit as the heel lifted (frame 952), where the dense solve is at
-    half of it, and 8 mm in two frames."""
+    975 and 980 (the hips 4.3 degrees and back). Solved from the jerked postures, the planted
+    feet absorbed it and the dense solve turned a foot at twice its no-pop limit there (now
+    those frames are solved from the frames around them: tests/test_glitches.py). The keys
+    may match the dense solve's pops where they are, not anywhere in the clip: fitted against
+    the clip's worst ratio they turned the left foot at 1.7 times its limit as the heel lifted
+    (frame 952), where the dense solve is at half of it, and 8 mm in two frames."""
     solution = _solved("jumps")
     assert solution.scene.displacement.curves
     errors = _goal_errors(solution.motion, solution.constraints)

@@ -102,6 +102,9 @@ class Correction:
         iterations: ``(F,)`` solver iterations per frame: the most of its solves in pass one,
             pass two's where a ramp's blend was solved again.
         seconds: wall time of each pass.
+        glitches: the frames solved from the way between their neighbours: the capture
+            thrown out and back for one frame under a held goal
+            (:func:`~engine.correction.glitches.held_glitches`).
     """
 
     motion: Motion
@@ -110,6 +113,7 @@ class Correction:
     residual: dict
     iterations: np.ndarray
     seconds: dict = field(default_factory=dict)
+    glitches: tuple = ()
 
     def displacement_map(self, *, position_tolerance: float = 1e-4,
                          rotation_tolerance: float = np.radians(0.02)) -> DisplacementMap:
@@ -882,7 +886,7 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             warm_start: bool = False, progress=None, cancel=None,
             chunk_frames: int = CHUNK_FRAMES, pins: bool = False,
             still: frozenset | None = None, frames: tuple[int, int] | None = None,
-            carried: dict | None = None) -> Correction:
+            carried: dict | None = None, glitches=None) -> Correction:
     """Correct ``composed`` so that ``constraints`` hold, with the two passes of section 3.3.
 
     Args:
@@ -915,8 +919,13 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
             a limb (:func:`engine.conversion.followers.carriers`), whose goals the IK meets
             through the limb (:func:`~.ik.effector`): the motion it returns leaves them where
             they were, for :func:`~engine.conversion.followers.follow` to place.
+        glitches: the frames to solve from the way between their neighbours (one-frame
+            glitches of the capture under held goals); ``None`` (the default): those
+            :func:`~engine.correction.glitches.held_glitches` finds in ``composed`` (a solve of
+            a few frames cut from a clip passes the whole clip's, shifted).
     """
     from ..describe import figure_size
+    from .glitches import held_glitches, without_glitches
 
     cons = _check(constraints, composed, pins)
     sk = composed.skeleton
@@ -944,7 +953,12 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
         if not warm_start:
             wanted = np.zeros(composed.num_frames, dtype=bool)
             wanted[lo:hi + 1] = True
-    problem = _Problem(composed, cons, options, warm_start, progress, cancel, chunk_frames,
+    # the attraction posture: a one-frame glitch under a held goal is taken from the frames
+    # around it (the correction undoes it there, at every joint alike)
+    glitches = (held_glitches(composed, cons, options.scale) if glitches is None else
+                np.unique(np.asarray(glitches, dtype=int)))
+    attraction = without_glitches(composed, glitches)
+    problem = _Problem(attraction, cons, options, warm_start, progress, cancel, chunk_frames,
                        _still_joints(composed) if still is None else frozenset(still),
                        wanted=wanted, carried=carried or None)
     units = _ramp_units(cons)
@@ -977,7 +991,8 @@ def enforce(composed: Motion, constraints, *, options: IKOptions | None = None,
     timings["pass two"] = time.perf_counter() - t0
     if progress is not None:
         progress(1.0)
-    return _correction(composed, rot2, tra2, changed, residual, iters, timings)
+    correction = _correction(composed, rot2, tra2, changed, residual, iters, timings)
+    return dataclasses.replace(correction, glitches=tuple(int(f) for f in glitches))
 
 
 def _apply_dense(composed: Motion, rotvecs, root, moved) -> Motion:

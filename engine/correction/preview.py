@@ -226,6 +226,7 @@ class WindowSolver:
         ``lo..hi``, a motion whose frame 0 is the clip's frame ``first``."""
         from ..motion import Motion
         from .enforcement import enforce
+        from .glitches import held_glitches
         ranges = _window_ranges(constraints, lo, hi)
         first, last = _span(ranges, lo, hi)
         # window_problem's constraints shifted by -first (one retimed copy each)
@@ -236,13 +237,19 @@ class WindowSolver:
         composed = self._composed()
         if composed is None:
             raise ValueError("the composed motion of this WindowSolver is gone")
+        # the whole clip's one-frame glitches under its held goals, as a solve of it finds
+        # them (the window's clipped ranges and cut edges would judge frames without the
+        # frames around them), those inside the cut with a frame either side
+        glitches = held_glitches(composed, constraints, self.options.scale) - first
+        glitches = glitches[(glitches >= 1) & (glitches <= last - first - 1)]
         cut = Motion._trusted(composed.skeleton, composed.rotations[first:last + 1],
                               composed.translations[first:last + 1], composed.frame_time,
                               composed.name)
         # frames lo..hi alone are spliced: the rest of [first, last] is solved only where
         # they depend on it (the ramps' key postures)
         part = enforce(cut, shifted, options=self.options, pins=True, still=self.still,
-                       frames=(lo - first, hi - first), carried=self.carried).motion
+                       frames=(lo - first, hi - first), carried=self.carried,
+                       glitches=glitches).motion
         return part, first
 
     def preview(self, constraints: list, base_constraints: list, base_motion):

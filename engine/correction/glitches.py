@@ -1,0 +1,145 @@
+"""One-frame glitches of a capture under held goals.
+
+An optical capture now and then throws the whole body out and back in a single frame (a
+marker taken for another for one frame): the CMU jumps, at 120 fps, turn their hips 4.5
+degrees on frame 975 and back on 976, the thighs and the feet with them, the planted feet 5 mm
+off and back. The direct conversion keeps that frame as it is, and outside the corrected
+ranges so does the result. Under a held goal it cannot: the planted foot stays where it is,
+so the frame's correction is the glitch undone, and solved from the glitched posture it is
+undone at whichever joints the attraction gives up (the knee and the ankle of a standing leg,
+which the conversion barely turns: a pop 1.4 to 2 times the no-pop limit on every character
+the jumps were put on).
+
+A frame is taken for such a glitch where, in the composed motion,
+
+* the body (its topmost branching joint, :meth:`~engine.skeleton.Skeleton.body_top`) turns
+  out and back: its world rotation lies off the midway of its neighbours' by more than half
+  the turn between those neighbours (out and back, not on its way) and by more than
+  :data:`RATIO` times as much as on any of the frames two and three before and after it (a
+  move of a body's own, however fast, bends its path alike over a few frames), and
+* a joint held there (a two-sided task active on the frame and both its neighbours) jumps
+  out and back alike: off the midway of its neighbours' places by more than half the step
+  between them, by :data:`RATIO` times the frames around, and by more than :data:`FLOOR` of
+  the figure's size.
+
+On those frames the attraction posture (every joint and the root) is the midway between the
+frames around the glitch; the correction there is that, solved to the goals, less the
+glitched frame, so the result passes the frame as its neighbours do. Measured on the shared
+captures (clips of six conventions at 30 to 120 fps): the two frames of the CMU jumps are
+12.0 and 9.7 times their surroundings at the hips and 16.0 and 10.6 at a planted foot; no
+other frame of any clip passes 4.8 at the body, and a foot's single-frame spike on the Bandai
+kick (12.6) comes with a body that moves on (1.0): left alone.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kinematics import fk_arrays
+from ..motion import Motion
+from ..quaternions import qmul, qnormalize, qslerp
+
+__all__ = ["RATIO", "FLOOR", "held_glitches", "without_glitches"]
+
+#: how many times its surroundings' bend a frame's excursion must be (see the module)
+RATIO = 8.0
+#: a held joint's excursion at least this share of the figure's size (jitter aside)
+FLOOR = 1e-3
+
+
+def _midway(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The unit quaternion halfway between ``a`` and ``b`` (``(..., 4)``), the short way."""
+    sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+    return qnormalize(a + sign * b)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arccos(np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0))
+
+
+def _out_and_back(excursion: np.ndarray, half_step: np.ndarray, floor: float = 0.0):
+    """``(F,)`` bool: frames whose ``excursion`` off their neighbours' midway is more than
+    ``half_step`` (half the way between the neighbours), :data:`RATIO` times the largest
+    excursion two and three frames either side, and ``floor``; the first and last three
+    frames are never judged."""
+    F = len(excursion)
+    out = np.zeros(F, dtype=bool)
+    if F < 7:
+        return out
+    e = excursion[3:-3]
+    around = np.maximum.reduce([excursion[:-6], excursion[1:-5], excursion[5:-1],
+                                excursion[6:]])
+    out[3:-3] = (e > half_step[3:-3]) & (e > RATIO * around) & (e > floor)
+    return out
+
+
+def held_glitches(composed: Motion, constraints, size: float) -> np.ndarray:
+    """The frames of ``composed`` that are one-frame glitches under a held goal (see the
+    module), sorted; ``constraints`` are a solve's (disabled ones and one-sided planes hold
+    nothing); ``size`` is the figure's size [m]. Linear in the clip and cheap: the body's
+    turn is found from the joints above it, the held joints' places only around the frames
+    where it turns out and back."""
+    F = composed.num_frames
+    none = np.zeros(0, dtype=int)
+    if F < 7:
+        return none
+    sk = composed.skeleton
+    held: dict[int, np.ndarray] = {}
+    for c in constraints:
+        if not c.enabled or c.kind_object.one_sided(c.goal) or c.joint not in sk.index:
+            continue
+        frames = np.zeros(F, dtype=bool)
+        frames[max(c.start, 0) + 1:min(c.end, F - 1)] = True       # with both neighbours
+        j = sk.index[c.joint]
+        held[j] = held[j] | frames if j in held else frames
+    if not held:
+        return none
+    top = sk.body_top()
+    q = composed.rotations[:, top]
+    for a in sk.ancestors(top):                        # its world rotation
+        q = qmul(composed.rotations[:, a], q)
+    body = np.zeros(F)
+    step = np.zeros(F)
+    body[1:-1] = _angle(q[1:-1], _midway(q[:-2], q[2:]))
+    step[1:-1] = _angle(q[:-2], q[2:]) / 2.0
+    turned = np.flatnonzero(_out_and_back(body, step) & np.logical_or.reduce(list(held.values())))
+    found = []
+    for f in turned[(turned >= 4) & (turned <= F - 5)]:
+        near = slice(f - 4, f + 5)                  # f and the excursions three either side
+        p = fk_arrays(sk, composed.rotations[near], composed.translations[near],
+                      end_sites=False).positions
+        for j, frames in held.items():
+            if not frames[f]:
+                continue
+            x = p[:, j]
+            off = np.zeros(9)
+            half = np.zeros(9)
+            off[1:-1] = np.linalg.norm(x[1:-1] - (x[:-2] + x[2:]) / 2.0, axis=-1)
+            half[1:-1] = np.linalg.norm(x[2:] - x[:-2], axis=-1) / 2.0
+            if _out_and_back(off, half, FLOOR * size)[4]:
+                found.append(int(f))
+                break
+    return np.array(found, dtype=int)
+
+
+def without_glitches(composed: Motion, frames) -> Motion:
+    """``composed`` with each of ``frames`` (single frames inside the clip; a run of them is
+    spanned from the frames before and after it) replaced by the way between its neighbours:
+    every joint's rotation on the arc, the root's translation on the line (the one
+    translation the correction moves)."""
+    frames = np.unique(np.asarray(frames, dtype=int))
+    if len(frames) == 0:
+        return composed
+    rot = composed.rotations.copy()
+    tra = composed.translations.copy()
+    F = composed.num_frames
+    runs = np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1)
+    for run in runs:
+        a, b = int(run[0]) - 1, int(run[-1]) + 1
+        if a < 0 or b >= F:
+            raise ValueError(f"a glitch at frames {run.tolist()} needs a frame either side")
+        for f in run:
+            u = (f - a) / (b - a)
+            rot[f] = qslerp(rot[a], rot[b], u)
+            tra[f, 0] = tra[a, 0] + u * (tra[b, 0] - tra[a, 0])
+    return Motion._trusted(composed.skeleton, rot, tra, composed.frame_time, composed.name)
+
