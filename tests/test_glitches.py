@@ -109,10 +109,17 @@ def test_a_glitch_under_a_planted_foot_is_solved_from_the_frames_around_it(case)
         # solved from the glitched posture, the legs took the glitch there
         popped = _worst_pop(thrown.performer, thrown.composed, as_thrown, cons)
         assert popped["ratio"] > 1.5 and abs(popped["frame"] - frames[1]) <= 1, popped
-        # the scene's solve (keys and all) says where (the CLI's --report)
+        # the scene's solve says where (the CLI's --report), and its keys, fitted to the
+        # tasks, take the glitch undone as the dense solve has it: every goal held, no pop
+        # (keyed through with the rest, the keys fell back to the dense curves; keyed on
+        # every joint there, one the dense solve leaves alone, LHipJoint, took it and turned
+        # 1.79 times the no-pop limit)
         solution = thrown.solve(regenerate=True)
         assert solution.report["glitches"] == list(frames)
+        assert solution.report["keys"]["fitted_to"] == "tasks"
         assert solution.report["quality"]["pops"][0]["ratio"] <= 1.0
+        from test_layers import _goal_errors
+        assert max(_goal_errors(solution.motion, solution.constraints)) < 1e-3
     # every goal met as in the clean solve
     for i in range(len(cons)):
         assert np.nanmax(solved.residual[i], initial=0.0) < 1e-4 * size
@@ -164,3 +171,44 @@ def test_the_way_between_keeps_everything_but_the_glitch():
     assert np.array_equal(out.translations[:, 1:], performer.translations[:, 1:])
     with pytest.raises(ValueError, match="a frame either side"):
         without_glitches(performer, [0])
+
+
+def test_the_keys_take_the_glitch_undone_where_the_dense_solve_spikes():
+    """The solved keys (fitted to the tasks) of the FAIR jump with its two glitches: every
+    channel the dense correction spikes at a glitch is keyed on it and either side, so the
+    keyed posture there comes near the dense solve's (within 3 mm; keyed through, 7-10 mm
+    off); a joint the dense solve leaves alone there (LHipJoint) gets no such keys."""
+    from motion_composer.engine.correction import keyfit
+    (pw, pn), (tw, tn), frames = CASES["jump-fair1-tpose"]
+    performer_file, target_file = _path(pw, pn), _path(tw, tn)
+    scene = _scene(_glitched(read_motion(performer_file), frames), performer_file,
+                   target_file)
+    cons = scene.automatic_constraints()
+    dense = enforce(scene.edited, cons)
+    assert dense.glitches == frames
+    spiked = keyfit.fit_to_tasks(scene.edited, cons, dense.rotvecs, dense.root,
+                                 pull=keyfit.FAITHFUL_PULL, glitches=dense.glitches)
+    through = keyfit.fit_to_tasks(scene.edited, cons, dense.rotvecs, dense.root,
+                                  pull=keyfit.FAITHFUL_PULL)
+    p_dense = _positions(dense.motion)
+    for f in frames:
+        near = [np.linalg.norm(_positions(keys.apply(scene.edited))[f] - p_dense[f],
+                               axis=-1).max() for keys in (spiked, through)]
+        assert near[0] < 3e-3 and near[1] > 2 * near[0], (f, near)
+    # keyed on and beside each glitch: every channel whose dense correction spikes there by
+    # over a millimetre at its lever (the fit's tolerance is half of one); not LHipJoint
+    from motion_composer.engine.correction.displacement import chain_lengths
+    sk = scene.edited.skeleton
+    lever = chain_lengths(sk)
+    checked = 0
+    for (joint, _), curve in spiked.curves.items():
+        j = sk.index.get(joint)
+        signal, arm = (dense.root, 1.0) if j is None else (dense.rotvecs[:, j], lever[j])
+        at = set(np.round(np.asarray(curve.frames)).astype(int).tolist())
+        for f in frames:
+            if np.linalg.norm(signal[f] - (signal[f - 1] + signal[f + 1]) / 2) * arm > 1e-3:
+                assert {f - 1, f, f + 1} <= at, (joint, f)
+                checked += 1
+        if joint == "LHipJoint":                 # its even keys may fall near one
+            assert not any({f - 1, f, f + 1} <= at for f in frames)
+    assert checked >= 6

@@ -46,6 +46,13 @@ heel held on a point, a foot's orientation, a foot above the floor); many curves
   channel of the demo's went to 12.1 % of its window frames, over the budget of 10 %). Where
   the ramps end more often than the budget allows, the evenly spaced keys go first, then
   ramps' ends where they are nearest each other (:func:`_thinned`).
+* **Keys on a glitch undone.** Where the dense solve took a frame from the way between its
+  neighbours (a capture's one-frame glitch under a held goal, :mod:`.glitches`), its
+  correction spikes there: each channel it spikes by more than the fit's tolerance (at the
+  joint's lever) is keyed on the frame and either side, and its speed into and out of the
+  frame costs nothing. Keyed through like the rest, the keys could not follow the spike,
+  missed the goals there and fell back to the dense curves (the CMU jumps onto the Mixamo
+  characters: their dense solves' pops elsewhere, up to 1.46, came with them).
 * **Values and slopes by damped Gauss-Newton.** Each key has a value and an in and an out
   slope (a ``broken`` tangent where they differ). The curves are linear in them (cubic
   Hermite basis, :func:`~.displacement.hermite_basis`), so a step minimises, over every held
@@ -570,7 +577,8 @@ class _Tasks:
 def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndarray, *,
                  budget: float | None = None, tolerance: float = TASK_TOLERANCE,
                  pull: float = PULL, stagger: float = 0.0, at_ramps: bool = False,
-                 stats: dict | None = None, cancel=None, carried=None) -> DisplacementMap:
+                 stats: dict | None = None, cancel=None, carried=None,
+                 glitches=()) -> DisplacementMap:
     """Few Hermite keys for the dense correction ``rotvecs (F, J, 3)`` [rad], ``root
     (F, 3)`` [m] of ``edited`` (the motion the IK started from) under ``constraints``,
     fitted to the constraints' tasks (see the module doc). ``stats``, when given, receives
@@ -583,7 +591,11 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     joint at the ends of the ramps of the constraints on it too (:func:`_ramp_ends`);
     ``cancel()`` returning True stops it (:class:`~engine.errors.MotionComposerError`).
     ``carried``: the control joints carried with limbs, held through them
-    (:func:`~.ik.effector`).
+    (:func:`~.ik.effector`). ``glitches``: the frames the dense solve took from the way
+    between their neighbours (:attr:`~.enforcement.Correction.glitches`): every channel is
+    keyed on each and on the frames either side, and its speed into and out of it costs
+    nothing (the correction there is the capture's one-frame glitch undone, a spike no
+    smooth curve makes; the keys take it as the dense solve has it).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
     metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it, and on
@@ -604,6 +616,21 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     spacing = 2.0 / budget
     # a key interval or more where a joint's dense correction is zero: zero there too
     gap = int(np.ceil(spacing))
+    lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
+    lever[:-1] = np.maximum(lever[:-1], LEVER_FLOOR * share)
+    # a glitch undone (the dense correction spikes there, moving the joint's chain more
+    # than the fit's tolerance): keyed on it and either side, free to turn into and out of
+    # it; the joints it does not spike keep their keys and speed cost (keyed there, a joint
+    # the dense solve leaves alone took the spike: the FAIR jump's LHipJoint 1.79 times the
+    # no-pop limit)
+    spiked, unslowed = {}, set()
+    for f in (int(f) for f in glitches if 0 < f < F - 1):
+        for j in range(-1, sk.num_joints):
+            curve = root if j < 0 else rotvecs[:, j]
+            if np.linalg.norm(curve[f] - (curve[f - 1] + curve[f + 1]) / 2) * lever[j] \
+                    > tolerance:
+                spiked.setdefault(j, []).extend((f - 1, f, f + 1))
+                unslowed.update(((j, f), (j, f + 1)))
     joints = []
     for j in list(np.flatnonzero(moved.any(axis=0))) + [-1]:
         if j < 0:
@@ -618,13 +645,13 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
             phases = ((n + np.arange(3)) * 0.618034 + stagger) % 1.0
             # a curve keeps its span's two ends however short the clip (three frames at a
             # tenth of a key a frame rounded to none)
+            seeds = list(_ramp_ends(cons, sk, j, carried)) if at_ramps else []
+            seeds += spiked.get(int(j), [])
             joints.append(_Joint(int(j), spans, spacing, F,
                                  max(2, int(np.floor(budget * window.sum()))), phases,
-                                 _ramp_ends(cons, sk, j, carried) if at_ramps else ()))
+                                 sorted(set(seeds))))
     if not joints:
         return DisplacementMap()
-    lever = np.r_[chain_lengths(sk), 1.0]            # the root's translation: 1 m per m
-    lever[:-1] = np.maximum(lever[:-1], LEVER_FLOOR * share)
     locked = frozenset(range(sk.num_joints)) - {jt.index for jt in joints}
     # a floor is held to its tolerance in metres on a figure bigger than GIANT too (the foot
     # rule is absolute: at most 1 mm under a joint's rest height)
@@ -660,6 +687,8 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
         speed, at = _speeds(layout, edited.fps)
         weights = abs(speed) @ speed_w / (2 * edited.fps)
         weights *= np.array([boost.get(key, 1.0) for key in at]) if boost else 1.0
+        if unslowed:
+            weights *= np.array([key not in unslowed for key in at], dtype=float)
         reg = sparse.vstack([reg_pull @ layout.basis,
                              sparse.diags(weights) @ speed @ layout.basis]).tocsr()
         target = np.r_[scale * dense, np.zeros(speed.shape[0])]
@@ -1220,7 +1249,7 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
         stats: dict = {}
         keys = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root,
                             pull=pull, at_ramps=at_ramps, stats=stats, cancel=cancel,
-                            carried=carried)
+                            carried=carried, glitches=correction.glitches)
         if not judge.keeps(keys, stats):
             continue
         over = judge.unsteady(keys)
@@ -1228,7 +1257,8 @@ def solved_keys(direct: Motion, edited: Motion, constraints, correction, *, canc
             again: dict = {}
             other = fit_to_tasks(edited, constraints, correction.rotvecs, correction.root,
                                  pull=pull, stagger=RESTAGGER, at_ramps=at_ramps,
-                                 stats=again, cancel=cancel, carried=carried)
+                                 stats=again, cancel=cancel, carried=carried,
+                                 glitches=correction.glitches)
             if judge.keeps(other, again):
                 steadier = judge.unsteady(other)
                 if steadier < over:
