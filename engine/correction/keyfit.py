@@ -592,10 +592,11 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     ``cancel()`` returning True stops it (:class:`~engine.errors.MotionComposerError`).
     ``carried``: the control joints carried with limbs, held through them
     (:func:`~.ik.effector`). ``glitches``: the frames the dense solve took from the way
-    between their neighbours (:attr:`~.enforcement.Correction.glitches`): every channel is
-    keyed on each and on the frames either side, and its speed into and out of it costs
-    nothing (the correction there is the capture's one-frame glitch undone, a spike no
-    smooth curve makes; the keys take it as the dense solve has it).
+    between their neighbours (:attr:`~.enforcement.Correction.glitches`): each channel the
+    dense correction spikes there (by more than ``tolerance`` at its joint's lever) is keyed
+    on the frame and either side, and its speed into and out of it costs nothing (the
+    correction there is the capture's one-frame glitch undone, a spike no smooth curve
+    makes; the keys take it as the dense solve has it).
 
     On a character smaller than :data:`~engine.correction.ik.FULL_SIZE` the lengths in
     metres (``tolerance``, :data:`TASK_LIMIT`, :data:`ANGLE_LEVER`) shrink with it, and on
