@@ -382,13 +382,14 @@ def test_a_giant_holds_its_flat_feet():
 
 
 def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
-    """The CMU 131 walk onto the fox, the firm pull's fit: its rounds of added keys stall 11
-    times over the task limit, none within it, and it goes back to its least miss and on to
-    its rounds of emphasis and calming; the third of those misses by 37 times the limit. It
-    stops there, at more than keyfit.RUNAWAY times its least miss since its keys were added:
-    run on through every emphasis round (10 of emphasis, 10 of calming, 201 iterations for
-    140), it ends 24 times over the limit, refused all the same. The solve keeps the keys
-    that follow the dense curves."""
+    """The CMU 131 walk onto the fox, the light pull's fit: its rounds of added keys end 11
+    times over the task limit, none within it (they stall, or spend their rounds: which, is
+    rounding; with numpy 2.4 and scipy 1.17 the twelfth round misses by 0.03 % more than
+    the eleventh, one stall short), and it goes on to its rounds of emphasis and calming,
+    which miss by over 30 times the limit. It stops there, at more than keyfit.RUNAWAY
+    times its least miss since its keys were added: run on through every emphasis round,
+    it ends over the limit, refused all the same. The solve keeps the keys that follow the
+    dense curves."""
     from motion_composer.engine.correction import keyfit
     scene, solution, _ = solve_case(CASES[IDS.index("walk-cmumax-fox")])
     args = (solution.scene.edited, solution.constraints, solution.correction.rotvecs,
@@ -397,7 +398,8 @@ def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
     keyfit.fit_to_tasks(*args, pull=keyfit.PULL, stats=stopped)
     limit = stopped["limit_m"]              # the 1 mm limit grown with the 61 m fox
     assert limit > keyfit.TASK_LIMIT
-    assert stopped["stalled"] and stopped["ran_away"]
+    assert stopped["ran_away"]
+    assert stopped["stalled"] or len(stopped["adding_misses_m"]) == keyfit.ROUNDS + 1
     least = min(stopped["adding_misses_m"])
     assert least > limit
     assert stopped["worst_task_m"] > keyfit.RUNAWAY * least
