@@ -17,7 +17,6 @@ import pytest
 
 from conftest import BUNDLED_BVH, SHARED_BVH, clip_path, shared_path
 from motion_composer.engine.conversion.automap import automap
-from motion_composer.engine.correction import glitches
 from motion_composer.engine.correction.enforcement import enforce
 from motion_composer.engine.correction.glitches import held_glitches, without_glitches
 from motion_composer.engine.correction.quality import quality
@@ -27,6 +26,7 @@ from motion_composer.engine.kinematics import fk_arrays
 from motion_composer.engine.motion import Motion
 from motion_composer.engine.project import Project, Source
 from motion_composer.engine.quaternions import about_axis, qmul
+from motion_composer.engine.rotations import angle_between
 from motion_composer.engine.scene import Scene
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -161,9 +161,9 @@ def test_the_way_between_keeps_everything_but_the_glitch():
     changed = np.flatnonzero(np.any(out.rotations != performer.rotations, axis=(1, 2)))
     assert changed.tolist() == [975, 980, 981]
     q = out.rotations
-    between = glitches._angle(q[974], q[976])
-    assert np.allclose(glitches._angle(q[975], q[974]), between / 2, atol=1e-7)
-    assert np.allclose(glitches._angle(q[980], q[979]), glitches._angle(q[979], q[982]) / 3,
+    between = angle_between(q[974], q[976])
+    assert np.allclose(angle_between(q[975], q[974]), between / 2, atol=1e-7)
+    assert np.allclose(angle_between(q[980], q[979]), angle_between(q[979], q[982]) / 3,
                        atol=1e-7)
     t = out.translations[:, 0]
     assert np.allclose(t[975], (t[974] + t[976]) / 2)

@@ -36,7 +36,8 @@ import numpy as np
 
 from ..kinematics import fk_arrays
 from ..motion import Motion
-from ..quaternions import qmul, qnormalize, qslerp
+from ..quaternions import qmul, qslerp
+from ..rotations import angle_between
 
 __all__ = ["RATIO", "FLOOR", "held_glitches", "without_glitches"]
 
@@ -44,16 +45,6 @@ __all__ = ["RATIO", "FLOOR", "held_glitches", "without_glitches"]
 RATIO = 8.0
 #: a held joint's excursion at least this share of the figure's size (jitter aside)
 FLOOR = 1e-3
-
-
-def _midway(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The unit quaternion halfway between ``a`` and ``b`` (``(..., 4)``), the short way."""
-    sign = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
-    return qnormalize(a + sign * b)
-
-
-def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return 2.0 * np.arccos(np.clip(np.abs(np.sum(a * b, axis=-1)), 0.0, 1.0))
 
 
 def _out_and_back(excursion: np.ndarray, half_step: np.ndarray, floor: float = 0.0):
@@ -79,45 +70,36 @@ def held_glitches(composed: Motion, constraints, size: float) -> np.ndarray:
     turn is found from the joints above it, the held joints' places only around the frames
     where it turns out and back."""
     F = composed.num_frames
-    none = np.zeros(0, dtype=int)
-    if F < 7:
-        return none
     sk = composed.skeleton
-    held: dict[int, np.ndarray] = {}
-    for c in constraints:
-        if not c.enabled or c.kind_object.one_sided(c.goal) or c.joint not in sk.index:
-            continue
-        frames = np.zeros(F, dtype=bool)
-        frames[max(c.start, 0) + 1:min(c.end, F - 1)] = True       # with both neighbours
-        j = sk.index[c.joint]
-        held[j] = held[j] | frames if j in held else frames
-    if not held:
-        return none
+    held = [(sk.index[c.joint], c.start, c.end) for c in constraints
+            if c.enabled and c.joint in sk.index and not c.kind_object.one_sided(c.goal)]
+    if F < 9 or not held:
+        return np.zeros(0, dtype=int)
     top = sk.body_top()
     q = composed.rotations[:, top]
     for a in sk.ancestors(top):                        # its world rotation
         q = qmul(composed.rotations[:, a], q)
     body = np.zeros(F)
     step = np.zeros(F)
-    body[1:-1] = _angle(q[1:-1], _midway(q[:-2], q[2:]))
-    step[1:-1] = _angle(q[:-2], q[2:]) / 2.0
-    turned = np.flatnonzero(_out_and_back(body, step) & np.logical_or.reduce(list(held.values())))
+    body[1:-1] = angle_between(q[1:-1], qslerp(q[:-2], q[2:], 0.5))
+    step[1:-1] = angle_between(q[:-2], q[2:]) / 2.0
+    turned = np.flatnonzero(_out_and_back(body, step))
     found = []
     for f in turned[(turned >= 4) & (turned <= F - 5)]:
+        # the joints held on the frame and both its neighbours
+        joints = sorted({j for j, start, end in held if start < f < end})
+        if not joints:
+            continue
         near = slice(f - 4, f + 5)                  # f and the excursions three either side
-        p = fk_arrays(sk, composed.rotations[near], composed.translations[near],
-                      end_sites=False).positions
-        for j, frames in held.items():
-            if not frames[f]:
-                continue
-            x = p[:, j]
-            off = np.zeros(9)
-            half = np.zeros(9)
-            off[1:-1] = np.linalg.norm(x[1:-1] - (x[:-2] + x[2:]) / 2.0, axis=-1)
-            half[1:-1] = np.linalg.norm(x[2:] - x[:-2], axis=-1) / 2.0
-            if _out_and_back(off, half, FLOOR * size)[4]:
-                found.append(int(f))
-                break
+        x = fk_arrays(sk, composed.rotations[near], composed.translations[near],
+                      end_sites=False).positions[:, joints]
+        off = np.zeros((9, len(joints)))
+        half = np.zeros((9, len(joints)))
+        off[1:-1] = np.linalg.norm(x[1:-1] - (x[:-2] + x[2:]) / 2.0, axis=-1)
+        half[1:-1] = np.linalg.norm(x[2:] - x[:-2], axis=-1) / 2.0
+        if any(_out_and_back(off[:, k], half[:, k], FLOOR * size)[4]
+               for k in range(len(joints))):
+            found.append(int(f))
     return np.array(found, dtype=int)
 
 

@@ -625,13 +625,13 @@ def fit_to_tasks(edited: Motion, constraints, rotvecs: np.ndarray, root: np.ndar
     # the dense solve leaves alone took the spike: the FAIR jump's LHipJoint 1.79 times the
     # no-pop limit)
     spiked, unslowed = {}, set()
+    curves = np.concatenate([rotvecs, root[:, None]], axis=1)    # the root's last: index -1
     for f in (int(f) for f in glitches if 0 < f < F - 1):
-        for j in range(-1, sk.num_joints):
-            curve = root if j < 0 else rotvecs[:, j]
-            if np.linalg.norm(curve[f] - (curve[f - 1] + curve[f + 1]) / 2) * lever[j] \
-                    > tolerance:
-                spiked.setdefault(j, []).extend((f - 1, f, f + 1))
-                unslowed.update(((j, f), (j, f + 1)))
+        spike = np.linalg.norm(curves[f] - (curves[f - 1] + curves[f + 1]) / 2, axis=-1)
+        for j in np.flatnonzero(spike * lever > tolerance):
+            j = int(j) if j < sk.num_joints else -1
+            spiked.setdefault(j, []).extend((f - 1, f, f + 1))
+            unslowed.update(((j, f), (j, f + 1)))
     joints = []
     for j in list(np.flatnonzero(moved.any(axis=0))) + [-1]:
         if j < 0:
