@@ -44,7 +44,7 @@ from .chains import CHAINS, ChainSettings, ChainSettingsError
 from .correspondence import Correspondence
 from .followers import find_followers
 from ..errors import MappingError, MotionComposerError
-from ..kinematics import fk_arrays
+from ..kinematics import fk_arrays, fk_joints
 from ..motion import Motion
 from ..quaternions import about_axis, from_matrix, qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
@@ -509,7 +509,9 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                            followers)
     chains = _chains(tsk, bones)
 
-    aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment)
+    aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment,
+                                  _feet_standing(performer, p_ref, target, t_ref, mapped,
+                                                 bones))
     aligned_local = aligned_world.copy()
     aligned_local[1:] = qmul(qconj(aligned_world[tsk.parents[1:]]), aligned_world[1:])
     bound = fk_arrays(tsk, aligned_local[None], t_ref.translations[None])
@@ -594,14 +596,18 @@ class _Reference:
     all_positions: np.ndarray
     rest: bool
     facing: tuple | None = None
+    #: the clip frame it is (``None``: the rest pose)
+    frame: int | None = None
 
 
 def _reference(motion: Motion, choice: str | int) -> _Reference:
     """``motion``'s reference pose (see :func:`reference_pose`) and its forward kinematics."""
     rot, tra, label = reference_pose(motion, choice)
     pose = fk_arrays(motion.skeleton, rot[None], tra[None], end_sites=True)
+    rest = not label.startswith("frame")
     return _Reference(rot, tra, label, pose.rotations[0], pose.positions[0],
-                      pose.all_positions()[0], not label.startswith("frame"))
+                      pose.all_positions()[0], rest,
+                      frame=None if rest else int(label.split()[1]))
 
 
 #: a performer joint's translation is animated where it moves by more than this share of the
@@ -820,7 +826,7 @@ def _faced(motion: Motion, ref: _Reference, facing) -> _Reference:
         tra[slot[0]] = qrot(qconj(above), moved - start)
     pose = fk_arrays(sk, rot[None], tra[None], end_sites=True)
     return _Reference(rot, tra, ref.label, pose.rotations[0], pose.positions[0],
-                      pose.all_positions()[0], ref.rest, facing)
+                      pose.all_positions()[0], ref.rest, facing, ref.frame)
 
 
 def _facing_turn(kids: np.ndarray, pelvis: int, mapped: np.ndarray, p_ref: _Reference,
@@ -835,20 +841,112 @@ def _facing_turn(kids: np.ndarray, pelvis: int, mapped: np.ndarray, p_ref: _Refe
     return math.atan2(sin, cos) if math.hypot(sin, cos) > 0.0 else 0.0
 
 
+def _feet_standing(performer: Motion, p_ref, target: Motion, t_ref, mapped: np.ndarray,
+                   bones: dict) -> dict:
+    """The target's mapped foot joints with virtual bones (each foot's ankle and the mapped
+    joints below it, where the target is a humanoid whose feet can be told) -> ``(G_p,
+    G_t)``: the turns of the performer joint and of the target joint from their reference
+    poses to where each stands flat (:func:`_standing_turn`)."""
+    from .automap import identify
+    tsk = target.skeleton
+    try:
+        roles = identify(tsk)
+    except MappingError:
+        return {}
+    p_size = max(float(np.ptp(p_ref.all_positions, axis=0).max()), 1e-6)
+    t_size = max(float(np.ptp(t_ref.all_positions, axis=0).max()), 1e-6)
+    out = {}
+    for side in ("l", "r"):
+        ankle = tsk.index.get(roles.get(f"foot_{side}"))
+        if ankle is None:
+            continue
+        for j in range(tsk.num_joints):
+            if (j in bones and bones[j].children and not bones[j].carries
+                    and (j == ankle or ankle in tsk.ancestors(j))):
+                b = bones[j]
+                out[j] = (_standing_turn(performer, p_ref, int(mapped[j]), int(b.performer[0]),
+                                         p_size),
+                          _standing_turn(target, t_ref, j, int(b.children[0]), t_size))
+    return out
+
+
+def _standing_turn(motion: Motion, ref, joint: int, end: int, size: float) -> np.ndarray:
+    """``(4,)`` the world turn of ``joint`` from ``ref`` (a reference pose of ``motion``) to
+    where it stands flat in ``motion``, its bone towards ``end``.
+
+    The reference stands flat (the identity) where it is the skeleton's rest pose, or a frame
+    where the foot is low (``joint`` and ``end`` within
+    :data:`~engine.conversion.followers.FLAT_LOW` of ``size`` of their planted heights, each
+    one's 5th percentile over the clip); a frame where it is not (a mid-stride frame) turns to
+    the frame of median pitch among the low ones, about the vertical as in the reference
+    (:func:`~engine.conversion.followers._standing`); the identity where it is never low."""
+    from .followers import FLAT_LOW, _standing
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
+    if ref.frame is None:
+        return identity
+    y = np.empty((motion.num_frames, 2))
+    for lo in range(0, motion.num_frames, _FK_CHUNK):
+        hi = min(motion.num_frames, lo + _FK_CHUNK)
+        _, pos = fk_joints(motion.skeleton, motion.rotations[lo:hi], motion.translations[lo:hi],
+                           [joint, end])
+        y[lo:hi] = pos[..., 1]
+    if np.all(y[ref.frame] < np.percentile(y, 5.0, axis=0) + FLAT_LOW * size):
+        return identity
+    standing = _standing(motion, joint, end, size, ref.world[joint])
+    return identity if standing is None else qmul(standing, qconj(ref.world[joint]))
+
+
+#: frames of forward kinematics at a time for a foot's heights (bounded memory)
+_FK_CHUNK = 4096
+
+
+def _heading_turn(from_dir: np.ndarray, to_dir: np.ndarray) -> np.ndarray | None:
+    """The turn about the vertical taking ``from_dir``'s heading onto ``to_dir``'s, ``None``
+    where either points within 30 degrees of straight up or down (no heading to speak of)."""
+    a, b = from_dir[[0, 2]], to_dir[[0, 2]]
+    if (np.linalg.norm(a) < 0.5 * np.linalg.norm(from_dir)
+            or np.linalg.norm(b) < 0.5 * np.linalg.norm(to_dir)):
+        return None
+    angle = math.atan2(a[1] * b[0] - a[0] * b[1], a[0] * b[0] + a[1] * b[1])
+    return about_axis(np.array([0.0, 1.0, 0.0]), angle)
+
+
 def _rest_posture(tsk: Skeleton, t_rot: np.ndarray, bones: dict,
-                  rest_alignment: bool) -> np.ndarray:
+                  rest_alignment: bool, feet: dict | None = None) -> np.ndarray:
     """``(J, 4)`` world rotations of the bound rest posture, root to leaves: the target's
     reference local rotations ``t_rot`` ``(J, 4)``, each joint with bones turned onto its
-    virtual bones when ``rest_alignment`` is on."""
+    virtual bones when ``rest_alignment`` is on.
+
+    A foot joint of ``feet`` (joint -> ``(G_p, G_t)``, the turns of its performer joint and of
+    itself from their reference poses to where each stands flat, :func:`_feet_standing`) is
+    not laid along its virtual bone: it is the target's own foot standing flat, turned about
+    the vertical to head as the performer's standing foot, then turned back by ``G_p``, so
+    that where the performer's foot stands flat the character's stands as flat as it does
+    itself. A foot's shape (its ankle's height over its length) differs from figure to
+    figure: laid along the performer's, the CMU feet stood 20-30 degrees off flat on every
+    Mixamo and Maya character, and the contacts' flat-foot hold turned them by that much at
+    every step. A foot bone within 30 degrees of the vertical (a fox's hind foot) has no
+    heading: it is laid along its bone."""
+    feet = feet or {}
     J = tsk.num_joints
     rest_world = np.empty((J, 4))
+    reference = np.empty((J, 4))              # the target's reference posture, unaligned
     for j in range(J):
         parent = tsk.parents[j]
         w = t_rot[j] if parent < 0 else qmul(rest_world[parent], t_rot[j])
+        reference[j] = t_rot[j] if parent < 0 else qmul(reference[parent], t_rot[j])
         if rest_alignment and j in bones and bones[j].children:
             b = bones[j]
-            from_dirs = qrot(w, b.target_local)
-            w = qmul(_align(from_dirs, b.reference, b.roll_by_bones), w)
+            heading = None
+            if j in feet:
+                g_p, g_t = feet[j]
+                standing = qmul(g_t, reference[j])
+                heading = _heading_turn(qrot(standing, b.target_local[0]),
+                                        qrot(g_p, b.reference[0]))
+            if heading is not None:
+                w = qmul(qconj(g_p), qmul(heading, standing))
+            else:
+                w = qmul(_align(qrot(w, b.target_local), b.reference, b.roll_by_bones), w)
         rest_world[j] = w
     return rest_world
 
