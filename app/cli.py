@@ -386,7 +386,8 @@ def bind_options_from_args(args, base, target_skeleton=None):
                                                 read_pose_offsets)
 
     flags = {"performer_reference": "reference", "target_reference": "target_reference",
-             "distribute": "distribute"}                 # batch has none of these
+             "distribute": "distribute",                 # batch has none of these
+             "flat_feet": "flat_feet"}
     changes = {k: getattr(args, flag, None) for k, flag in flags.items()}
     changes = {k: v for k, v in changes.items() if v is not None}
     if getattr(args, "keep_target_pose", False):
@@ -683,6 +684,10 @@ def _add_binding_options(parser, batch: bool = False) -> None:
                             '"distribute": "first", "ik_blend": 1.0}, ...} (chains spine, '
                             "neck, arm_l/r, leg_l/r, fingers_l/r); by setting over the "
                             "profile's")
+    group.add_argument("--flat-feet", action="store_true", default=None,
+                       help="stand the character's feet as flat as its own where the "
+                            "performer's stand flat, instead of along the performer's feet "
+                            "(feet of other shapes stand flat through every stance)")
     if batch:
         return
     group.add_argument("--reference", type=_reference,

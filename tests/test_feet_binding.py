@@ -1,5 +1,6 @@
-"""The binding lays a character's feet flat where the performer's stand flat (issue 14 point
-1: feet that stay planted heel to toe), across conventions whose feet differ in shape.
+"""With ``BindOptions.flat_feet`` the binding stands a character's feet flat where the
+performer's stand flat (issue 14 point 1: feet that stay planted heel to toe), across
+conventions whose feet differ in shape.
 
 Laid along the performer's virtual bones, as every other bone, a foot stood as far off flat as
 the two figures' feet differ in pitch (a foot's ankle height over its length): the CMU feet 20
@@ -8,16 +9,20 @@ stance, and the contacts' flat-foot hold turned them by that much at each step. 
 independently of the engine's own contact detection and of its binding."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from motion_composer.engine import forward_kinematics
-from motion_composer.engine.conversion import automap, reference_pose, retarget
+from motion_composer.app.cli import main as cli_main
+from motion_composer.engine.conversion import BindOptions, automap, reference_pose, retarget
 from motion_composer.engine.correction.contacts import find_feet
 from motion_composer.engine.describe import stature
 from motion_composer.engine.formats import read_character, read_motion, read_performer
 from motion_composer.engine.kinematics import fk_arrays
-from conftest import clip_path, shared_path
+from motion_composer.engine.project import load_project, project_from_json, project_to_json
+from conftest import REPO, clip_path, shared_path
 
 #: a foot stands flat where its ankle and toe are both within this share of the stature of
 #: their lowest heights (each one's 5th percentile over the clip)
@@ -49,10 +54,12 @@ def test_feet_stand_flat_where_the_performers_stand_flat(clip, character):
     performer = read_performer(clip_file)
     target = _target(shared_path(character))
     corr = automap(target.skeleton, performer.skeleton)
-    out = retarget(performer, target, corr)
+    out = retarget(performer, target, corr, bind_options=BindOptions(flat_feet=True))
+    laid = retarget(performer, target, corr)
     psk, tsk = performer.skeleton, target.skeleton
     p_pos = forward_kinematics(performer).positions
     t_pos = forward_kinematics(out).positions
+    l_pos = forward_kinematics(laid).positions
     size = stature(performer)
     feet = [(a, t) for a, t in find_feet(tsk) if t and a in corr.pairs and t in corr.pairs]
     assert len(feet) == 2
@@ -76,6 +83,19 @@ def test_feet_stand_flat_where_the_performers_stand_flat(clip, character):
         assert abs(t_turn - p_turn) < 4.0, (
             f"{ankle}: the character's foot stands {t_turn:.1f} degrees off its own flat "
             f"where the performer's stands {p_turn:.1f} off its own")
+        # without the option (the default) it is laid along the performer's foot, off its own
+        # flat by about the shapes' difference
+        l_turn = np.median(_pitch(l_pos[flat, tt] - l_pos[flat, ta])) - t_flat
+        assert abs(l_turn - p_turn) > 0.5 * abs(t_flat - p_flat)
+        # the rest of the mapped body turns alike (the legs' bones above the ankles too; the
+        # root moves otherwise where the hip height ratio, measured over the bound feet,
+        # differs, and so do a ground root and the control joints placed from the feet)
+        ankles = {tsk.index[a] for a, _ in feet}
+        body = [tsk.index[n] for n in corr.pairs
+                if tsk.index[n] not in ankles and not ankles & set(tsk.ancestors(tsk.index[n]))]
+        hips = min(body, key=lambda j: len(tsk.ancestors(j)))       # the mapped top
+        assert np.abs((t_pos[:, body] - t_pos[:, hips, None])
+                      - (l_pos[:, body] - l_pos[:, hips, None])).max() < 1e-9
 
 
 def _low(positions, ankle, toe, size):
@@ -96,3 +116,35 @@ def _flat_pitch(motion, ankle, toe, size) -> float:
     pos = forward_kinematics(motion).positions
     low = _low(pos, ankle, toe, size)
     return float(np.median(_pitch(pos[low, toe] - pos[low, ankle])))
+
+
+def test_flat_feet_is_a_project_setting_that_older_files_are_without(tmp_path):
+    """Written only when on: every project before it reads without it, as it was solved."""
+    old = load_project(REPO / "resources" / "demo" / "demo.mcp", check_sources=False)
+    assert old.bind_options.flat_feet is False
+    text = project_to_json(old, tmp_path / "a.mcp")
+    assert "flat_feet" not in text
+    on = dataclasses.replace(old, bind_options=dataclasses.replace(old.bind_options, flat_feet=True))
+    text = project_to_json(on, tmp_path / "a.mcp")
+    assert '"flat_feet": true' in text
+    back = project_from_json(text, tmp_path / "a.mcp")
+    assert back.bind_options.flat_feet is True and project_to_json(back, tmp_path / "a.mcp") == text
+
+
+def test_the_flat_feet_flag_stands_the_feet_flat(tmp_path, capsys):
+    clip = shared_path("bandai1_kick_normal_001.bvh")
+    target = shared_path("target_mixamo_ely.glb")
+    out, saved = tmp_path / "flat.bvh", tmp_path / "flat.mcp"
+    assert cli_main(["retarget", str(clip), "--target", str(target), "-o", str(out),
+                     "--flat-feet", "--save-project", str(saved)]) == 0
+    assert load_project(saved).bind_options.flat_feet is True
+    performer = read_performer(clip)
+    character = _target(target)
+    expected = retarget(performer, character, automap(character.skeleton, performer.skeleton),
+                        bind_options=BindOptions(flat_feet=True))
+    got = read_motion(out)
+    sk = expected.skeleton
+    ankle, toe = find_feet(sk)[0]
+    a, b = forward_kinematics(expected).positions, forward_kinematics(got).positions
+    k = [sk.index[ankle], sk.index[toe]]
+    assert np.abs(a[:, k] - b[:, k]).max() < 1e-4

@@ -75,6 +75,11 @@ class BindOptions:
             are dropped.
         chains: sorted pairs ``(chain name, ChainSettings)`` overriding the defaults
             (:mod:`engine.conversion.chains`); defaults are dropped.
+        flat_feet: with rest alignment, stand each foot of the target as flat as it stands
+            itself where the performer's foot stands flat, headed as the performer's, instead
+            of laying it along the performer's foot (see :func:`_rest_posture`): feet of
+            other shapes then stand flat on the floor through every stance. Off by default
+            and in every project written before it, which were solved without it.
     """
 
     performer_reference: str | int = "auto"
@@ -83,6 +88,7 @@ class BindOptions:
     distribute: str = "even"
     pose_offsets: tuple = ()
     chains: tuple = ()
+    flat_feet: bool = False
 
     def __post_init__(self):
         for ref in (self.performer_reference, self.target_reference):
@@ -509,9 +515,9 @@ def bind(performer: Motion, target: Motion, correspondence: Correspondence,
                            followers)
     chains = _chains(tsk, bones)
 
-    aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment,
-                                  _feet_standing(performer, p_ref, target, t_ref, mapped,
-                                                 bones))
+    feet = (_feet_standing(performer, p_ref, target, t_ref, mapped, bones)
+            if options.flat_feet and options.rest_alignment else {})
+    aligned_world = _rest_posture(tsk, t_ref.rotations, bones, options.rest_alignment, feet)
     aligned_local = aligned_world.copy()
     aligned_local[1:] = qmul(qconj(aligned_world[tsk.parents[1:]]), aligned_world[1:])
     bound = fk_arrays(tsk, aligned_local[None], t_ref.translations[None])

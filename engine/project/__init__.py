@@ -21,7 +21,7 @@ gives the same bytes::
       "target": {...},
       "correspondence": {"pairs": {"Hips": "Hips", ...}},
       "binding": {"performer_reference": "auto", "target_reference": "auto",
-                  "rest_alignment": true, "distribute": "even",
+                  "rest_alignment": true, "distribute": "even", "flat_feet": true,
                   "pose_offsets": {"LeftArm": [x, y, z, w]},
                   "chains": {"arm_l": {"weight": 1.0, "twist": true, "distribute": null,
                                        "ik_blend": 0.0}}},
@@ -42,9 +42,10 @@ gives the same bytes::
     }
 
 ``binding.pose_offsets`` and ``binding.chains`` are written only when set: a file without
-them (every file before them) means none, so they need no new version. :mod:`.profile` holds
-the retarget profiles (``.mcprofile``): the parts of a project that belong to the pair of
-skeletons.
+them (every file before them) means none, so they need no new version; so is
+``binding.flat_feet`` (``true``), which every file before it was solved without.
+:mod:`.profile` holds the retarget profiles (``.mcprofile``): the parts of a project that
+belong to the pair of skeletons.
 
 Source paths are stored relative to the project file's folder (so a project folder moved with
 its clips still opens) and held absolute in memory. ``embedded`` (last, as it is long) holds the

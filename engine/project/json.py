@@ -102,6 +102,8 @@ def binding_dict(b: BindOptions) -> dict:
     out = {"performer_reference": _reference_out(b.performer_reference),
            "target_reference": _reference_out(b.target_reference),
            "rest_alignment": bool(b.rest_alignment), "distribute": b.distribute}
+    if b.flat_feet:                      # files without it were solved without it
+        out["flat_feet"] = True
     if b.pose_offsets:
         out["pose_offsets"] = {joint: [float(x) for x in q] for joint, q in b.pose_offsets}
     if b.chains:
@@ -408,7 +410,8 @@ def _binding(data) -> BindOptions:
         distribute=_choice(d.get("distribute", default.distribute), "binding.distribute",
                            ("even", "first")),
         pose_offsets=_pose_offsets(d.get("pose_offsets", {}), "binding.pose_offsets"),
-        chains=_chains(d.get("chains", {}), "binding.chains"))
+        chains=_chains(d.get("chains", {}), "binding.chains"),
+        flat_feet=_bool(d.get("flat_feet", default.flat_feet), "binding.flat_feet"))
 
 
 def _pose_offsets(data, where: str) -> tuple:
