@@ -26,6 +26,7 @@ from motion_composer.engine import read_bvh  # noqa: E402
 from motion_composer.engine.conversion.correspondence import Correspondence  # noqa: E402
 from motion_composer.engine.conversion import BindOptions  # noqa: E402
 from motion_composer.engine.conversion import RootOptions  # noqa: E402
+from motion_composer.engine.rotations import angle_between  # noqa: E402
 
 from conftest import clip_path  # noqa: E402
 from gui_support import WAIT_MS, shown  # noqa: E402
@@ -112,6 +113,29 @@ def test_model_changes_show_in_panel(panel, doc):
     assert panel.root_mode.currentData() == "absolute"
     assert not panel.auto_scale.isEnabled() and not panel.scale_v.isEnabled()
     assert doc.undo_stack.count() == 4
+
+
+def test_flat_feet_turns_only_the_feet_and_undoes(qtbot, panel, doc):
+    sk = doc.scene.target.skeleton
+    feet = [sk.index[n] for n in ("LeftFoot", "RightFoot")]
+    before = doc.motion.rotations.copy()
+    assert not panel.flat_feet.isChecked() and panel.flat_feet.isEnabled()
+    count = doc.undo_stack.count()
+    qtbot.mouseClick(panel.flat_feet, Qt.MouseButton.LeftButton)
+    assert doc.scene.bind_options.flat_feet is True and panel.flat_feet.isChecked()
+    assert doc.undo_stack.undoText() == "Turn flat feet on"
+    # the walk's feet turn by how its flat feet differ from the T-pose's (a few degrees)
+    turn = np.degrees(angle_between(doc.motion.rotations[:, feet], before[:, feet]))
+    assert 0.5 < turn.max() < 10.0
+    doc.undo_stack.undo()
+    assert doc.scene.bind_options.flat_feet is False and not panel.flat_feet.isChecked()
+    np.testing.assert_allclose(doc.motion.rotations, before, atol=1e-12)
+    assert doc.undo_stack.count() == count + 1
+    # with the target's own posture kept there is no rest posture to stand them in
+    qtbot.mouseClick(panel.align_off, Qt.MouseButton.LeftButton)
+    assert not panel.flat_feet.isEnabled()
+    doc.undo_stack.undo()
+    assert panel.flat_feet.isEnabled()
 
 
 def test_evaluation_error_shows_in_notes(panel, doc):

@@ -205,6 +205,13 @@ class BindingPanel(QtWidgets.QWidget):
         self.align_group.addButton(self.align_off)
         box.addWidget(self.align_on)
         box.addWidget(self.align_off)
+        self.flat_feet = QtWidgets.QCheckBox("Stand the feet flat as the target's own")
+        self.flat_feet.setToolTip(
+            "Where the performer's foot stands flat, the target's stands as flat as in its own "
+            "rest pose, headed as the performer's, instead of along the performer's foot "
+            "(feet of another shape then stand flat through every stance); with the rest "
+            "posture only")
+        box.addWidget(self.flat_feet)
         chain_row = QtWidgets.QFormLayout()
         self.distribute = QtWidgets.QComboBox()
         for key, text, _undo in DISTRIBUTIONS:
@@ -403,6 +410,7 @@ class BindingPanel(QtWidgets.QWidget):
         self.target_reference.frameEdited.connect(
             lambda f: self._reference_frame_edited("target", f))
         self.align_on.toggled.connect(self._alignment_toggled)
+        self.flat_feet.toggled.connect(self._flat_feet_toggled)
         self.distribute.currentIndexChanged.connect(self._distribute_changed)
         self.root_mode.currentIndexChanged.connect(self._root_mode_changed)
         self.auto_scale.toggled.connect(self._auto_scale_toggled)
@@ -429,6 +437,9 @@ class BindingPanel(QtWidgets.QWidget):
             b.target_reference, d.scene.target.num_frames if d.scene.target is not None else 0)
         with _Blocker(self.align_on), _Blocker(self.align_off):
             (self.align_on if b.rest_alignment else self.align_off).setChecked(True)
+        with _Blocker(self.flat_feet):
+            self.flat_feet.setChecked(b.flat_feet)
+        self.flat_feet.setEnabled(b.rest_alignment)
         with _Blocker(self.distribute):
             self.distribute.setCurrentIndex(self.distribute.findData(b.distribute))
         with _Blocker(self.root_mode):
@@ -608,6 +619,10 @@ class BindingPanel(QtWidgets.QWidget):
     def _alignment_toggled(self, on: bool) -> None:
         self._push(f"Turn rest alignment {'on' if on else 'off'}",
                    bind=dataclasses.replace(self.doc.scene.bind_options, rest_alignment=bool(on)))
+
+    def _flat_feet_toggled(self, on: bool) -> None:
+        self._push(f"Turn flat feet {'on' if on else 'off'}",
+                   bind=dataclasses.replace(self.doc.scene.bind_options, flat_feet=bool(on)))
 
     def _distribute_changed(self, index: int) -> None:
         key, _text, undo = DISTRIBUTIONS[index]
