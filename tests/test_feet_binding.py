@@ -124,7 +124,8 @@ def test_flat_feet_is_a_project_setting_that_older_files_are_without(tmp_path):
     assert old.bind_options.flat_feet is False
     text = project_to_json(old, tmp_path / "a.mcp")
     assert "flat_feet" not in text
-    on = dataclasses.replace(old, bind_options=dataclasses.replace(old.bind_options, flat_feet=True))
+    on = dataclasses.replace(old, bind_options=dataclasses.replace(old.bind_options,
+                                                                   flat_feet=True))
     text = project_to_json(on, tmp_path / "a.mcp")
     assert '"flat_feet": true' in text
     back = project_from_json(text, tmp_path / "a.mcp")
