@@ -108,10 +108,12 @@ def _short(path: Path) -> str:
         path.name
 
 
-def solve_pair(clip: Path, target_path: Path) -> dict:
-    """Solve ``clip`` onto ``target_path`` as the CLI's ``retarget --auto-contacts`` does and
-    measure the rules. Returns the row (a dict)."""
+def solve_pair(clip: Path, target_path: Path, flat_feet: bool = False) -> dict:
+    """Solve ``clip`` onto ``target_path`` as the CLI's ``retarget --auto-contacts`` does
+    (with ``--flat-feet`` where ``flat_feet``) and measure the rules. Returns the row (a
+    dict)."""
     import test_foot_contacts as tfc
+    from motion_composer.engine.conversion import BindOptions
     from motion_composer.engine.conversion.automap import automap
     from motion_composer.engine.correction.contacts import find_feet
     from motion_composer.engine.describe import stature
@@ -137,7 +139,7 @@ def solve_pair(clip: Path, target_path: Path) -> dict:
                 row["notes"].append(f"warning: {line}")
             project = Project(performer=Source(str(clip)), target=Source(str(target_path)),
                               correspondence=automap(target.skeleton, performer.skeleton),
-                              auto_contacts=True)
+                              auto_contacts=True, bind_options=BindOptions(flat_feet=flat_feet))
             t0 = time.perf_counter()
             solution = Scene(project, performer, target).solve(regenerate=True)
             row["seconds"] = time.perf_counter() - t0
@@ -297,6 +299,8 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=600.0,
                         help="seconds allowed to one pair (default 600)")
     parser.add_argument("--list", action="store_true", help="list the pairs and exit")
+    parser.add_argument("--flat-feet", action="store_true",
+                        help="bind with flat feet (BindOptions.flat_feet, --flat-feet)")
     args = parser.parse_args()
 
     clips, targets, skipped = clips_and_targets()
@@ -334,7 +338,7 @@ def main() -> None:
             seen[key] = f"{_short(clip)} -> {_short(target)}"
             signal.setitimer(signal.ITIMER_REAL, args.timeout)
             try:
-                row = solve_pair(clip, target)
+                row = solve_pair(clip, target, args.flat_feet)
             finally:
                 signal.setitimer(signal.ITIMER_REAL, 0)
         rows.append(row)
