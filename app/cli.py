@@ -376,10 +376,10 @@ def _profile(args):
 def bind_options_from_args(args, base, target_skeleton=None):
     """``base`` (the profile's :class:`~engine.conversion.BindOptions`, or the defaults) with
     the binding flags given (``--reference``, ``--target-reference``, ``--keep-target-pose``,
-    ``--distribute``, ``--flat-feet``), then the ``--pose-offsets`` file's offsets (by joint, replacing the
-    profile's for those joints; checked against ``target_skeleton`` when given) and the
-    ``--chain-settings`` file's settings (by chain, over the profile's for the settings it
-    gives)."""
+    ``--distribute``, ``--flat-feet``), then the ``--pose-offsets`` file's offsets (by joint,
+    replacing the profile's for those joints; checked against ``target_skeleton`` when given)
+    and the ``--chain-settings`` file's settings (by chain, over the profile's for the
+    settings it gives)."""
     import dataclasses
 
     from motion_composer.engine.project import (SettingsFileError, read_chain_settings,

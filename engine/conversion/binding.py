@@ -44,7 +44,7 @@ from .chains import CHAINS, ChainSettings, ChainSettingsError
 from .correspondence import Correspondence
 from .followers import find_followers
 from ..errors import MappingError, MotionComposerError
-from ..kinematics import fk_arrays, fk_joints
+from ..kinematics import fk_arrays
 from ..motion import Motion
 from ..quaternions import about_axis, from_matrix, qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
@@ -886,24 +886,12 @@ def _standing_turn(motion: Motion, ref, joint: int, end: int, size: float) -> np
     one's 5th percentile over the clip); a frame where it is not (a mid-stride frame) turns to
     the frame of median pitch among the low ones, about the vertical as in the reference
     (:func:`~engine.conversion.followers._standing`); the identity where it is never low."""
-    from .followers import FLAT_LOW, _standing
+    from .followers import _standing
     identity = np.array([0.0, 0.0, 0.0, 1.0])
     if ref.frame is None:
         return identity
-    y = np.empty((motion.num_frames, 2))
-    for lo in range(0, motion.num_frames, _FK_CHUNK):
-        hi = min(motion.num_frames, lo + _FK_CHUNK)
-        _, pos = fk_joints(motion.skeleton, motion.rotations[lo:hi], motion.translations[lo:hi],
-                           [joint, end])
-        y[lo:hi] = pos[..., 1]
-    if np.all(y[ref.frame] < np.percentile(y, 5.0, axis=0) + FLAT_LOW * size):
-        return identity
-    standing = _standing(motion, joint, end, size, ref.world[joint])
+    standing = _standing(motion, joint, end, size, ref.world[joint], ref.frame)
     return identity if standing is None else qmul(standing, qconj(ref.world[joint]))
-
-
-#: frames of forward kinematics at a time for a foot's heights (bounded memory)
-_FK_CHUNK = 4096
 
 
 def _heading_turn(from_dir: np.ndarray, to_dir: np.ndarray) -> np.ndarray | None:

@@ -209,9 +209,10 @@ def _pitch(v: np.ndarray) -> np.ndarray:
 
 
 def _standing(motion: Motion, ankle: int, toe: int, size: float,
-              reference: np.ndarray) -> np.ndarray | None:
+              reference: np.ndarray, frame: int | None = None) -> np.ndarray | None:
     """The performer ``ankle``'s world rotation as it stands flat, turned about the vertical
-    to the heading nearest its ``reference`` world rotation; or None (the foot is never low).
+    to the heading nearest its ``reference`` world rotation; or None (the foot is never low,
+    or is low on ``frame``, the reference's own frame: it stands flat there as it is).
     Flat is the frame of median pitch (``ankle`` to ``toe``) among those where both are low
     (:data:`FLAT_LOW`); its roll is the capture's own."""
     F = motion.num_frames
@@ -222,7 +223,7 @@ def _standing(motion: Motion, ankle: int, toe: int, size: float,
                                            motion.translations[lo:hi], [ankle, toe])
     y = pos[..., 1]
     low = np.flatnonzero(np.all(y < np.percentile(y, 5.0, axis=0) + FLAT_LOW * size, axis=1))
-    if not len(low):
+    if not len(low) or frame in low:
         return None
     pitch = _pitch(pos[low, 1] - pos[low, 0])
     flat = rot[low[int(np.argmin(np.abs(pitch - np.median(pitch))))], 0]
