@@ -4,14 +4,25 @@ rule of :mod:`engine.correction.quality` (over a one-frame span a smoothstep may
 whole correction in that frame, times 1.5), on a real walk; the goal is still met."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
+from conftest import shared_path
 from ik_fixtures import walk_on_holden
 from motion_composer.engine import forward_kinematics
+from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.correction import enforcement
 from motion_composer.engine.correction.constraints import Constraint, ConstraintError
 from motion_composer.engine.correction.enforcement import enforce
-from motion_composer.engine.correction.quality import angular_speed, pop_limits, quality
+from motion_composer.engine.correction.ik import column_scale, quat_to_rotvec
+from motion_composer.engine.correction.preview import WindowSolver
+from motion_composer.engine.correction.quality import angular_speed, pop_limits, quality, ramps
+from motion_composer.engine.formats import read_character, read_performer
+from motion_composer.engine.project import Project, Source
+from motion_composer.engine.quaternions import qconj, qmul, qnormalize
+from motion_composer.engine.scene import Scene
 
 
 @pytest.mark.parametrize("frames", [(199, 200, 240, 241), (199, 200, 200, 201)],
@@ -364,3 +375,128 @@ def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
     pb = forward_kinematics(b.correction.motion).positions
     np.testing.assert_allclose(pb - [0.0, lift, 0.0], pa, atol=1e-4)
     assert b.report["floor"] == {"height_m": 0.0, "lift_m": pytest.approx(lift)}
+
+
+
+@functools.lru_cache(maxsize=None)
+def _jumps_onto_kenney():
+    """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts: the scene,
+    its enabled constraints and a window solver over its composed motion."""
+    performer_file = shared_path("cmu_mb_01_01_jumps.bvh")
+    target_file = shared_path("fbx/maya_kenney_character_7700_binary.fbx")
+    performer = read_performer(performer_file)
+    target = read_character(target_file).rest_motion()
+    project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
+                      correspondence=automap(target.skeleton, performer.skeleton),
+                      auto_contacts=True)
+    scene = Scene(project, performer, target).regenerated()
+    cons = [c for c in scene.constraints if c.enabled]
+    solver = WindowSolver(scene.edited, scene.project.ik_options, carried=scene.carried)
+    return scene, cons, solver
+
+
+#: the landing of the CMU jumps onto Kenney's character: the ramp into the plant of both feet
+LANDING = (2240, 2280)
+
+
+def test_pass_two_ends_each_frame_nearest_its_blend(monkeypatch):
+    """Pass two solves the tasks held on a ramp's frames (here the floors under six foot
+    joints) from the blend, pass one's sum of corrections, which it is pulled towards: each
+    frame must end at the posture nearest its blend that meets them, whatever side of the
+    floors it starts on. On the landing (frames 2252-2266) the blend adds the key frame's
+    turn of each foot (flat: 25 degrees) to feet still pitched toe down and puts the toes'
+    tips up to 83 mm under the floor; solved from there, the first step turned the feet
+    heel down about the toes and pinned an ankle on its own floor, a hold the pull to the
+    blend kept: 0.18 from the blend in the solver's weighted norm, where the same frame
+    started from either neighbour's correction ends at 0.05, and its neighbours lifted the
+    body instead (the hips 90 mm apart in one frame). Every frame pass two solves here is
+    solved again from each neighbour's correction: none ends nearer its blend."""
+    scene, cons, solver = _jumps_onto_kenney()
+    calls, inside = [], []
+    pass_two, solve = enforcement._pass_two, enforcement.solve_frames
+
+    def spy_pass_two(*args, **kwargs):
+        inside.append(True)
+        try:
+            return pass_two(*args, **kwargs)
+        finally:
+            inside.pop()
+
+    def spy_solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
+                  locked=frozenset()):
+        out = solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
+                    locked)
+        if inside:
+            calls.append((skeleton, tasks, attraction_rot, attraction_root, tra, options,
+                          locked, out))
+        return out
+
+    monkeypatch.setattr(enforcement, "_pass_two", spy_pass_two)
+    monkeypatch.setattr(enforcement, "solve_frames", spy_solve)
+    part, first = solver.solve(cons, *LANDING)
+    monkeypatch.undo()
+    assert calls
+    # the floors hold: each foot joint at or above its own height, less a millimetre
+    floors = [c for c in cons if c.kind == "plane"]
+    assert floors
+    frames = slice(LANDING[0] - first, LANDING[1] + 1 - first)
+    pose = forward_kinematics(part).positions
+    for c in floors:
+        y = pose[frames, part.skeleton.index[c.joint], 1]
+        assert y.min() >= c.goal["point"][1] - 1e-3, c.joint
+    checked = 0
+    for sk, tasks, arot, aroot, tra, options, locked, (rot2, tra2, residual, _) in calls:
+        weight = column_scale(sk, np.arange(sk.num_joints), options.scale)
+
+        def distance(r, t, i):
+            """The solver's weighted distance of the posture ``r, t`` from row ``i``'s
+            blend (the root's translation in its share of the stature)."""
+            turn = quat_to_rotvec(qmul(r, qconj(arot[i])))
+            return float(np.sqrt(np.sum(((t[0] - aroot[i]) / weight[:3]) ** 2)
+                                 + np.sum(turn ** 2)))
+
+        for i in range(len(rot2)):
+            if residual[i].max() > 1e-4:
+                continue
+            own = distance(rot2[i], tra2[i], i)
+            for k in (i - 1, i + 1):
+                if not 0 <= k < len(rot2):
+                    continue
+                # row k's correction (per joint and the root's) added to row i's blend
+                start_rot = qnormalize(qmul(qmul(rot2[k], qconj(arot[k])), arot[i]))
+                start_tra = tra[i].copy()
+                start_tra[0] = aroot[i] + tra2[k][0] - aroot[k]
+                r, t, res, _ = solve(sk, [task.take([i]) for task in tasks],
+                                     start_rot[None], start_tra[None], arot[i:i + 1],
+                                     aroot[i:i + 1], options, locked)
+                if res.max() > 1e-4:
+                    continue
+                assert own <= distance(r[0], t[0], i) + 1e-3, (i, k, own)
+                checked += 1
+    assert checked >= 10
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "open (issue 14 point 2): RightUpLeg 1.07 times the no-pop limit at 2262 (283 deg/s over "
+    "263), where the capture's own thigh turns 220: pass two now ends each frame at the "
+    "posture nearest its blend (was 2.00, the Hips, from a hold the solve kept), and that "
+    "posture follows the blend's toes, 45, 83 and 59 mm under the floor over 2260-2262: the "
+    "lift the floors need changes by the frame"))
+def test_a_landing_whose_blend_sinks_the_feet_is_solved_without_a_pop():
+    """The CMU jumps onto Kenney's Maya character (FBX), the landing of frames 2252-2266
+    (:func:`test_pass_two_ends_each_frame_nearest_its_blend`): no joint turns faster than the
+    no-pop rule allows around the ramps of frames 2240-2280. Solved in a window
+    (:class:`WindowSolver`): the frames a whole solve gives there."""
+    scene, cons, solver = _jumps_onto_kenney()
+    composed = scene.edited
+    lo, hi = LANDING
+    spans = [(a, b) for a, b in ramps(cons, composed.num_frames) if lo <= a and b <= hi]
+    assert any(a < 2262 < b for a, b in spans)            # the landing's ramp in
+    part, first = solver.solve(cons, lo, hi)
+    direct = composed.frames(slice(first, first + part.num_frames))
+    limit = pop_limits(direct, part, [(a - first, b - first) for a, b in spans])
+    frames = slice(lo + 1 - first, hi + 1 - first)
+    ratio = angular_speed(part)[frames] / limit[frames]
+    worst = np.unravel_index(np.argmax(ratio), ratio.shape)
+    assert ratio[worst] <= 1.0, (part.skeleton.names[worst[1]], lo + 1 + worst[0],
+                                 float(ratio[worst]))

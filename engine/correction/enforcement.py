@@ -755,7 +755,77 @@ def _pass_two(problem: _Problem, rot, tra, held, only=None):
     closer = dataclasses.replace(problem, options=dataclasses.replace(
         options, settle=options.settle * 0.1),
         previous=np.full(problem.num_frames, -1, dtype=np.intp))
-    return _solve(closer, entries, rot, tra, only=problem.wanted if only is None else only)
+    only = problem.wanted if only is None else only
+    start = (rot.copy(), _above_planes(problem, entries, rot, tra, only))
+    return _solve(closer, entries, rot, tra, start=start, only=only)
+
+
+#: sweeps of the dual ascent that finds the root's move out of one-sided planes
+#: (:func:`_above_planes`): planes of one normal (floors) need one, a corner a few
+PLANE_SWEEPS = 50
+
+
+def _above_planes(problem: _Problem, entries, rot, tra, only) -> np.ndarray:
+    """A copy of ``tra`` with the root moved, on each frame of ``entries`` (and of ``only``,
+    a mask; ``None``: all) where the posture ``rot``, ``tra`` puts a joint on the wrong side
+    of a one-sided plane (a floor), by the shortest translation that brings every such joint
+    onto its side: pass two's start there. The blend can put the feet centimetres under the
+    floor (a landing's ramp in adds the key frame's turn of the foot, flat, to a foot still
+    pitched toe down: the CMU jumps onto Kenney's Maya character, toes 83 mm under); from
+    there the first step pushes every joint up at once, turns the feet heel down about the
+    toes and pins the ankle on its own floor, a hold the pull to the blend keeps (0.18 from
+    the blend, in the solver's weighted norm, where the posture nearest it that meets the
+    floors is 0.05), and the neighbouring frames, which took the other way, lift the body
+    (the hips 90 mm apart in one frame). From above the planes the pull to the blend brings
+    the joints down onto them, and each frame ends at the posture nearest its blend."""
+    tra = tra.copy()
+    sk = problem.skeleton
+    lone = []
+    for i, frames, goals in entries:
+        if problem.cons[i].kind_object.one_sided(problem.cons[i].goal) and len(frames):
+            if only is not None:
+                keep = only[frames]
+                frames, goals = frames[keep], goals[keep]
+            lone.append((sk.index[problem.cons[i].joint], frames, goals))
+    if not lone:
+        return tra
+    acts = {j: effector(j, problem.carried) for j, _, _ in lone}
+    anchors = sorted({a for a, _ in acts.values()})
+    frames = np.unique(np.concatenate([f for _, f, _ in lone]))
+    for lo in range(0, len(frames), problem.chunk_frames):
+        f = frames[lo:lo + problem.chunk_frames]
+        turn, pose = fk_joints(sk, rot[f], tra[f], anchors)
+        # per plane and frame: a . d >= b for the root's move d (a the normal towards the
+        # allowed side, b how far the joint is on the wrong side); -inf where not held
+        a = np.zeros((len(f), len(lone), 3))
+        b = np.full((len(f), len(lone)), -np.inf)
+        for k, (j, fr, goals) in enumerate(lone):
+            row = np.searchsorted(f, fr)
+            inside = (row < len(f)) & (f[np.minimum(row, len(f) - 1)] == fr)
+            row, goals = row[inside], goals[inside]
+            anchor, point = acts[j]
+            at = pose[row, anchors.index(anchor)]
+            if point is not None:
+                at = at + qrot(turn[row, anchors.index(anchor)],
+                               np.broadcast_to(point, (len(row), 3)))
+            toward = goals[:, 3:6] * goals[:, 6:7]
+            a[row, k] = toward
+            b[row, k] = -np.sum((at - goals[:, 0:3]) * toward, axis=1)
+        out = (b > 0.0).any(axis=1)
+        if not out.any():
+            continue
+        a, b = a[out], b[out]
+        # the shortest d (Hildreth's dual coordinate ascent; each a is a unit vector)
+        d = np.zeros((len(a), 3))
+        lam = np.zeros(b.shape)
+        for _ in range(PLANE_SWEEPS):
+            for k in range(len(lone)):
+                change = np.maximum(-lam[:, k], b[:, k] - np.sum(a[:, k] * d, axis=1))
+                change[~np.isfinite(change)] = 0.0
+                lam[:, k] += change
+                d += change[:, None] * a[:, k]
+        tra[f[out], 0] += d
+    return tra
 
 
 def _repair_boundaries(units) -> list:
