@@ -153,6 +153,31 @@ def test_only_the_cmu_jumps_have_glitches_under_their_contacts():
     assert {k: v for k, v in found.items() if v} == {"shared/cmu_mb_01_01_jumps.bvh": [975, 980]}
 
 
+
+@pytest.mark.parametrize("target, frames", [
+    ("fbx/maya_kenney_character_7700_binary.fbx", [975, 980]),
+    ("target_robot_expressive.glb", [975, 980, 1010]),
+], ids=["kenney", "robot"])
+def test_a_rig_whose_root_never_turns_has_its_body_judged_below_it(target, frames):
+    """Kenney's Maya character hangs its hips (``HipsCtrl``) and its feet's controls from a
+    ``Root`` the conversion never turns, and the robot its body and feet from ``Bone``: the
+    topmost branching joint is that still node, so no frame ever turned out and back there,
+    and the CMU jumps' glitches under the planted feet (975 and 980, found on every other
+    character) were not found (a pop 1.93 times the no-pop limit on Kenney's at 980). The
+    body is judged at the branching joint under the still node's largest child: the same
+    two frames (the robot, whose held joints are controls carried with its shins, also 1010,
+    as the fox); and the Bandai walk onto them, none."""
+    target_file = shared_path(target)
+    for clip, expected in (("cmu_mb_01_01_jumps.bvh", frames),
+                           ("bandai1_walk_normal_001.bvh", [])):
+        clip_file = shared_path(clip)
+        scene = _scene(read_motion(clip_file), clip_file, target_file)
+        composed = scene.composed
+        top = composed.skeleton.body_top()
+        assert np.ptp(composed.rotations[:, top], axis=0).max() == 0.0   # a still node
+        found = held_glitches(composed, scene.automatic_constraints(), figure_size(composed))
+        assert found.tolist() == expected, clip
+
 def test_the_way_between_keeps_everything_but_the_glitch():
     """``without_glitches`` changes the glitch frames only: rotations on the arc between the
     neighbours (a run of two from the frames either side), the root on the line."""

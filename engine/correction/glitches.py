@@ -45,6 +45,9 @@ __all__ = ["RATIO", "FLOOR", "held_glitches", "without_glitches"]
 RATIO = 8.0
 #: a held joint's excursion at least this share of the figure's size (jitter aside)
 FLOOR = 1e-3
+#: a joint whose rotation (quaternion components) never moves further than this from its
+#: first frame's never turns (the conversion holds it still, rounding aside)
+STILL = 1e-12
 
 
 def _out_and_back(excursion: np.ndarray, half_step: np.ndarray, floor: float = 0.0):
@@ -63,6 +66,34 @@ def _out_and_back(excursion: np.ndarray, half_step: np.ndarray, floor: float = 0
     return out
 
 
+def _body(composed: Motion) -> int:
+    """The joint whose world turn is the body's: the topmost branching joint
+    (:meth:`~engine.skeleton.Skeleton.body_top`) where it turns; where neither it nor any
+    joint above it ever turns (a rig's still root carrying the hips beside the feet's
+    controls: Kenney's Maya character, whose ``Root`` holds ``HipsCtrl`` and two
+    ``FootCtrl``, or the robot's ``Bone``), the topmost branching joint under its child that
+    carries the most joints, and so on down. Judged at a still root, no frame of a clip would
+    ever turn out and back."""
+    sk = composed.skeleton
+    rot = composed.rotations
+    size = np.ones(sk.num_joints, dtype=int)            # the joints each carries, itself too
+    for j in range(sk.num_joints - 1, 0, -1):
+        size[sk.parents[j]] += size[j]
+
+    def still(j: int) -> bool:
+        return bool(np.all(np.abs(rot[:, j] - rot[:1, j]) <= STILL))
+
+    top = sk.body_top()
+    while all(still(j) for j in (top, *sk.ancestors(top))) and sk.children[top]:
+        j = max(sk.children[top], key=lambda k: size[k])
+        while len(sk.children[j]) == 1:
+            j = sk.children[j][0]
+        if not sk.children[j]:
+            break
+        top = j
+    return top
+
+
 def held_glitches(composed: Motion, constraints, size: float) -> np.ndarray:
     """The frames of ``composed`` that are one-frame glitches under a held goal (see the
     module), sorted; ``constraints`` are a solve's (disabled ones and one-sided planes hold
@@ -75,7 +106,7 @@ def held_glitches(composed: Motion, constraints, size: float) -> np.ndarray:
             if c.enabled and c.joint in sk.index and not c.kind_object.one_sided(c.goal)]
     if F < 9 or not held:
         return np.zeros(0, dtype=int)
-    top = sk.body_top()
+    top = _body(composed)
     q = composed.rotations[:, top]
     for a in sk.ancestors(top):                        # its world rotation
         q = qmul(composed.rotations[:, a], q)
