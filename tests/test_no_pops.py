@@ -377,7 +377,6 @@ def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
     assert b.report["floor"] == {"height_m": 0.0, "lift_m": pytest.approx(lift)}
 
 
-
 @functools.lru_cache(maxsize=None)
 def _jumps_onto_kenney():
     """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts: the scene,
