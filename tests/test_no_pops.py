@@ -13,6 +13,7 @@ from conftest import shared_path
 from ik_fixtures import walk_on_holden
 from motion_composer.engine import forward_kinematics
 from motion_composer.engine.conversion.automap import automap
+from motion_composer.engine.conversion.binding import BindOptions
 from motion_composer.engine.correction import enforcement
 from motion_composer.engine.correction.constraints import Constraint, ConstraintError
 from motion_composer.engine.correction.enforcement import enforce
@@ -378,16 +379,17 @@ def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
 
 
 @functools.lru_cache(maxsize=None)
-def _jumps_onto_kenney():
-    """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts: the scene,
-    its enabled constraints and a window solver over its composed motion."""
+def _jumps_onto_kenney(flat_feet: bool = False):
+    """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts (bound with
+    flat feet where ``flat_feet``): the scene, its enabled constraints and a window solver
+    over its composed motion."""
     performer_file = shared_path("cmu_mb_01_01_jumps.bvh")
     target_file = shared_path("fbx/maya_kenney_character_7700_binary.fbx")
     performer = read_performer(performer_file)
     target = read_character(target_file).rest_motion()
     project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
                       correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True)
+                      auto_contacts=True, bind_options=BindOptions(flat_feet=flat_feet))
     scene = Scene(project, performer, target).regenerated()
     cons = [c for c in scene.constraints if c.enabled]
     solver = WindowSolver(scene.edited, scene.project.ik_options, carried=scene.carried)
@@ -396,6 +398,83 @@ def _jumps_onto_kenney():
 
 #: the landing of the CMU jumps onto Kenney's character: the ramp into the plant of both feet
 LANDING = (2240, 2280)
+
+
+def _solves_of(stage: str, monkeypatch, solver, cons):
+    """The window ``LANDING`` solved, with every call of the IK solver that ``stage``
+    (``"_pass_one"`` or ``"_pass_two"`` of :mod:`enforcement`) makes recorded: ``(part,
+    first, calls)``, each call ``(skeleton, tasks, attraction rot, attraction root, start
+    translations, options, locked, result)``."""
+    calls, inside = [], []
+    wrapped, solve = getattr(enforcement, stage), enforcement.solve_frames
+
+    def spy_stage(*args, **kwargs):
+        inside.append(True)
+        try:
+            return wrapped(*args, **kwargs)
+        finally:
+            inside.pop()
+
+    def spy_solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
+                  locked=frozenset()):
+        out = solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
+                    locked)
+        if inside:
+            calls.append((skeleton, tasks, attraction_rot, attraction_root, tra, options,
+                          locked, out))
+        return out
+
+    monkeypatch.setattr(enforcement, stage, spy_stage)
+    monkeypatch.setattr(enforcement, "solve_frames", spy_solve)
+    part, first = solver.solve(cons, *LANDING)
+    monkeypatch.undo()
+    return part, first, calls
+
+
+def _nearest_whatever_the_start(calls) -> int:
+    """Each frame of the recorded solves ``calls`` (:func:`_solves_of`) solved again from each
+    neighbouring row's correction added to its own attraction posture: asserts that none ends
+    nearer that posture, in the solver's weighted norm (the root's translation in its share
+    of the stature), than the solve did. Returns how many were compared."""
+    solve = enforcement.solve_frames
+    checked = 0
+    for sk, tasks, arot, aroot, tra, options, locked, (rot2, tra2, residual, _) in calls:
+        weight = column_scale(sk, np.arange(sk.num_joints), options.scale)
+
+        def distance(r, t, i):
+            turn = quat_to_rotvec(qmul(r, qconj(arot[i])))
+            return float(np.sqrt(np.sum(((t[0] - aroot[i]) / weight[:3]) ** 2)
+                                 + np.sum(turn ** 2)))
+
+        for i in range(len(rot2)):
+            if residual[i].max() > 1e-4:
+                continue
+            own = distance(rot2[i], tra2[i], i)
+            for k in (i - 1, i + 1):
+                if not 0 <= k < len(rot2):
+                    continue
+                start_rot = qnormalize(qmul(qmul(rot2[k], qconj(arot[k])), arot[i]))
+                start_tra = tra[i].copy()
+                start_tra[0] = aroot[i] + tra2[k][0] - aroot[k]
+                r, t, res, _ = solve(sk, [task.take([i]) for task in tasks],
+                                     start_rot[None], start_tra[None], arot[i:i + 1],
+                                     aroot[i:i + 1], options, locked)
+                if res.max() > 1e-4:
+                    continue
+                assert own <= distance(r[0], t[0], i) + 1e-3, (i, k, own)
+                checked += 1
+    return checked
+
+
+def _floors_hold(part, first, cons) -> None:
+    """Each foot joint at or above its floor, less a millimetre, over ``LANDING``."""
+    floors = [c for c in cons if c.kind == "plane"]
+    assert floors
+    frames = slice(LANDING[0] - first, LANDING[1] + 1 - first)
+    pose = forward_kinematics(part).positions
+    for c in floors:
+        y = pose[frames, part.skeleton.index[c.joint], 1]
+        assert y.min() >= c.goal["point"][1] - 1e-3, c.joint
 
 
 def test_pass_two_ends_each_frame_nearest_its_blend(monkeypatch):
@@ -411,68 +490,31 @@ def test_pass_two_ends_each_frame_nearest_its_blend(monkeypatch):
     body instead (the hips 90 mm apart in one frame). Every frame pass two solves here is
     solved again from each neighbour's correction: none ends nearer its blend."""
     scene, cons, solver = _jumps_onto_kenney()
-    calls, inside = [], []
-    pass_two, solve = enforcement._pass_two, enforcement.solve_frames
-
-    def spy_pass_two(*args, **kwargs):
-        inside.append(True)
-        try:
-            return pass_two(*args, **kwargs)
-        finally:
-            inside.pop()
-
-    def spy_solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
-                  locked=frozenset()):
-        out = solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
-                    locked)
-        if inside:
-            calls.append((skeleton, tasks, attraction_rot, attraction_root, tra, options,
-                          locked, out))
-        return out
-
-    monkeypatch.setattr(enforcement, "_pass_two", spy_pass_two)
-    monkeypatch.setattr(enforcement, "solve_frames", spy_solve)
-    part, first = solver.solve(cons, *LANDING)
-    monkeypatch.undo()
+    part, first, calls = _solves_of("_pass_two", monkeypatch, solver, cons)
     assert calls
-    # the floors hold: each foot joint at or above its own height, less a millimetre
-    floors = [c for c in cons if c.kind == "plane"]
-    assert floors
-    frames = slice(LANDING[0] - first, LANDING[1] + 1 - first)
-    pose = forward_kinematics(part).positions
-    for c in floors:
-        y = pose[frames, part.skeleton.index[c.joint], 1]
-        assert y.min() >= c.goal["point"][1] - 1e-3, c.joint
-    checked = 0
-    for sk, tasks, arot, aroot, tra, options, locked, (rot2, tra2, residual, _) in calls:
-        weight = column_scale(sk, np.arange(sk.num_joints), options.scale)
+    _floors_hold(part, first, cons)
+    assert _nearest_whatever_the_start(calls) >= 10
 
-        def distance(r, t, i):
-            """The solver's weighted distance of the posture ``r, t`` from row ``i``'s
-            blend (the root's translation in its share of the stature)."""
-            turn = quat_to_rotvec(qmul(r, qconj(arot[i])))
-            return float(np.sqrt(np.sum(((t[0] - aroot[i]) / weight[:3]) ** 2)
-                                 + np.sum(turn ** 2)))
 
-        for i in range(len(rot2)):
-            if residual[i].max() > 1e-4:
-                continue
-            own = distance(rot2[i], tra2[i], i)
-            for k in (i - 1, i + 1):
-                if not 0 <= k < len(rot2):
-                    continue
-                # row k's correction (per joint and the root's) added to row i's blend
-                start_rot = qnormalize(qmul(qmul(rot2[k], qconj(arot[k])), arot[i]))
-                start_tra = tra[i].copy()
-                start_tra[0] = aroot[i] + tra2[k][0] - aroot[k]
-                r, t, res, _ = solve(sk, [task.take([i]) for task in tasks],
-                                     start_rot[None], start_tra[None], arot[i:i + 1],
-                                     aroot[i:i + 1], options, locked)
-                if res.max() > 1e-4:
-                    continue
-                assert own <= distance(r[0], t[0], i) + 1e-3, (i, k, own)
-                checked += 1
-    assert checked >= 10
+@pytest.mark.xfail(strict=True, reason=(
+    "open (issue 14 point 2): with flat feet pass one starts this landing's frame 2262 from "
+    "the composed posture 59 mm under the floor and ends 0.46 from it where a start above the "
+    "floors ends at 0.10 (the hips 216 mm under the frame before's; the no-pop rule 2.88). "
+    "Started above the floors as pass two is, it passes (the landing then 1.02), but that "
+    "changes pass one on every frame a floor's joint starts under: measured on part of the "
+    "sweep, the CMU jumps onto the CMU T-pose went 1.07 -> 1.09 and lost its keys fitted to "
+    "the tasks, and two glitch tests' measured figures moved; not landed"))
+def test_pass_one_ends_each_frame_nearest_the_composed_posture(monkeypatch):
+    """Pass one solves each frame from the composed posture, which it is pulled towards. The
+    CMU jumps onto Kenney's character bound with flat feet sink the feet through the floor
+    on the landing (the ankles 59 mm and 30 mm under theirs on 2262): every frame pass one
+    solves on the landing, solved again from each neighbour's correction, must end no
+    nearer its composed posture."""
+    scene, cons, solver = _jumps_onto_kenney(flat_feet=True)
+    part, first, calls = _solves_of("_pass_one", monkeypatch, solver, cons)
+    assert calls
+    _floors_hold(part, first, cons)
+    assert _nearest_whatever_the_start(calls) >= 10
 
 
 @pytest.mark.xfail(strict=True, reason=(
