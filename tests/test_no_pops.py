@@ -477,41 +477,36 @@ def _floors_hold(part, first, cons) -> None:
         assert y.min() >= c.goal["point"][1] - 1e-3, c.joint
 
 
-def test_pass_two_ends_each_frame_nearest_its_blend(monkeypatch):
-    """Pass two solves the tasks held on a ramp's frames (here the floors under six foot
-    joints) from the blend, pass one's sum of corrections, which it is pulled towards: each
-    frame must end at the posture nearest its blend that meets them, whatever side of the
-    floors it starts on. On the landing (frames 2252-2266) the blend adds the key frame's
-    turn of each foot (flat: 25 degrees) to feet still pitched toe down and puts the toes'
-    tips up to 83 mm under the floor; solved from there, the first step turned the feet
-    heel down about the toes and pinned an ankle on its own floor, a hold the pull to the
-    blend kept: 0.18 from the blend in the solver's weighted norm, where the same frame
-    started from either neighbour's correction ends at 0.05, and its neighbours lifted the
-    body instead (the hips 90 mm apart in one frame). Every frame pass two solves here is
-    solved again from each neighbour's correction: none ends nearer its blend."""
-    scene, cons, solver = _jumps_onto_kenney()
-    part, first, calls = _solves_of("_pass_two", monkeypatch, solver, cons)
-    assert calls
-    _floors_hold(part, first, cons)
-    assert _nearest_whatever_the_start(calls) >= 10
-
-
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 14 point 2): with flat feet pass one starts this landing's frame 2262 from "
-    "the composed posture 59 mm under the floor and ends 0.46 from it where a start above the "
-    "floors ends at 0.10 (the hips 216 mm under the frame before's; the no-pop rule 2.88). "
-    "Started above the floors as pass two is, it passes (the landing then 1.02), but that "
-    "changes pass one on every frame a floor's joint starts under: measured on part of the "
-    "sweep, the CMU jumps onto the CMU T-pose went 1.07 -> 1.09 and lost its keys fitted to "
-    "the tasks, and two glitch tests' measured figures moved; not landed"))
-def test_pass_one_ends_each_frame_nearest_the_composed_posture(monkeypatch):
-    """Pass one solves each frame from the composed posture, which it is pulled towards. The
-    CMU jumps onto Kenney's character bound with flat feet sink the feet through the floor
-    on the landing (the ankles 59 mm and 30 mm under theirs on 2262): every frame pass one
-    solves on the landing, solved again from each neighbour's correction, must end no
-    nearer its composed posture."""
-    scene, cons, solver = _jumps_onto_kenney(flat_feet=True)
-    part, first, calls = _solves_of("_pass_one", monkeypatch, solver, cons)
+@pytest.mark.parametrize("stage, flat_feet", [
+    ("_pass_two", False),
+    pytest.param("_pass_one", True, marks=pytest.mark.xfail(strict=True, reason=(
+        "open (issue 14 point 2): with flat feet pass one starts this landing's frame 2262 "
+        "from the composed posture 59 mm under the floor and ends 0.46 from it where a start "
+        "above the floors ends at 0.10 (the hips 216 mm under the frame before's; the no-pop "
+        "rule 2.88). Started above the floors as pass two is, it passes (the landing then "
+        "1.02), but that changes pass one on every frame a floor's joint starts under: "
+        "measured on part of the sweep, the CMU jumps onto the CMU T-pose went 1.07 -> 1.09 "
+        "and lost its keys fitted to the tasks, and two glitch tests' measured figures "
+        "moved; not landed"))),
+], ids=["pass-two", "pass-one-flat-feet"])
+def test_each_frame_ends_nearest_its_attraction_whatever_the_start(stage, flat_feet,
+                                                                   monkeypatch):
+    """Pass one solves each frame from the composed posture, pass two the tasks held on a
+    ramp's frames (here the floors under six foot joints) from the blend, pass one's sum of
+    corrections; each is pulled towards where it starts, and must end at the posture nearest
+    it that meets the tasks, whatever side of the floors it starts on. On the landing of the
+    CMU jumps onto Kenney's character (frames 2252-2266) the blend adds the key frame's turn
+    of each foot (flat: 25 degrees) to feet still pitched toe down and puts the toes' tips up
+    to 83 mm under the floor; solved from there, pass two's first step turned the feet heel
+    down about the toes and pinned an ankle on its own floor, a hold the pull to the blend
+    kept: 0.18 from the blend in the solver's weighted norm, where the same frame started
+    from either neighbour's correction ends at 0.05, and its neighbours lifted the body
+    instead (the hips 90 mm apart in one frame). Bound with flat feet, the composed posture
+    itself sinks the ankles 59 mm and 30 mm under their floors on 2262. Every frame the stage
+    solves on the landing is solved again from each neighbour's correction: none may end
+    nearer where it started from; the floors hold."""
+    scene, cons, solver = _jumps_onto_kenney(flat_feet=flat_feet)
+    part, first, calls = _solves_of(stage, monkeypatch, solver, cons)
     assert calls
     _floors_hold(part, first, cons)
     assert _nearest_whatever_the_start(calls) >= 10
@@ -525,9 +520,9 @@ def test_pass_one_ends_each_frame_nearest_the_composed_posture(monkeypatch):
     "lift the floors need changes by the frame"))
 def test_a_landing_whose_blend_sinks_the_feet_is_solved_without_a_pop():
     """The CMU jumps onto Kenney's Maya character (FBX), the landing of frames 2252-2266
-    (:func:`test_pass_two_ends_each_frame_nearest_its_blend`): no joint turns faster than the
-    no-pop rule allows around the ramps of frames 2240-2280. Solved in a window
-    (:class:`WindowSolver`): the frames a whole solve gives there."""
+    (:func:`test_each_frame_ends_nearest_its_attraction_whatever_the_start`): no joint turns
+    faster than the no-pop rule allows around the ramps of frames 2240-2280. Solved in a
+    window (:class:`WindowSolver`): the frames a whole solve gives there."""
     scene, cons, solver = _jumps_onto_kenney()
     composed = scene.edited
     lo, hi = LANDING
