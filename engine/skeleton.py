@@ -152,6 +152,14 @@ class Skeleton:
         return _frozen(idx, dtype=np.intp)
 
     @cached_property
+    def subtree_sizes(self) -> np.ndarray:
+        """Per joint, how many joints it carries, itself included."""
+        size = np.ones(self.num_joints, dtype=np.intp)
+        for j in range(self.num_joints - 1, 0, -1):
+            size[self.parents[j]] += size[j]
+        return _frozen(size, dtype=np.intp)
+
+    @cached_property
     def depth(self) -> np.ndarray:
         d = np.zeros(self.num_joints, dtype=np.intp)
         for j in range(1, self.num_joints):

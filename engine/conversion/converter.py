@@ -251,9 +251,7 @@ def _bone_axes(tsk) -> dict[int, np.ndarray]:
     """Per target joint, its bone's direction ``(3,)`` in its own frame: towards its child
     with the largest subtree, or its End Site; joints with neither (or a zero-length bone)
     have none."""
-    subtree = np.ones(tsk.num_joints, dtype=np.intp)
-    for j in range(tsk.num_joints - 1, 0, -1):
-        subtree[tsk.parents[j]] += subtree[j]
+    subtree = tsk.subtree_sizes
     ends = {site.parent: np.asarray(site.offset, dtype=float) for site in tsk.end_sites}
     axes = {}
     for j in range(tsk.num_joints):

@@ -819,11 +819,15 @@ def _above_planes(problem: _Problem, entries, rot, tra, only) -> np.ndarray:
         d = np.zeros((len(a), 3))
         lam = np.zeros(b.shape)
         for _ in range(PLANE_SWEEPS):
+            moved = False
             for k in range(len(lone)):
+                # -lam where the plane is not held on the frame (b = -inf): lam stays 0
                 change = np.maximum(-lam[:, k], b[:, k] - np.sum(a[:, k] * d, axis=1))
-                change[~np.isfinite(change)] = 0.0
                 lam[:, k] += change
                 d += change[:, None] * a[:, k]
+                moved = moved or bool(np.any(change != 0.0))
+            if not moved:                 # met exactly (floors: after the first sweep)
+                break
         tra[f[out], 0] += d
     return tra
 

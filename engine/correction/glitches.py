@@ -45,9 +45,6 @@ __all__ = ["RATIO", "FLOOR", "held_glitches", "without_glitches"]
 RATIO = 8.0
 #: a held joint's excursion at least this share of the figure's size (jitter aside)
 FLOOR = 1e-3
-#: a joint whose rotation (quaternion components) never moves further than this from its
-#: first frame's never turns (the conversion holds it still, rounding aside)
-STILL = 1e-12
 
 
 def _out_and_back(excursion: np.ndarray, half_step: np.ndarray, floor: float = 0.0):
@@ -74,18 +71,12 @@ def _body(composed: Motion) -> int:
     ``FootCtrl``, or the robot's ``Bone``), the topmost branching joint under its child that
     carries the most joints, and so on down. Judged at a still root, no frame of a clip would
     ever turn out and back."""
+    from .enforcement import _still_joints
     sk = composed.skeleton
-    rot = composed.rotations
-    size = np.ones(sk.num_joints, dtype=int)            # the joints each carries, itself too
-    for j in range(sk.num_joints - 1, 0, -1):
-        size[sk.parents[j]] += size[j]
-
-    def still(j: int) -> bool:
-        return bool(np.all(np.abs(rot[:, j] - rot[:1, j]) <= STILL))
-
+    still = _still_joints(composed)
     top = sk.body_top()
-    while all(still(j) for j in (top, *sk.ancestors(top))) and sk.children[top]:
-        j = max(sk.children[top], key=lambda k: size[k])
+    while all(j in still for j in (top, *sk.ancestors(top))) and sk.children[top]:
+        j = max(sk.children[top], key=lambda k: sk.subtree_sizes[k])
         while len(sk.children[j]) == 1:
             j = sk.children[j][0]
         if not sk.children[j]:
