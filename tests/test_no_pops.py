@@ -404,9 +404,12 @@ def _solves_of(stage: str, monkeypatch, solver, cons):
     """The window ``LANDING`` solved, with every call of the IK solver that ``stage``
     (``"_pass_one"`` or ``"_pass_two"`` of :mod:`enforcement`) makes recorded: ``(part,
     first, calls)``, each call ``(skeleton, tasks, attraction rot, attraction root, start
-    translations, options, locked, result)``."""
-    calls, inside = [], []
+    translations, options, locked, result)``. Pass one solves its frames that start under a
+    floor again from above it and keeps the nearer (:func:`enforcement._nearer_from_above`):
+    the rows it kept replace the first solve's (:func:`_as_kept`)."""
+    calls, inside, again, kept = [], [], [], []
     wrapped, solve = getattr(enforcement, stage), enforcement.solve_frames
+    nearer = enforcement._nearer_from_above
 
     def spy_stage(*args, **kwargs):
         inside.append(True)
@@ -415,20 +418,65 @@ def _solves_of(stage: str, monkeypatch, solver, cons):
         finally:
             inside.pop()
 
+    def spy_nearer(problem, entries, rot, tra, *args):
+        again.append(True)
+        try:
+            out = nearer(problem, entries, rot, tra, *args)
+        finally:
+            again.pop()
+        kept.append((problem.composed, rot, tra))
+        return out
+
     def spy_solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
                   locked=frozenset()):
         out = solve(skeleton, tasks, rot, tra, attraction_rot, attraction_root, options,
                     locked)
         if inside:
             calls.append((skeleton, tasks, attraction_rot, attraction_root, tra, options,
-                          locked, out))
+                          locked, out, bool(again)))
         return out
 
     monkeypatch.setattr(enforcement, stage, spy_stage)
+    monkeypatch.setattr(enforcement, "_nearer_from_above", spy_nearer)
     monkeypatch.setattr(enforcement, "solve_frames", spy_solve)
     part, first = solver.solve(cons, *LANDING)
     monkeypatch.undo()
-    return part, first, calls
+    return part, first, _as_kept(calls, kept)
+
+
+def _as_kept(calls, kept) -> list:
+    """``calls`` (:func:`_solves_of`) with each row that a solve from above the floors
+    replaced (``kept``: per :func:`enforcement._nearer_from_above` the composed motion and
+    the postures it left) holding the row kept: the same frame (attraction posture) and
+    tasks, the result it ended with; those solves left out."""
+    def key(tasks, arot, aroot, i):
+        return (arot[i].tobytes(), aroot[i].tobytes(),
+                tuple((t.joint, t.goal[i].tobytes(), float(t.weight[i])) for t in tasks))
+
+    taken = {}
+    for composed, rot, tra in kept:
+        for sk, tasks, arot, aroot, _, _, _, (r, t, res, _), above in calls:
+            if not above:
+                continue
+            for i in range(len(r)):
+                same = np.flatnonzero(
+                    (composed.rotations == arot[i]).all(axis=(1, 2))
+                    & (composed.translations[:, 0] == aroot[i]).all(axis=1))
+                if any(np.array_equal(rot[f], r[i]) and np.array_equal(tra[f], t[i])
+                       for f in same):
+                    taken[key(tasks, arot, aroot, i)] = (r[i], t[i], res[i])
+    out = []
+    for *call, (r, t, res, it), above in calls:
+        if above:
+            continue
+        r, t, res = r.copy(), t.copy(), res.copy()
+        for i in range(len(r)):
+            row = taken.pop(key(call[1], call[2], call[3], i), None)
+            if row is not None:
+                r[i], t[i], res[i] = row
+        out.append((*call, (r, t, res, it)))
+    assert not taken                    # each kept row replaced one of the first solve's
+    return out
 
 
 def _nearest_whatever_the_start(calls) -> int:
@@ -479,15 +527,7 @@ def _floors_hold(part, first, cons) -> None:
 
 @pytest.mark.parametrize("stage, flat_feet", [
     ("_pass_two", False),
-    pytest.param("_pass_one", True, marks=pytest.mark.xfail(strict=True, reason=(
-        "open (issue 14 point 2): with flat feet pass one starts this landing's frame 2262 "
-        "from the composed posture 59 mm under the floor and ends 0.46 from it where a start "
-        "above the floors ends at 0.10 (the hips 216 mm under the frame before's; the no-pop "
-        "rule 2.88). Started above the floors as pass two is, it passes (the landing then "
-        "1.02), but that changes pass one on every frame a floor's joint starts under: "
-        "measured on part of the sweep, the CMU jumps onto the CMU T-pose went 1.07 -> 1.09 "
-        "and lost its keys fitted to the tasks, and two glitch tests' measured figures "
-        "moved; not landed"))),
+    ("_pass_one", True),
 ], ids=["pass-two", "pass-one-flat-feet"])
 def test_each_frame_ends_nearest_its_attraction_whatever_the_start(stage, flat_feet,
                                                                    monkeypatch):
@@ -502,9 +542,12 @@ def test_each_frame_ends_nearest_its_attraction_whatever_the_start(stage, flat_f
     kept: 0.18 from the blend in the solver's weighted norm, where the same frame started
     from either neighbour's correction ends at 0.05, and its neighbours lifted the body
     instead (the hips 90 mm apart in one frame). Bound with flat feet, the composed posture
-    itself sinks the ankles 59 mm and 30 mm under their floors on 2262. Every frame the stage
-    solves on the landing is solved again from each neighbour's correction: none may end
-    nearer where it started from; the floors hold."""
+    itself sinks the ankles 59 mm and 30 mm under their floors on 2262, and pass one's solve
+    from there ended 0.46 from it where a start above the floors ends at 0.10 (the hips 216 mm
+    under the frame before's; the no-pop rule 2.88): pass one now solves such frames from
+    above the floors too and keeps the nearer. Every frame the stage solves on the landing is
+    solved again from each neighbour's correction: none may end nearer where it started from;
+    the floors hold."""
     scene, cons, solver = _jumps_onto_kenney(flat_feet=flat_feet)
     part, first, calls = _solves_of(stage, monkeypatch, solver, cons)
     assert calls
