@@ -9,9 +9,10 @@ translation) that, added to the composed motion, meets the constraints, with res
 Every frame is solved from the composed motion with the tasks active there (``[start, end]``
 of each constraint, and the one-sided planes such as the floor where they are needed): the
 key postures (a frame whose composed posture puts a joint under a floor is solved from above
-it as well, and the posture nearer the composed one kept: :func:`_nearer_from_above`). A ramp eases its constraints' correction in and out along a smoothstep ``s``
-of the ramp's fraction (zero slope at both ends): the correction they make at the ramp's key
-frame (``start`` of an input ramp ``(smooth_in, start)``, ``end`` of an output ramp
+it as well, and the posture nearer the composed one kept: :func:`_nearer_from_above`). A ramp
+eases its constraints' correction in and out along a smoothstep ``s`` of the ramp's fraction
+(zero slope at both ends): the correction they make at the ramp's key frame (``start`` of an
+input ramp ``(smooth_in, start)``, ``end`` of an output ramp
 ``(end, smooth_out)``), the posture solved there with them less the posture solved there
 without them, is added to each ramp frame's own posture (solved with the tasks active on
 that frame) times ``s`` (input) or ``1 - s`` (output). A ramp alone gives ``exp(s r)
@@ -662,10 +663,10 @@ def _pass_one(problem: _Problem):
     """The key postures and the blend over the ramps: the clip's frames solved from the
     composed motion (and from above the floors: :func:`_nearer_from_above`), then each key
     posture of its own (without its ramps' constraints, or with the goals held across the
-    ramp: :func:`_virtual_frames`) solved from the correction
-    next to it on the ramps' side (:func:`_start_from_inner`), then each ramp's correction
-    eased in or out over it (:func:`_blend`). Returns rot, tra, residuals (of the clip's
-    frames), iterations, the frames solved and the frames blended (both ``(F,)``)."""
+    ramp: :func:`_virtual_frames`) solved from the correction next to it on the ramps' side
+    (:func:`_start_from_inner`), then each ramp's correction eased in or out over it
+    (:func:`_blend`). Returns rot, tra, residuals (of the clip's frames), iterations, the
+    frames solved and the frames blended (both ``(F,)``)."""
     F = problem.num_frames
     units = _ramp_units(problem.cons)
     _check_overlaps(problem, units)
@@ -710,7 +711,7 @@ def _pass_one(problem: _Problem):
 #: how much nearer its attraction posture (in the solver's weighted norm,
 #: :func:`_distance`) a frame solved from above the one-sided planes must end than the same
 #: frame solved from the attraction posture to be kept instead (:func:`_nearer_from_above`):
-#: a solve's own scatter is far below it, a trap far above (0.36 at the least measured)
+#: a solve's own scatter is far below it, a trap far above (0.3 at the least measured)
 NEARER = 1e-3
 
 
