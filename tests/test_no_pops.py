@@ -378,20 +378,27 @@ def test_a_floor_far_above_the_characters_feet_is_solved_without_a_pop():
     assert b.report["floor"] == {"height_m": 0.0, "lift_m": pytest.approx(lift)}
 
 
-@functools.lru_cache(maxsize=None)
-def _jumps_onto_kenney(flat_feet: bool = False):
-    """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts (bound with
-    flat feet where ``flat_feet``): the scene, its enabled constraints and a window solver
-    over its composed motion."""
-    performer_file = shared_path("cmu_mb_01_01_jumps.bvh")
-    target_file = shared_path("fbx/maya_kenney_character_7700_binary.fbx")
+def _shared_scene(clip: str, character: str, flat_feet: bool = False):
+    """``clip`` onto ``character`` (files of ``../shared/data``) with automatic contacts,
+    as ``retarget --auto-contacts`` maps and binds them (with flat feet where
+    ``flat_feet``): the scene and its enabled constraints."""
+    performer_file, target_file = shared_path(clip), shared_path(character)
     performer = read_performer(performer_file)
     target = read_character(target_file).rest_motion()
     project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
                       correspondence=automap(target.skeleton, performer.skeleton),
                       auto_contacts=True, bind_options=BindOptions(flat_feet=flat_feet))
     scene = Scene(project, performer, target).regenerated()
-    cons = [c for c in scene.constraints if c.enabled]
+    return scene, [c for c in scene.constraints if c.enabled]
+
+
+@functools.lru_cache(maxsize=None)
+def _jumps_onto_kenney(flat_feet: bool = False):
+    """The CMU jumps onto Kenney's Maya character (FBX) with automatic contacts (bound with
+    flat feet where ``flat_feet``): the scene, its enabled constraints and a window solver
+    over its composed motion."""
+    scene, cons = _shared_scene("cmu_mb_01_01_jumps.bvh",
+                                "fbx/maya_kenney_character_7700_binary.fbx", flat_feet)
     solver = WindowSolver(scene.edited, scene.project.ik_options, carried=scene.carried)
     return scene, cons, solver
 
@@ -563,15 +570,7 @@ def test_a_second_start_above_the_floors_leaves_frames_it_does_not_bring_nearer_
     character, where frames start under the floors but none in a hold, the correction is
     the one solved without the second start bit for bit: the key fit's choices, which turn
     on the last bits, do not move for nothing."""
-    performer_file = shared_path("bandai1_walk_normal_001.bvh")
-    target_file = shared_path("target_mixamo_ely.glb")
-    performer = read_performer(performer_file)
-    target = read_character(target_file).rest_motion()
-    project = Project(performer=Source(str(performer_file)), target=Source(str(target_file)),
-                      correspondence=automap(target.skeleton, performer.skeleton),
-                      auto_contacts=True)
-    scene = Scene(project, performer, target).regenerated()
-    cons = [c for c in scene.constraints if c.enabled]
+    scene, cons = _shared_scene("bandai1_walk_normal_001.bvh", "target_mixamo_ely.glb")
     lifted = []
     nearer = enforcement._nearer_from_above
 
