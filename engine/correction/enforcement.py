@@ -676,11 +676,12 @@ def _pass_one(problem: _Problem):
                             virtual.composed.rotations, virtual.composed.translations)
     clip = np.arange(len(src)) < F
     needed = _needed_virtual(problem, units, deltas, inner, len(src))
-    rot_v, tra_v, residual_v, iters_v = _solve(virtual, _restricted(entries, clip),
+    clip_entries = _restricted(entries, clip)
+    rot_v, tra_v, residual_v, iters_v = _solve(virtual, clip_entries,
                                                virtual.composed.rotations,
                                                virtual.composed.translations, only=needed)
-    residual_v = _nearer_from_above(virtual, _restricted(entries, clip), rot_v, tra_v,
-                                    residual_v, iters_v, needed)
+    residual_v = _nearer_from_above(virtual, clip_entries, rot_v, tra_v, residual_v,
+                                    iters_v, needed)
     if not clip.all():
         # a key posture without its ramps that holds no task at all is the composed posture
         # itself: started from a neighbour's correction it would stay there, unsolved, and
