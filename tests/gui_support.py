@@ -31,9 +31,18 @@ def require_gl():
 
 def view_pixels(view):
     """The viewport's picture as drawn now (:meth:`Viewport.render_image`): ``(H, W, 3)`` RGB
-    integers."""
+    integers. Waits (up to 30 s, processing events) until the view can be drawn: on a busy
+    machine a viewport just shown may not be exposed yet, and its picture is then null."""
+    import time
     import numpy as np
-    img = view.render_image().convertToFormat(QtGui.QImage.Format.Format_RGB32)
+    from motion_composer.app.gui.qt import QtCore
+    deadline = time.monotonic() + 30.0
+    img = view.render_image()
+    while img.isNull() and time.monotonic() < deadline:
+        QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.ProcessEventsFlag.AllEvents, 50)
+        img = view.render_image()
+    assert not img.isNull(), "the viewport could not be drawn within 30 s"
+    img = img.convertToFormat(QtGui.QImage.Format.Format_RGB32)
     arr = np.frombuffer(img.constBits(), dtype=np.uint8).reshape(
         img.height(), img.bytesPerLine() // 4, 4)                     # B G R A per pixel
     return arr[:, :img.width(), :3][..., ::-1].astype(int)
