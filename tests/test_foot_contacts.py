@@ -416,17 +416,16 @@ def test_a_fit_no_round_held_stops_when_its_later_rounds_run_away(monkeypatch):
 #: the pairs where the no-pop rule is still open (issue 14 point 2), with what the keyed result
 #: shows: the worst joint over its limit, and why
 POPS_OPEN = {
-    "jumps-cmumb-holden": "1.07: LeftLeg at frame 1539, 549 deg/s over a limit of 513 (the "
-                          "dense solve: 558, 1.09), the take-off of a jump: the performer's "
-                          "left heel rises 20 mm over frames 1533-1539 (767 mm/s into 1539) "
-                          "but stays within its held height (2 % of the stature above its "
-                          "lowest), so the hold keeps it down and the knee's correction grows "
-                          "1.3 degrees in three frames before the ramp out eases it. Holding "
-                          "a part only while it is slow in 3D moved the pop (1.05 at 973); "
-                          "heels held within 0.5 % of the stature let the standing feet "
-                          "slide (2.8 % of the stature). The capture's one-frame glitches at "
-                          "975 and 980, which popped 1.43 here, are solved from the frames "
-                          "around them (engine/correction/glitches.py)",
+    "jumps-cmumb-holden": "1.02: LeftLeg at frame 1538, 523 deg/s over a limit of 513, the "
+                          "take-off of a jump: every hold of the left foot ends within seven "
+                          "frames (the flat at heel-off, 1533, the heel's pivot about the toe "
+                          "at 1539, the toe at 1540) and their ramps out overlap while the "
+                          "foot leaves the floor. It was 1.07 at 1539 with the heel held "
+                          "down while the performer's rose 20 mm over 1533-1539 (heel-off "
+                          "was not told apart: engine/correction/contacts.py, _heel_offs). "
+                          "The capture's one-frame glitches at 975 and 980, which popped "
+                          "1.43 here, are solved from the frames around them "
+                          "(engine/correction/glitches.py)",
 }
 
 

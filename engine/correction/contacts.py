@@ -32,6 +32,11 @@ PART_MIN_FRAMES = 3
 #: above its lowest height in the contact: a heel rising off the floor is let go (heel-off)
 #: while the foot as a whole is still on the ground
 PART_HEIGHT = 2.0 / 3.0
+#: heel-off (:func:`_heel_offs`): a heel run's last frames where the heel rises faster than
+#: ``HEEL_RISE`` statures per second on every frame, by ``HEEL_OFF`` of the stature or more
+#: in all, with the toe held, are the heel rising as the foot pivots about the toe
+HEEL_OFF = 0.005
+HEEL_RISE = 0.05
 
 
 @dataclass(frozen=True)
@@ -62,7 +67,9 @@ class Contact:
     ``start`` to ``end`` (frames, inclusive), and within it the runs ``(first, last)`` where
     each part is planted: ``heel`` (the ankle) and ``ball`` (the toe joint). A step is heel
     strike (a heel run alone), flat (both), heel-off with the toe pivoting (a ball run alone),
-    toe-off."""
+    toe-off. ``heel_off``: per heel run the last frame its heel is down (:func:`_heel_offs`;
+    the run's last frame where it stays down; empty: every run's last frame); after it, to
+    the run's end, the heel rises while the toe is held."""
 
     joint: str
     toe: str | None
@@ -70,6 +77,11 @@ class Contact:
     end: int
     heel: tuple = ()
     ball: tuple = ()
+    heel_off: tuple = ()
+
+    def heel_down(self) -> tuple:
+        """The last frame the heel is down in each heel run."""
+        return self.heel_off or tuple(e for _, e in self.heel)
 
 
 @dataclass(frozen=True)
@@ -177,6 +189,28 @@ def _part_runs(mask: np.ndarray, start: int, gap: int) -> tuple:
     return tuple((start + a, start + b) for a, b in _runs(inner) if b - a + 1 >= PART_MIN_FRAMES)
 
 
+def _heel_offs(heel: tuple, ball: tuple, y: np.ndarray, band: float, rise: float) -> tuple:
+    """Per heel run the last frame its heel is down: the frame before the run's last frames
+    where the heel height ``y`` [m] rises on every frame by more than ``rise`` [m] and by
+    ``band`` [m] or more in all, with the ball held on each (heel-off: the heel rises and
+    the foot pivots about the toe); else the run's last frame. Held flat to the run's end,
+    the foot stayed flat while the performer's heel rose up to ``PART_HEIGHT`` of
+    ``ContactOptions.height`` (20 mm in six frames at the CMU jumps' take-off, frames
+    1533-1539) and the leg's correction grew until the ramp out eased it off, faster than
+    the no-pop rule allows."""
+    pivot = np.zeros(len(y), dtype=bool)
+    for a, b in ball:
+        pivot[a:b + 1] = True
+    out = []
+    for a, b in heel:
+        k = b
+        while k > a and y[k] - y[k - 1] > rise and pivot[k]:
+            k -= 1
+        down = k < b and y[b] - y[k] >= band and k - a + 1 >= PART_MIN_FRAMES
+        out.append(k if down else b)
+    return tuple(out)
+
+
 def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = None,
                     options: ContactOptions | None = None) -> list[Contact]:
     """Contacts of ``motion``'s feet (``(ankle, toe)`` names; found by name when omitted).
@@ -189,7 +223,8 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     the clip's edge) and contacts under ``options.min_duration`` dropped unless the clip cuts
     them; each
     contact keeps the runs where each part is held: slow, and within :data:`PART_HEIGHT` of
-    ``options.height`` above its lowest height in the contact."""
+    ``options.height`` above its lowest height in the contact, and each heel run's heel-off
+    (:func:`_heel_offs`)."""
     from ..describe import figure_size
     options = options or ContactOptions()
     sk = motion.skeleton
@@ -236,7 +271,9 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
                         for y, slow in zip(heights, slows)]
                 heel = _part_runs(held[0], s, gap)
                 ball = _part_runs(held[1], s, gap) if toe else ()
-                contacts.append(Contact(ankle, toe, s, e, heel, ball))
+                off = _heel_offs(heel, ball, heights[0], HEEL_OFF * size,
+                                 HEEL_RISE * size / fps)
+                contacts.append(Contact(ankle, toe, s, e, heel, ball, off))
     contacts.sort(key=lambda c: (c.start, c.joint))
     return contacts
 
@@ -398,6 +435,33 @@ def _flat_feet(heel_runs, ball_runs, rot, ankle, toe, rest_turn, rest_toe,
     return _FlatFeet(ankles, toes, turns)
 
 
+def _pivot(heel: np.ndarray, toes: list, ball: tuple, ankle: np.ndarray, toe: np.ndarray,
+           s: int, off: int, e: int) -> np.ndarray:
+    """The path ``(e - s + 1, 3)`` of a heel run ``s .. e`` down at ``heel`` (its goal) to
+    ``off`` (heel-off) and then turning about the held toe (``toes``: the goals of the ball
+    runs ``ball``) as the converted foot turns since ``off`` (the smallest turn of its
+    ankle-to-toe vector; ``ankle``, ``toe`` the converted positions ``(F, 3)``), never under
+    the planted height. The foot keeps its length, so the held toe and the heel's path agree,
+    the heel rises as the performer's does, and it drifts as the performer's heel drifts
+    about its toe."""
+    path = np.tile(np.asarray(heel, dtype=float), (e - s + 1, 1))
+    frames = np.arange(off + 1, e + 1)
+    foot = ankle[frames] - toe[frames]
+    turn = quat_between(np.broadcast_to(ankle[off] - toe[off], foot.shape), foot)
+    for k, (bs, be) in enumerate(ball):
+        here = (frames >= bs) & (frames <= be)
+        if here.any():
+            lever = np.broadcast_to(heel - toes[k], (int(here.sum()), 3))
+            path[frames[here] - s] = toes[k] + qrot(turn[here], lever)
+    path[:, 1] = np.maximum(path[:, 1], heel[1])
+    return path
+
+
+def _drift(points: np.ndarray) -> float:
+    """The largest horizontal distance of ``points (n, 3)`` from the first."""
+    return float(np.linalg.norm(points[:, [0, 2]] - points[0, [0, 2]], axis=1).max())
+
+
 def _spans(runs: list[tuple[str, int, int]], ramp: int, F: int) -> list[tuple[int, int]]:
     """``(smooth_in, smooth_out)`` of each run ``(joint, start, end)``: at most ``ramp`` frames
     either side, and never over the next run of the same joint (they meet halfway)."""
@@ -424,12 +488,16 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     ``pairs``: target joint -> performer joint (the correspondence). The foot is held whole
     while flat and by its toe while it pivots:
 
-    * each flat (a heel run and a ball run overlapping) holds the ankle's world orientation:
-      the converted foot's mean orientation over the flat, pitched so that the toe stands as
-      high above the ankle as in the rest pose (the converted heading and roll kept: a foot
-      turned out, or turned between two flats of one contact as it pivots, stays so);
-    * a heel run pins the target ankle at its planted height above the floor; a ball run pins
-      the target toe at its planted height. A part that comes down while the other is held
+    * each flat (a heel run to its heel-off and a ball run overlapping) holds the ankle's
+      world orientation: the converted foot's mean orientation over the flat, pitched so that
+      the toe stands as high above the ankle as in the rest pose (the converted heading and
+      roll kept: a foot turned out, or turned between two flats of one contact as it
+      pivots, stays so);
+    * a heel run pins the target ankle at its planted height above the floor, to heel-off
+      (:attr:`Contact.heel_off`), and from there to the run's end holds it on the path the
+      pivot about the held toe gives it (:func:`_pivot`: the heel rises as the converted
+      foot pitches, and the flat's orientation is let go); a ball run pins the target toe at
+      its planted height. A part that comes down while the other is held
       is placed from it through the flat foot's orientation (a heel strike places the toe
       where the flat foot puts it, and it stays there while the heel rises; a heel that comes
       down again about a held toe lands where the foot's new heading puts it); a part that
@@ -464,6 +532,13 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     # the character's size, for a carried foot's heel (below)
     from ..describe import figure_size
     size = figure_size(composed) if carried else None
+    # the performer's heels and both sizes, to judge a heel's pivot (below)
+    p_sk = performer.skeleton
+    pivoting = sorted({p_sk.index[c.joint] for c in used if c.heel_off})
+    p_heel = {} if not pivoting else {
+        p_sk.names[j]: v for j, v in _foot_poses(p_sk, performer.rotations,
+                                                 performer.translations, pivoting)[0].items()}
+    p_size, t_size = figure_size(performer), figure_size(composed)
     # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
     runs = []
     for c in used:
@@ -506,13 +581,38 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
         # flat foot is held from the toe's landing on
         heel_runs = [(min(hs, next((bs for bs, be in c.ball if 0 < hs - bs < ramp and
                                     hs <= be), hs)), he) for hs, he in c.heel]
-        feet = _flat_feet(heel_runs, c.ball, t_rot[a], t_pos[a], t_pos[sk.index[toe]],
-                          rest_turn, rest_toe, (ground.floor + ground.heights[ankle],
-                                                ground.floor + ground.heights[toe]))
+        # the foot is flat while the heel is down, to heel-off, and then turns about the
+        # toe (_pivot) where the heel then moves no further from where it was at heel-off
+        # than the performer's does from its own, as fractions of each one's size (the
+        # ankle swings along as the foot turns about the toe, the more the higher it stands
+        # over it: the glTF fox's, a digitigrade's, far more than a human's); elsewhere the
+        # heel is held down to the run's end, the foot flat (while the performer's heel
+        # rises a little, as before heel-off was told apart)
+        down = list(c.heel_down())
+        pivots: dict[int, np.ndarray] = {}
+        while True:
+            flat_runs = [(hs, min(he, off)) for (hs, he), off in zip(heel_runs, down)]
+            feet = _flat_feet(flat_runs, c.ball, t_rot[a], t_pos[a], t_pos[sk.index[toe]],
+                              rest_turn, rest_toe, (ground.floor + ground.heights[ankle],
+                                                    ground.floor + ground.heights[toe]))
+            pivots.clear()
+            held = False                # a heel held to its run's end: its flat changes
+            for i, (s, e) in enumerate(heel_runs):
+                if down[i] < e:
+                    path = _pivot(feet.ankles[i], feet.toes, c.ball, t_pos[a],
+                                  t_pos[sk.index[toe]], s, down[i], e)
+                    tail = slice(down[i], e + 1)
+                    if _drift(path[tail.start - s:]) * p_size <= \
+                            _drift(p_heel[c.joint][tail]) * t_size:
+                        pivots[i] = path
+                    else:
+                        down[i], held = e, True
+            if not held:
+                break
         toe_first = False
         pins = []
         for k, (s, e) in enumerate(c.ball):
-            flats = [(max(s, hs), min(e, he)) for hs, he in heel_runs if hs <= e and s <= he]
+            flats = [(max(s, hs), min(e, he)) for hs, he in flat_runs if hs <= e and s <= he]
             for flat in flats if ankle not in carried else ():
                 runs.append((ankle, "turn", flat[0], flat[1], None, None, c,
                              feet.turns[flat], 1))
@@ -536,7 +636,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                 # turn easing in brings it down about the toe, onto its goal at ``s`` (a
                 # straight ramp would pull the ankle off the circle the held toe allows)
                 after = s
-            runs.append((ankle, "pin", s, e, after, "heel", c, feet.ankles[i], int(toe_first)))
+            goal = pivots.get(i, feet.ankles[i])
+            runs.append((ankle, "pin", s, e, after, "heel", c, goal, int(toe_first)))
         runs += pins
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
     out = []
