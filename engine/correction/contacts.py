@@ -538,7 +538,7 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     p_heel = {} if not pivoting else {
         p_sk.names[j]: v for j, v in _foot_poses(p_sk, performer.rotations,
                                                  performer.translations, pivoting)[0].items()}
-    p_size, t_size = figure_size(performer), figure_size(composed)
+    p_size, t_size = (figure_size(performer), figure_size(composed)) if pivoting else (1, 1)
     # (target joint, what, start, end, smooth_in, part, contact, goal, priority below)
     runs = []
     for c in used:
