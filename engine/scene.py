@@ -41,7 +41,7 @@ from .conversion.followers import above_floor, carriers, follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, ConstraintError, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
-                                  horizontal_drift, target_ground)
+                                  held_until, horizontal_drift, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction.keyfit import parting, solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
@@ -924,8 +924,9 @@ def _report(composed: Motion, correction, constraints: list, mapped: int, timing
         for c in pins:
             report["contacts"].append({
                 "joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
-                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, c.end),
-                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, c.end)})
+                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, held_until(c)),
+                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start,
+                                                      held_until(c))})
         drift_d = [x["drift_direct_m"] for x in report["contacts"]]
         drift_c = [x["drift_corrected_m"] for x in report["contacts"]]
         report["contact_drift"] = {

@@ -109,6 +109,12 @@ def test_a_heel_off_turns_the_foot_about_the_held_toe(monkeypatch):
                 and sk.parents[sk.index[d.joint]] == sk.index[c.joint]]
         assert toes, c.name
     assert min(rises) >= 0.5, rises
+    # the report measures a pivoting heel's drift up to heel-off, where it is held in place
+    report = [r for r in solution.report["contacts"] if r["part"] == "heel"]
+    assert report and max(r["drift_corrected_m"] for r in report) < 1e-3 * t_size
+    assert solution.report["contact_drift"]["corrected_max_m"] < 1e-3 * t_size
+    quality = [r for r in solution.report["quality"]["contacts"] if r["part"] == "heel"]
+    assert quality and max(r["drift_corrected_m"] for r in quality) < 1e-3 * t_size
 
     monkeypatch.setattr(contacts_module, "HEEL_OFF", np.inf)      # no heel-off: held flat
     flat = scene.solve(regenerate=True)

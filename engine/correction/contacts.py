@@ -23,7 +23,7 @@ from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
-           "find_feet", "horizontal_drift", "estimate_floor", "target_ground",
+           "find_feet", "horizontal_drift", "held_until", "estimate_floor", "target_ground",
            "converted_ground", "below_foot", "PART_MIN_FRAMES", "PART_HEIGHT"]
 
 #: a part's planted run is this many frames or more (a heel strike lasts a few frames)
@@ -689,6 +689,18 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
                                     "performer_joint": floors[joint]}))
     out.sort(key=lambda k: ("floor" in k.meta, k.start, k.name))
     return out
+
+
+def held_until(constraint: Constraint) -> int:
+    """The last frame a contact's pin holds its joint in place horizontally: its ``end``, but
+    for a heel that pivots about its toe (a path whose points leave their first one at
+    heel-off: :func:`_pivot`) the frame of heel-off. Its drift is measured to there: after
+    it the heel moves as the foot turns, by design."""
+    if constraint.kind != "trajectory":
+        return constraint.end
+    p = np.asarray(constraint.goal["points"])[:, [0, 2]]
+    moved = np.flatnonzero(np.any(p != p[0], axis=1))
+    return constraint.start + (int(moved[0]) - 1 if len(moved) else len(p) - 1)
 
 
 def horizontal_drift(motion: Motion, joint: str, start: int, end: int) -> float:

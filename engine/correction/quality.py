@@ -22,6 +22,7 @@ import numpy as np
 from ..kinematics import fk_arrays
 from ..motion import Motion
 from ..quaternions import qconj, qmul
+from .contacts import held_until
 
 __all__ = ["quality", "angular_speed", "ramps", "pop_limits", "goal_jumps", "POP_WINDOW",
            "POP_FACTOR", "SMOOTHSTEP_PEAK", "JUMP_FLOOR"]
@@ -227,7 +228,7 @@ def _contacts(constraints, direct_pos, corrected_pos, index) -> tuple[list[dict]
             continue
         seen.add(key)
         j = index[c.joint]
-        span = slice(c.start, c.end + 1)
+        span = slice(c.start, held_until(c) + 1)        # a heel's pivot moves it, by design
         drifts = []
         for pos in (direct_pos, corrected_pos):
             p = pos[span, j][:, [0, 2]]
