@@ -79,8 +79,10 @@ def test_a_moved_goal_previews_as_the_full_solve_where_ramps_keyed_outside_ease_
         i = moved[name]
         c = constraints[i]
         after = list(constraints)
-        after[i] = Constraint.from_dict({**c.to_dict(),
-                                         "goal": {"point": c.goal["point"] + [0.01, 0, 0]}})
+        # a pin on a point, or a heel's pin that pivots about its toe after heel-off (a path)
+        goal = ({"point": c.goal["point"] + [0.01, 0, 0]} if "point" in c.goal else
+                {"points": np.asarray(c.goal["points"]) + [0.01, 0, 0]})
+        after[i] = Constraint.from_dict({**c.to_dict(), "goal": goal})
         lo, hi = changed_window(constraints, after)
         outside = [x for x in after if x.enabled and x.smooth_in <= hi and x.smooth_out >= lo
                    and ((x.start - x.smooth_in >= 2 and x.start > hi) or

@@ -696,9 +696,10 @@ def held_until(constraint: Constraint) -> int:
     for a heel that pivots about its toe (a path whose points leave their first one at
     heel-off: :func:`_pivot`) the frame of heel-off. Its drift is measured to there: after
     it the heel moves as the foot turns, by design."""
-    if constraint.kind != "trajectory":
+    points = constraint.goal.get("points")
+    if points is None:                                  # a pin on a point
         return constraint.end
-    p = np.asarray(constraint.goal["points"])[:, [0, 2]]
+    p = np.asarray(points)[:, [0, 2]]
     moved = np.flatnonzero(np.any(p != p[0], axis=1))
     return constraint.start + (int(moved[0]) - 1 if len(moved) else len(p) - 1)
 
