@@ -922,11 +922,11 @@ def _report(composed: Motion, correction, constraints: list, mapped: int, timing
                    and "part" in c.meta), key=lambda c: (c.start - c.end, c.start))
     if pins:
         for c in pins:
+            held = held_until(c)            # a heel's pivot about its toe moves it, by design
             report["contacts"].append({
                 "joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
-                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, held_until(c)),
-                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start,
-                                                      held_until(c))})
+                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, held),
+                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, held)})
         drift_d = [x["drift_direct_m"] for x in report["contacts"]]
         drift_c = [x["drift_corrected_m"] for x in report["contacts"]]
         report["contact_drift"] = {

@@ -19,7 +19,7 @@ from motion_composer.engine.kinematics import fk_arrays
 WALKS = ["cmu_max_131_01_walk.bvh", "bandai1_walk_normal_001.bvh", "cc3_cmu_02_01_walk.bvh"]
 
 
-def _heights(motion, joints) -> dict:
+def _positions(motion, joints) -> dict:
     pos = fk_arrays(motion.skeleton, motion.rotations, motion.translations,
                     end_sites=False).positions
     return {j: pos[:, motion.skeleton.index[j]] for j in joints}
@@ -37,7 +37,7 @@ def test_a_heel_off_is_the_heel_rising_while_the_toe_is_held(spec):
     if not found:
         pytest.skip("no contacts on this clip")
     size = figure_size(motion)
-    pos = _heights(motion, [a for a, _ in feet])
+    pos = _positions(motion, [a for a, _ in feet])
     for c in found:
         y = pos[c.joint][:, 1]
         assert len(c.heel_down()) == len(c.heel)
@@ -94,7 +94,7 @@ def test_a_heel_off_turns_the_foot_about_the_held_toe(monkeypatch):
     assert len(pivots) >= 5
     performer = scene.performer
     p_size, t_size = figure_size(performer), figure_size(scene.composed)
-    p_pos = _heights(performer, [a for a, _ in find_feet(performer.skeleton)])
+    p_pos = _positions(performer, [a for a, _ in find_feet(performer.skeleton)])
     sk = solution.motion.skeleton
     rises = []
     for c, off, heel in pivots:
