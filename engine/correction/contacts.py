@@ -534,7 +534,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
     size = figure_size(composed) if carried else None
     # the performer's heels and both sizes, to judge a heel's pivot (below)
     p_sk = performer.skeleton
-    pivoting = sorted({p_sk.index[c.joint] for c in used if c.heel_off})
+    pivoting = sorted({p_sk.index[c.joint] for c in used
+                       if any(off < e for off, (_, e) in zip(c.heel_down(), c.heel))})
     p_heel = {} if not pivoting else {
         p_sk.names[j]: v for j, v in _foot_poses(p_sk, performer.rotations,
                                                  performer.translations, pivoting)[0].items()}
@@ -710,5 +711,4 @@ def horizontal_drift(motion: Motion, joint: str, start: int, end: int) -> float:
     sk = motion.skeleton
     pose = fk_arrays(sk, motion.rotations[start:end + 1], motion.translations[start:end + 1],
                      end_sites=False)
-    p = pose.positions[:, sk.index[joint]][:, [0, 2]]
-    return float(np.linalg.norm(p - p[0], axis=1).max())
+    return _drift(pose.positions[:, sk.index[joint]])
