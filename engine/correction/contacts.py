@@ -479,6 +479,39 @@ def _spans(runs: list[tuple[str, int, int]], ramp: int, F: int) -> list[tuple[in
     return [tuple(x) for x in spans]
 
 
+def _back_to_back(ranges: list[tuple[int, int, int, int, int]]) -> list[int]:
+    """Each hold's last frame: its ``end``, or where another contact's hold eases in just
+    after the foot is let go, the frame before that one's key frame (back to back with it).
+
+    ``ranges``: per hold ``(contact, smooth_in, start, end, smooth_out)``, ``contact`` a
+    number per foot contact. The holds a contact lets go last (``end``, with a ramp out)
+    in the half of another contact's ramp in next to its key frame (``start``), one frame
+    or more before it, are held on to the frame before the key, where their own ramps out
+    still have two frames or more after that: a walk at 120 frames a second, its left toe
+    let go on frame 495 and its right heel planted on 497. Holding the toe on 496 is what
+    the feet of a walk do, both down until the other has landed; and the enforcement eases
+    such holds well only back to back. A key posture holds the goals held on the frame
+    next to it inside its ramps (enforcement._virtual_frames), so that the ramp's
+    correction is what it adds to them: the heel's key posture on 497 did not hold the toe,
+    its correction dragged the toe, held to 495, and pass two pulling the toe back lifted
+    the heel 70 mm off its goal until the key frame, where it came down in one frame (the
+    hips turned 1.85 times the no-pop limit). Holding such goals in the key postures
+    instead was tried: the frame between, which holds neither, then added two corrections
+    each made with the other's goal held, and threw the toe 145 mm off. A hold the foot
+    lets go before its last (the flat foot's orientation at heel-off, while the toe holds
+    on) is not held longer."""
+    last: dict[int, int] = {}
+    for contact, _, _, e, _ in ranges:
+        last[contact] = max(last.get(contact, e), e)
+    keys = [(s, (lo + s + 1) // 2, contact) for contact, lo, s, _, _ in ranges if s - lo >= 2]
+    out = []
+    for contact, _, _, e, hi in ranges:
+        later = [k for k, mid, other in keys
+                 if other != contact and mid <= e < k - 1 and k - 1 <= hi - 2]
+        out.append(min(later) - 1 if e == last[contact] and hi - e >= 2 and later else e)
+    return out
+
+
 def contact_constraints(contacts: list[Contact], performer: Motion, composed: Motion,
                         pairs: dict[str, str], options: ContactOptions | None = None, *,
                         floor: float | None = None, ground: Ground | None = None,
@@ -504,6 +537,8 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
       comes down alone is held at its converted median position. Where the target has no
       mapped toe the ankle is pinned over the whole contact and its world orientation is
       held too (the converted orientation at the contact's middle frame);
+    * a foot let go a few frames before another lands (in the half of the other's ramp in
+      next to its key frame) is held on until the frame before it (:func:`_back_to_back`);
     * on every frame each held foot joint stays at or above its planted height (a one-sided
       plane: the floor rule), and so does each joint below a held foot whose height the
       ``ground`` gives (:func:`below_foot`: a toe's end joint, separate toes).
@@ -641,14 +676,19 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             runs.append((ankle, "pin", s, e, after, "heel", c, goal, int(toe_first)))
         runs += pins
     spans = _spans([(r[0] + r[1], r[2], r[3]) for r in runs], ramp, F)
+    spans = [(lo if r[4] is None else min(max(lo, r[4]), r[2]), hi)
+             for r, (lo, hi) in zip(runs, spans)]
+    ends = _back_to_back([(id(r[6]), lo, r[2], r[3], hi) for r, (lo, hi) in zip(runs, spans)])
     out = []
     # names are labels (the user may rename them): the joint and the hold's number along the
     # clip, never its frames, which go stale when a handle moves
     number: dict[tuple, int] = {}
-    for (joint, _, s, e, first, part, c, goal, below), (lo, hi) in zip(runs, spans):
+    for (joint, _, s, e, first, part, c, goal, below), (lo, hi), end in zip(runs, spans, ends):
         label = ("contact" if part is not None else "foot flat", joint)
         number[label] = number.get(label, 0) + 1
-        lo = lo if first is None else min(max(lo, first), s)
+        if end > e and goal.ndim == 2:                  # a path: held at its last point
+            goal = np.concatenate([goal, np.repeat(goal[-1:], end - e, axis=0)])
+        e = end
         performer_joint = c.toe if part == "toe" else c.joint
         if part is not None:
             # a pin on a point, or a carried foot's path (a point per frame)
