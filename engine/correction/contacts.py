@@ -320,8 +320,9 @@ def target_ground(target: Motion, feet: list[tuple[str, str | None]], *,
         for j in joints[ankle] + below_foot(sk, ankle, toe):
             heights[sk.names[j]] = float(y[f, j]) - rest_floor
         a = sk.index[ankle]
-        flat[ankle] = (pose.rotations[f, a],
-                       pose.positions[f, sk.index[toe]] - pose.positions[f, a] if toe else None)
+        if toe or ankle not in flat:        # a foot's own toe, not lost to a toeless map
+            flat[ankle] = (pose.rotations[f, a], pose.positions[f, sk.index[toe]] -
+                           pose.positions[f, a] if toe else None)
     return Ground(rest_floor if floor is None else float(floor), heights, flat)
 
 
@@ -604,10 +605,15 @@ def contact_constraints(contacts: list[Contact], performer: Motion, composed: Mo
             runs.append((ankle, "path", c.start, c.end, None, "heel", c, path, 0))
             continue
         if toe is None:
-            # without a toe the ankle holds the whole contact, its orientation too
+            # without a toe the ankle holds the whole contact, its orientation too: the
+            # converted foot's over the contact, flat (pitched so that the character's own
+            # toe stands as high above the ankle as in its rest pose) where the character
+            # has a toe the performer has not; else as converted at the contact's middle
             goal = np.median(t_pos[a][frames], axis=0)
             goal[1] = ground.floor + ground.heights[ankle]
-            turn = t_rot[a][(c.start + c.end) // 2]
+            rest_turn, rest_toe = ground.flat.get(ankle, (None, None))
+            turn = (t_rot[a][(c.start + c.end) // 2] if rest_toe is None else
+                    _flat_turn(t_rot[a][frames], rest_turn, rest_toe)[0])
             runs.append((ankle, "pin", c.start, c.end, None, "heel", c, goal, 0))
             if ankle not in carried:
                 runs.append((ankle, "turn", c.start, c.end, None, None, c, turn, 1))
