@@ -12,6 +12,7 @@ where it planted while the heel rises, with ramps.
 """
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -504,12 +505,21 @@ def _back_to_back(ranges: list[tuple[int, int, int, int, int]]) -> list[int]:
     last: dict[int, int] = {}
     for contact, _, _, e, _ in ranges:
         last[contact] = max(last.get(contact, e), e)
-    keys = [(s, (lo + s + 1) // 2, contact) for contact, lo, s, _, _ in ranges if s - lo >= 2]
+    keys = sorted((s, (lo + s + 1) // 2, contact) for contact, lo, s, _, _ in ranges
+                  if s - lo >= 2)
+    frames = [k for k, _, _ in keys]
     out = []
     for contact, _, _, e, hi in ranges:
-        later = [k for k, mid, other in keys
-                 if other != contact and mid <= e < k - 1 and k - 1 <= hi - 2]
-        out.append(min(later) - 1 if e == last[contact] and hi - e >= 2 and later else e)
+        end = e
+        if e == last[contact] and hi - e >= 2:
+            # the key frames k with e + 1 < k <= hi - 1, earliest first (a few per hold: the
+            # whole is linear in the clip)
+            for k, mid, other in keys[bisect.bisect_right(frames, e + 1):
+                                      bisect.bisect_right(frames, hi - 1)]:
+                if other != contact and mid <= e:
+                    end = k - 1
+                    break
+        out.append(end)
     return out
 
 
