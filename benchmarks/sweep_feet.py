@@ -287,12 +287,17 @@ def format_row(row: dict) -> str:
             f"{_fmt(row.get('res_deg'), '7.2f')} {_fmt(row.get('seconds'), '6.1f')}  {notes}")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_filters(parser: argparse.ArgumentParser) -> None:
+    """The ``--clip`` and ``--target`` name filters (sweep_variants.py's too)."""
     parser.add_argument("--clip", action="append", default=[],
                         help="only clips whose name contains this (repeatable)")
     parser.add_argument("--target", action="append", default=[],
                         help="only targets whose name contains this (repeatable)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_filters(parser)
     parser.add_argument("--pairs", nargs="+", default=[], metavar="CLIP:TARGET",
                         help="only these pairs (substrings of the clip and target names)")
     parser.add_argument("--json", help="also write each row as a JSON line to this file")

@@ -1,5 +1,6 @@
-"""The foot and no-pop rules of sweep_feet.py on variants of the shared clips that no exporter
-here wrote: other frame rates and feet without toes (a report, not a test).
+"""sweep_feet.py's foot and no-pop rules on variants of the shared clips (a report).
+
+Variants that no exporter here wrote: other frame rates and feet without toes.
 
     python benchmarks/sweep_variants.py [--clip SUBSTR ...] [--target SUBSTR ...]
                                         [--rates 24,30,60,120] [--toeless] [--out DIR]
@@ -94,10 +95,7 @@ def variants(clip: Path, rates: list[float], toeless: bool, out: Path) -> list[P
 def main() -> None:
     import sweep_feet
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", action="append", default=[],
-                        help="only clips whose name contains this (repeatable)")
-    parser.add_argument("--target", action="append", default=[],
-                        help="only targets whose name contains this (repeatable)")
+    sweep_feet.add_filters(parser)
     parser.add_argument("--rates", default="30,120",
                         help="frame rates to resample to, comma-separated (default 30,120)")
     parser.add_argument("--toeless", action="store_true", help="also cut the toes off")
