@@ -41,7 +41,7 @@ from .conversion.followers import above_floor, carriers, follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, ConstraintError, floor_constraint
 from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
-                                  held_until, horizontal_drift, target_ground)
+                                  target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction.keyfit import parting, solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
@@ -648,11 +648,12 @@ class Scene:
         correction = delivered
         scene = self.replace(constraints=tuple(chosen), displacement=(
             keys if keys is not None else correction_keys(correction)))
-        report = _report(composed, correction, chosen, len(self.correspondence), timings)
         # measured on what is delivered: the keys on top of the animator's layers
-        report["quality"] = quality(self.performer, composed, scene.motion, chosen,
-                                    correction.residual if correction is not None else None,
-                                    self.binding)
+        measured = quality(self.performer, composed, scene.motion, chosen,
+                           correction.residual if correction is not None else None,
+                           self.binding)
+        report = _report(composed, correction, chosen, len(self.correspondence), timings,
+                         measured)
         report["keys"] = _keys_report(scene, correction, keys is not None, why.get("reason"))
         # the floor the character stands on: the project's, with the conversion moved onto
         # it (``lift_m``), else the one under its feet in its reference pose
@@ -907,28 +908,23 @@ def _keys_report(scene: "Scene", correction, fitted: bool, why: str | None = Non
     return out
 
 
-def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict) -> dict:
+def _report(composed: Motion, correction, constraints: list, mapped: int, timings: dict,
+            measured: dict) -> dict:
+    """The solve's report; ``measured`` is its :func:`~engine.correction.quality.quality`
+    (kept as ``"quality"``), whose contacts give the drift figures: the longest first."""
+    contacts = sorted(measured["contacts"], key=lambda c: (c["start"] - c["end"], c["start"]))
     report = {
         "frames": composed.num_frames,
         "fps": composed.fps,
         "mapped_joints": mapped,
         "constraints": describe_residuals(correction, constraints) if correction else [],
-        "contacts": [],
+        "contacts": contacts,
         "timings": timings,
+        "quality": measured,
     }
-    motion = correction.motion if correction is not None else composed
-    # the foot parts' pins, the longest first
-    pins = sorted((c for c in constraints if c.auto and c.meta.get("source") == "contact"
-                   and "part" in c.meta), key=lambda c: (c.start - c.end, c.start))
-    if pins:
-        for c in pins:
-            held = held_until(c)            # a heel's pivot about its toe moves it, by design
-            report["contacts"].append({
-                "joint": c.joint, "part": c.meta["part"], "start": c.start, "end": c.end,
-                "drift_direct_m": horizontal_drift(composed, c.joint, c.start, held),
-                "drift_corrected_m": horizontal_drift(motion, c.joint, c.start, held)})
-        drift_d = [x["drift_direct_m"] for x in report["contacts"]]
-        drift_c = [x["drift_corrected_m"] for x in report["contacts"]]
+    if contacts:
+        drift_d = [x["drift_direct_m"] for x in contacts]
+        drift_c = [x["drift_corrected_m"] for x in contacts]
         report["contact_drift"] = {
             "count": len(drift_d),
             "direct_mean_m": float(np.mean(drift_d)),
