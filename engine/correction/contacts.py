@@ -38,6 +38,16 @@ PART_HEIGHT = 2.0 / 3.0
 #: in all, with the toe held, are the heel rising as the foot pivots about the toe
 HEEL_OFF = 0.005
 HEEL_RISE = 0.05
+#: [s] on a noisy capture (:data:`NOISY`) the detector measures a foot part's speed and
+#: height on its path smoothed over this many seconds (:func:`_smoothed`): a capture's noise,
+#: a few millimetres a frame, is metres per second at 120 frames a second, and broke a walk's
+#: plants into pieces
+SMOOTH = 1.0 / 60.0
+#: a capture is noisy where its noise (:func:`_noise`) moves a still foot from one frame to
+#: the next at over this share of ``ContactOptions.speed`` on average: a still foot then reads
+#: as moving on more than 2 % of its frames. A clean capture's paths are read as they are
+#: (smoothing moves a contact's first and last frames where the foot slows at the limit)
+NOISY = 0.5
 
 
 @dataclass(frozen=True)
@@ -147,6 +157,33 @@ def _foot_poses(skeleton: Skeleton, rotations: np.ndarray, translations: np.ndar
     return pos, rot
 
 
+def _smoothed(path: np.ndarray, sigma: float) -> np.ndarray:
+    """``path (F, 3)`` smoothed along the frames: a running median over ``2 round(sigma) + 1``
+    frames (a capture's spike of a frame or two goes, a landing's edge stays where it is),
+    then a Gaussian of ``sigma`` frames (the noise averaged); the clip's edges held."""
+    if sigma <= 0 or len(path) < 2:
+        return path
+    from scipy.ndimage import gaussian_filter1d, median_filter
+    size = 2 * int(round(sigma)) + 1
+    median = median_filter(path, size=(size, 1), mode="nearest")
+    return gaussian_filter1d(median, sigma, axis=0, mode="nearest", truncate=3.0)
+
+
+def _noise(paths: list, size: float) -> float:
+    """[m] The noise of a capture's foot paths ``(F, 3)`` per axis and frame: the median
+    length of their second differences where each is low (within 1 % of ``size`` of its 5th
+    percentile height, where a foot stands still), over sqrt 6 (white noise's ratio)."""
+    bends = []
+    for p in paths:
+        if len(p) < 3:
+            continue
+        y = p[:, 1]
+        low = (y < np.percentile(y, 5.0) + 0.01 * size)[1:-1]
+        bends.append(np.linalg.norm(p[2:] - 2.0 * p[1:-1] + p[:-2], axis=1)[low])
+    bends = [b for b in bends if len(b)]
+    return float(np.median(np.concatenate(bends))) / np.sqrt(6.0) if bends else 0.0
+
+
 def estimate_floor(heights: np.ndarray) -> float:
     """The floor under a set of low points ``(F, n)``: the 2nd percentile of the lowest."""
     return float(np.percentile(np.min(heights, axis=1), 2.0))
@@ -219,13 +256,14 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     A part (the heel: the ankle joint; the ball: the toe joint) is planted where it is low
     (within ``options.height`` of the stature above its planted height, the 5th percentile of
     its height above the floor) and slow (horizontally under ``options.speed`` statures per
-    second). A foot is on the ground where either part is planted, gaps under
-    ``options.max_gap`` closed (and, where the foot is low, the frames between a contact and
-    the clip's edge) and contacts under ``options.min_duration`` dropped unless the clip cuts
-    them; each
-    contact keeps the runs where each part is held: slow, and within :data:`PART_HEIGHT` of
-    ``options.height`` above its lowest height in the contact, and each heel run's heel-off
-    (:func:`_heel_offs`)."""
+    second). On a noisy capture (:data:`NOISY`) speeds and heights are measured on the path
+    smoothed over :data:`SMOOTH` seconds, and a part coming down faster than the speed limit
+    is not planted. A foot is on the ground where either part is
+    planted, gaps under ``options.max_gap`` closed (and, where the foot is low, the frames
+    between a contact and the clip's edge) and contacts under ``options.min_duration``
+    dropped unless the clip cuts them; each contact keeps the runs where each part is held:
+    slow, and within :data:`PART_HEIGHT` of ``options.height`` above its lowest height in
+    the contact, and each heel run's heel-off (:func:`_heel_offs`)."""
     from ..describe import figure_size
     options = options or ContactOptions()
     sk = motion.skeleton
@@ -244,21 +282,29 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     floor = estimate_floor(low_all)
     gap = max(1, int(round(options.max_gap * fps)))
     shortest = max(2, int(round(options.min_duration * fps)))
+    # a noisy capture's paths are smoothed: its noise alone would move a still foot
+    noisy = _noise([pos[j] for j in pos], size) * np.sqrt(2.0) * fps > \
+        NOISY * options.speed * size
     contacts = []
     for (ankle, toe), idx in zip(feet, points):
         parts, heights, slows, lows = [], [], [], []
         for j in idx:
-            y = pos[j][:, 1] - floor
+            path = _smoothed(pos[j], SMOOTH * fps) if noisy else pos[j]
+            y = path[:, 1] - floor
             rest = np.percentile(y, 5.0)                        # its height when planted
-            vel = np.gradient(pos[j][:, [0, 2]], axis=0) * fps
-            slow = np.linalg.norm(vel, axis=1) < options.speed * size
+            vel = np.gradient(path[:, [0, 2]], axis=0) * fps
+            # on a smoothed path a part still coming down is not planted yet: a jump's
+            # landing that swings the foot to and fro reads as slow at the turn
+            falling = (np.gradient(y) * fps < -options.speed * size) if noisy else \
+                np.zeros(len(y), dtype=bool)
+            slow = (np.linalg.norm(vel, axis=1) < options.speed * size) & ~falling
             lows.append(y < rest + options.height * size)
             parts.append(lows[-1] & slow)
             heights.append(y)
             # a part is held while it has not moved off since the frame before
             step = np.zeros(len(y))
-            step[1:] = np.linalg.norm(np.diff(pos[j][:, [0, 2]], axis=0), axis=1) * fps
-            slows.append(step < options.speed * size)
+            step[1:] = np.linalg.norm(np.diff(path[:, [0, 2]], axis=0), axis=1) * fps
+            slows.append((step < options.speed * size) & ~falling)
         planted = _close_edges(_close_gaps(np.logical_or.reduce(parts), gap),
                                np.logical_or.reduce(lows), gap)
         for s, e in _runs(planted):
