@@ -510,6 +510,10 @@ def cmd_retarget(args) -> int:
                 f"{keys['largest_distance_from_dense_m'] * 1000:.1f} mm from the dense solve)")
         if keys.get("why_dense_curves"):
             note += f" because {keys['why_dense_curves']}"
+        detection = result.report.get("contact_detection") or {}
+        if detection.get("smoothed"):
+            note += (f", contacts found on smoothed foot paths (a noisy capture: "
+                     f"{detection['noise_mm']:.1f} mm a frame)")
         floor = result.report["floor"]
         if floor["lift_m"]:
             note += (f", standing on the floor at {floor['height_m']:.3f} m (the conversion "

@@ -40,8 +40,8 @@ from .conversion.converter import convert
 from .conversion.followers import above_floor, carriers, follow
 from .conversion.correspondence import Correspondence
 from .correction.constraints import Constraint, ConstraintError, floor_constraint
-from .correction.contacts import (below_foot, contact_constraints, detect_contacts, find_feet,
-                                  target_ground)
+from .correction.contacts import (below_foot, capture_noise, contact_constraints,
+                                  detect_contacts, find_feet, target_ground)
 from .correction.enforcement import Correction, describe_residuals, enforce
 from .correction.keyfit import parting, solved_keys
 from .correction.reach import SOURCE as REACH, reach_constraints, unreached
@@ -577,14 +577,26 @@ class Scene:
         planted on a path that rises through heel-off (found from the heel alone, a
         contact ended before the performer's heel rose and the hold on the other foot threw
         the released one 19 cm in a frame)."""
+        return detect_contacts(self.performer, self._contact_feet(),
+                               self.project.contact_options)
+
+    def _contact_feet(self) -> list[tuple[str, str | None]]:
+        """The performer's feet :meth:`contacts` reads: ``(ankle, toe)``, mapped ankles."""
         pairs = self.foot_pairs()
         mapped = set(pairs.values())
         binding = self.binding
         carried = {binding.performer.names[f.source] for f in binding.followers
                    if f.source >= 0} if binding is not None else set()
-        feet = [(a, t if t in mapped or a in carried else None)
+        return [(a, t if t in mapped or a in carried else None)
                 for a, t in find_feet(self.performer.skeleton) if a in mapped]
-        return detect_contacts(self.performer, feet, self.project.contact_options)
+
+    def contact_detection(self) -> dict:
+        """How the performer's contacts are read: ``noise_mm``, the noise of its foot paths
+        per axis and frame, and ``smoothed``, whether that makes it a noisy capture whose
+        paths the detector smooths (:func:`~engine.correction.contacts.capture_noise`)."""
+        noise, smoothed = capture_noise(self.performer, self._contact_feet(),
+                                        self.project.contact_options)
+        return {"noise_mm": 1000.0 * noise, "smoothed": smoothed}
 
     def solve(self, *, regenerate: bool = False, constraints=None, ik_options=None,
               progress=None, cancel=None, warm_start: bool = False,
@@ -662,6 +674,8 @@ class Scene:
         report["binding"] = dict(self.binding.notes)
         # the capture's one-frame glitches under held goals, solved from the frames around
         report["glitches"] = list(correction.glitches) if correction is not None else []
+        if regenerate and self.project.auto_contacts:
+            report["contact_detection"] = self.contact_detection()
         report["warnings"] = warnings
         return Solution(scene=scene, constraints=chosen, correction=correction, report=report)
 

@@ -129,3 +129,29 @@ def test_a_noisy_part_is_held_once_it_has_come_down(clip):
                     path = y[:, sk.index[joint]]
                     fall = (path[first - 1] - path[first + 1]) / 2 * motion.fps
                     assert fall <= limit, (joint, first, fall, limit)
+
+
+def test_the_report_and_the_cli_say_when_a_capture_is_read_as_noisy(tmp_path, capsys):
+    """``retarget --auto-contacts`` on the Bandai run as it is and with noise (written by
+    the engine's BVH writer): the report's ``contact_detection`` gives the noise and whether
+    the paths were smoothed, and the CLI's line says so for the noisy one."""
+    import json
+
+    from motion_composer.app.cli import main
+    from motion_composer.engine.formats import write_bvh
+    clean = shared_path("bandai1_run_active_001.bvh")
+    noisy = tmp_path / "noisy_capture.bvh"
+    write_bvh(_noisy(read_performer(clean), 1.0, 0.2), noisy)
+    target = str(shared_path("target_cmu_mb_rest_tpose.bvh"))
+    seen = {}
+    for name, clip in (("clean", clean), ("noisy", noisy)):
+        report = tmp_path / f"{name}.json"
+        code = main(["retarget", str(clip), "--target", target, "-o",
+                     str(tmp_path / f"{name}.bvh"), "--auto-contacts", "--report", str(report)])
+        out, err = capsys.readouterr()
+        assert code == 0, err
+        seen[name] = (json.loads(report.read_text())["contact_detection"], out)
+    (clean_report, clean_out), (noisy_report, noisy_out) = seen["clean"], seen["noisy"]
+    assert clean_report["smoothed"] is False and noisy_report["smoothed"] is True
+    assert noisy_report["noise_mm"] > 2 * clean_report["noise_mm"]
+    assert "smoothed foot paths" in noisy_out and "smoothed" not in clean_out

@@ -24,6 +24,7 @@ from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
+           "capture_noise",
            "find_feet", "horizontal_drift", "held_until", "estimate_floor", "target_ground",
            "converted_ground", "below_foot", "PART_MIN_FRAMES", "PART_HEIGHT"]
 
@@ -184,6 +185,28 @@ def _noise(paths: list, size: float) -> float:
     return float(np.median(np.concatenate(bends))) / np.sqrt(6.0) if bends else 0.0
 
 
+def _judged(pos: dict, size: float, fps: float, options: ContactOptions) -> tuple[float, bool]:
+    """The noise [m] of the foot paths ``pos`` (:func:`_noise`) and whether it makes the
+    capture noisy (:data:`NOISY`)."""
+    noise = _noise([pos[j] for j in pos], size)
+    return noise, bool(noise * np.sqrt(2.0) * fps > NOISY * options.speed * size)
+
+
+def capture_noise(motion: Motion, feet: list[tuple[str, str | None]] | None = None,
+                  options: ContactOptions | None = None) -> tuple[float, bool]:
+    """[m] The noise of ``motion``'s foot paths (per axis and frame, :func:`_noise`; feet
+    ``(ankle, toe)`` found by name when omitted), and whether :func:`detect_contacts` reads
+    them as a noisy capture's, smoothed (:data:`NOISY`)."""
+    from ..describe import figure_size
+    sk = motion.skeleton
+    feet = feet if feet is not None else find_feet(sk)
+    joints = [sk.index[n] for foot in feet for n in foot if n]
+    if not joints or motion.num_frames < 3:
+        return 0.0, False
+    pos, _ = _foot_poses(sk, motion.rotations, motion.translations, joints)
+    return _judged(pos, figure_size(motion), motion.fps, options or ContactOptions())
+
+
 def estimate_floor(heights: np.ndarray) -> float:
     """The floor under a set of low points ``(F, n)``: the 2nd percentile of the lowest."""
     return float(np.percentile(np.min(heights, axis=1), 2.0))
@@ -283,8 +306,7 @@ def detect_contacts(motion: Motion, feet: list[tuple[str, str | None]] | None = 
     gap = max(1, int(round(options.max_gap * fps)))
     shortest = max(2, int(round(options.min_duration * fps)))
     # a noisy capture's paths are smoothed: its noise alone would move a still foot
-    noisy = _noise([pos[j] for j in pos], size) * np.sqrt(2.0) * fps > \
-        NOISY * options.speed * size
+    noisy = _judged(pos, size, fps, options)[1]
     contacts = []
     for (ankle, toe), idx in zip(feet, points):
         parts, heights, slows, lows = [], [], [], []
