@@ -24,9 +24,8 @@ from ..quaternions import qconj, qmul, qrot, quat_between
 from ..skeleton import Skeleton
 
 __all__ = ["Contact", "ContactOptions", "Ground", "detect_contacts", "contact_constraints",
-           "capture_noise",
-           "find_feet", "horizontal_drift", "held_until", "estimate_floor", "target_ground",
-           "converted_ground", "below_foot", "PART_MIN_FRAMES", "PART_HEIGHT"]
+           "capture_noise", "find_feet", "horizontal_drift", "held_until", "estimate_floor",
+           "target_ground", "converted_ground", "below_foot", "PART_MIN_FRAMES", "PART_HEIGHT"]
 
 #: a part's planted run is this many frames or more (a heel strike lasts a few frames)
 PART_MIN_FRAMES = 3
@@ -44,10 +43,11 @@ HEEL_RISE = 0.05
 #: a few millimetres a frame, is metres per second at 120 frames a second, and broke a walk's
 #: plants into pieces
 SMOOTH = 1.0 / 60.0
-#: a capture is noisy where its noise (:func:`_noise`) moves a still foot from one frame to
-#: the next at over this share of ``ContactOptions.speed`` on average: a still foot then reads
-#: as moving on more than 2 % of its frames. A clean capture's paths are read as they are
-#: (smoothing moves a contact's first and last frames where the foot slows at the limit)
+#: a capture is noisy where its noise (:func:`_noise`, per axis and frame) moves a still foot
+#: from one frame to the next (sqrt 2 times the noise, times the frame rate) at over this share
+#: of ``ContactOptions.speed``: a still foot then reads as moving on more than 2 % of its
+#: frames. A clean capture's paths are read as they are (smoothing moves a contact's first
+#: and last frames where the foot slows at the limit)
 NOISY = 0.5
 
 
