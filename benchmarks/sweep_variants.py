@@ -5,7 +5,8 @@ noise and a floor away from zero.
 
     python benchmarks/sweep_variants.py [--clip SUBSTR ...] [--target SUBSTR ...]
                                         [--rates 24,30,60,120] [--toeless]
-                                        [--jitter MM,DEG] [--lift M] [--out DIR]
+                                        [--jitter MM,DEG] [--lift M] [--turn DEG]
+                                        [--out DIR]
 
 Each clip of ``../shared/data`` (``--clip`` filters by name) is written again, by the engine's
 own BVH writer, resampled to each of ``--rates`` (slerp between frames; a rate the clip
@@ -15,7 +16,9 @@ its channels and those of the joints below it are dropped: a capture exported to
 ankle), with ``--jitter MM,DEG`` also with a raw capture's noise (the root moved by
 Gaussian noise of MM millimetres on each axis and every joint turned about a random axis by
 Gaussian noise of DEG degrees, each frame on its own, seeded), and with ``--lift M`` also
-raised by M metres (a capture whose floor is not at zero; negative lowers). Every variant is solved onto every character (``--target`` filters) exactly as
+raised by M metres (a capture whose floor is not at zero; negative lowers), and with
+``--turn DEG`` also turned about the vertical through the origin (a capture walking another
+way). Every variant is solved onto every character (``--target`` filters) exactly as
 sweep_feet.py solves a pair, and printed as its row. The variants go to ``--out`` (a
 temporary directory by default, removed after).
 
@@ -106,9 +109,23 @@ def lifted(motion, metres: float):
     return motion.replace(translations=translations)
 
 
+def turned(motion, degrees: float):
+    """``motion`` turned by ``degrees`` about the vertical (the engine's +Y) through the
+    origin: the root's rotation and its path."""
+    import numpy as np
+    from motion_composer.engine.quaternions import about_axis, qmul, qrot
+    turn = about_axis(np.array([0.0, 1.0, 0.0]), np.radians(degrees))
+    rotations = motion.rotations.copy()
+    turns = np.broadcast_to(turn, (motion.num_frames, 4))
+    rotations[:, 0] = qmul(turns, rotations[:, 0])
+    translations = motion.translations.copy()
+    translations[:, 0] = qrot(turns, translations[:, 0])
+    return motion.replace(rotations=rotations, translations=translations)
+
+
 def variants(clip: Path, rates: list[float], toeless: bool, out: Path,
-             jitter: tuple[float, float] | None = None, lift: float | None = None
-             ) -> list[Path]:
+             jitter: tuple[float, float] | None = None, lift: float | None = None,
+             turn: float | None = None) -> list[Path]:
     """The variant files of ``clip`` written into ``out``."""
     from motion_composer.engine.correction.contacts import find_feet
     from motion_composer.engine.formats import read_performer, write_bvh
@@ -133,6 +150,10 @@ def variants(clip: Path, rates: list[float], toeless: bool, out: Path,
         path = out / f"{clip.stem}_lift{lift:+g}m.bvh"
         write_bvh(lifted(motion, lift), path)
         made.append(path)
+    if turn:
+        path = out / f"{clip.stem}_turn{turn:g}deg.bvh"
+        write_bvh(turned(motion, turn), path)
+        made.append(path)
     return made
 
 
@@ -146,6 +167,8 @@ def main() -> None:
     parser.add_argument("--jitter", help="also add noise: MM,DEG (root millimetres, joint "
                         "degrees, Gaussian, each frame)")
     parser.add_argument("--lift", type=float, help="also raise the clip by this many metres")
+    parser.add_argument("--turn", type=float, help="also turn the clip about the vertical by "
+                        "this many degrees")
     parser.add_argument("--out", help="write the variants here (kept)")
     args = parser.parse_args()
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
@@ -158,7 +181,8 @@ def main() -> None:
         out = Path(args.out or scratch)
         out.mkdir(parents=True, exist_ok=True)
         for clip in clips:
-            for variant in variants(clip, rates, args.toeless, out, jitter, args.lift):
+            for variant in variants(clip, rates, args.toeless, out, jitter, args.lift,
+                                    args.turn):
                 for target in targets:
                     print(sweep_feet.format_row(sweep_feet.solve_pair(variant, target)),
                           flush=True)
